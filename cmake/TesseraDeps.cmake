@@ -1,0 +1,37 @@
+# Finds the Debian 12 packages Tessera depends on and wraps the ones without a
+# CMake config as imported targets (facts in ../shared/STACK.md).
+find_package(Threads REQUIRED)
+find_package(embree 3 REQUIRED)
+find_package(TBB REQUIRED COMPONENTS tbb)
+find_package(ZLIB REQUIRED)
+find_package(libjpeg-turbo REQUIRED)
+find_package(websocketpp REQUIRED)
+find_package(Catch2 2 REQUIRED)
+
+# CAF 0.17.6: no CMake config and no .pc file.
+find_path(CAF_INCLUDE_DIR caf/all.hpp REQUIRED)
+find_library(CAF_CORE_LIBRARY caf_core REQUIRED)
+find_library(CAF_IO_LIBRARY caf_io REQUIRED)
+add_library(caf::core UNKNOWN IMPORTED)
+set_target_properties(caf::core PROPERTIES IMPORTED_LOCATION ${CAF_CORE_LIBRARY}
+  INTERFACE_INCLUDE_DIRECTORIES ${CAF_INCLUDE_DIR}
+  INTERFACE_LINK_LIBRARIES Threads::Threads)
+add_library(caf::io UNKNOWN IMPORTED)
+set_target_properties(caf::io PROPERTIES IMPORTED_LOCATION ${CAF_IO_LIBRARY}
+  INTERFACE_LINK_LIBRARIES caf::core)
+
+# libsquish 1.15: its .pc file has an empty prefix.
+find_path(SQUISH_INCLUDE_DIR squish.h REQUIRED)
+find_library(SQUISH_LIBRARY squish REQUIRED)
+add_library(squish::squish UNKNOWN IMPORTED)
+set_target_properties(squish::squish PROPERTIES IMPORTED_LOCATION ${SQUISH_LIBRARY}
+  INTERFACE_INCLUDE_DIRECTORIES ${SQUISH_INCLUDE_DIR})
+
+# tinygltf (header-only) with stb_image from libstb-dev and nlohmann-json.
+find_path(TINYGLTF_INCLUDE_DIR tiny_gltf.h REQUIRED)
+find_path(STB_INCLUDE_DIR stb_image.h PATH_SUFFIXES stb REQUIRED)
+add_library(tinygltf::tinygltf INTERFACE IMPORTED)
+set_target_properties(tinygltf::tinygltf PROPERTIES
+  INTERFACE_INCLUDE_DIRECTORIES "${TINYGLTF_INCLUDE_DIR};${STB_INCLUDE_DIR}")
+add_library(stb::stb INTERFACE IMPORTED)
+set_target_properties(stb::stb PROPERTIES INTERFACE_INCLUDE_DIRECTORIES ${STB_INCLUDE_DIR})

@@ -1,0 +1,31 @@
+#!/usr/bin/env bash
+# Installs what Tessera needs on a Debian 12 machine, and nothing that is already there.
+# Usage: scripts/install-deps.sh [--browser]   (--browser adds chromium + npm packages)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+pkgs=(build-essential cmake ninja-build pkg-config
+      libcaf-dev libembree-dev libtbb-dev libturbojpeg0-dev libjpeg62-turbo-dev
+      libsquish-dev libwebsocketpp-dev libasio-dev zlib1g-dev catch2
+      libtinygltf-dev nlohmann-json3-dev libstb-dev clang libclang-rt-14-dev)
+if [[ "${1:-}" == "--browser" ]]; then pkgs+=(chromium nodejs npm); fi
+
+missing=()
+for p in "${pkgs[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+# nodejs/npm may come from outside Debian's packages on some images: accept any working node.
+if command -v node >/dev/null && command -v npm >/dev/null; then
+  missing=("${missing[@]/nodejs}"); missing=("${missing[@]/npm}")
+fi
+read -r -a missing <<< "${missing[*]:-}"
+if (( ${#missing[@]} )); then
+  echo "installing: ${missing[*]}"
+  SUDO=""; [[ $(id -u) -ne 0 ]] && SUDO=sudo
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${missing[@]}"
+fi
+
+if [[ "${1:-}" == "--browser" && -f web/package.json ]]; then
+  (cd web && { [[ -d node_modules ]] || npm ci --no-audit --no-fund || npm install --no-audit --no-fund; })
+fi
