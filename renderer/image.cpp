@@ -1,0 +1,80 @@
+#include "renderer/image.h"
+
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <stdexcept>
+
+#define STB_IMAGE_IMPLEMENTATION
+#define STB_IMAGE_WRITE_IMPLEMENTATION
+#define STBI_FAILURE_USERMSG
+#if defined(__GNUC__)
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmissing-field-initializers"
+#pragma GCC diagnostic ignored "-Wsign-compare"
+#pragma GCC diagnostic ignored "-Wunused-function"
+#endif
+#include <stb_image.h>
+#include <stb_image_write.h>
+#if defined(__GNUC__)
+#pragma GCC diagnostic pop
+#endif
+
+namespace tessera {
+
+void write_png(const std::string& path, const Image& img) {
+  if (img.width <= 0 || img.height <= 0) throw std::runtime_error(path + ": cannot write an empty image");
+  if (!stbi_write_png(path.c_str(), img.width, img.height, 4, img.rgba.data(), img.width * 4))
+    throw std::runtime_error(path + ": could not write PNG");
+}
+
+bool decode_image(const uint8_t* data, size_t size, Image& out, std::string& error) {
+  if (size > size_t(std::numeric_limits<int>::max())) {
+    error = "image data too large";
+    return false;
+  }
+  int w = 0, h = 0, n = 0;
+  stbi_uc* px = stbi_load_from_memory(data, int(size), &w, &h, &n, 4);
+  if (!px) {
+    error = stbi_failure_reason() ? stbi_failure_reason() : "undecodable image";
+    return false;
+  }
+  out.width = w;
+  out.height = h;
+  out.rgba.assign(px, px + size_t(w) * h * 4);
+  stbi_image_free(px);
+  return true;
+}
+
+Image read_image(const std::string& path) {
+  int w = 0, h = 0, n = 0;
+  stbi_uc* px = stbi_load(path.c_str(), &w, &h, &n, 4);
+  if (!px) throw std::runtime_error(path + ": " + (stbi_failure_reason() ? stbi_failure_reason() : "cannot read image"));
+  Image img(w, h);
+  std::memcpy(img.rgba.data(), px, img.rgba.size());
+  stbi_image_free(px);
+  return img;
+}
+
+void blit(Image& dst, const Image& src, int32_t x, int32_t y) {
+  for (int32_t row = 0; row < src.height; ++row)
+    std::memcpy(dst.pixel(x, y + row), src.pixel(0, row), size_t(src.width) * 4);
+}
+
+ImageError compare(const Image& a, const Image& b) {
+  if (a.width != b.width || a.height != b.height) throw std::runtime_error("compare: image sizes differ");
+  double se = 0;
+  size_t n = size_t(a.width) * a.height;
+  for (size_t i = 0; i < n; ++i)
+    for (int c = 0; c < 3; ++c) {
+      double d = double(a.rgba[i * 4 + c]) - double(b.rgba[i * 4 + c]);
+      se += d * d;
+    }
+  ImageError e;
+  double mse = n ? se / double(n * 3) : 0;
+  e.rmse = std::sqrt(mse);
+  e.psnr = mse > 0 ? 10.0 * std::log10(255.0 * 255.0 / mse) : std::numeric_limits<double>::infinity();
+  return e;
+}
+
+}  // namespace tessera

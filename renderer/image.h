@@ -1,0 +1,37 @@
+#pragma once
+// RGBA8 images (row 0 at the top) and PNG files.
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace tessera {
+
+struct Image {
+  int32_t width = 0, height = 0;
+  std::vector<uint8_t> rgba;  // width * height * 4
+
+  Image() = default;
+  Image(int32_t w, int32_t h) : width(w), height(h), rgba(size_t(w) * h * 4, 0) {}
+  uint8_t* pixel(int32_t x, int32_t y) { return &rgba[(size_t(y) * width + x) * 4]; }
+  const uint8_t* pixel(int32_t x, int32_t y) const { return &rgba[(size_t(y) * width + x) * 4]; }
+};
+
+// Writes a PNG; throws std::runtime_error naming the file on failure.
+void write_png(const std::string& path, const Image& img);
+// Reads a PNG or JPEG into RGBA8; throws std::runtime_error naming the file on failure.
+Image read_image(const std::string& path);
+// Decodes an in-memory PNG/JPEG; returns false and sets error on failure.
+bool decode_image(const uint8_t* data, size_t size, Image& out, std::string& error);
+
+// Copies src into dst at (x, y); src must fit.
+void blit(Image& dst, const Image& src, int32_t x, int32_t y);
+
+// Image comparison over RGB (alpha ignored): root mean square error in 0..255 units and
+// PSNR in dB (infinite for identical images). Sizes must match.
+struct ImageError {
+  double rmse = 0;
+  double psnr = 0;
+};
+ImageError compare(const Image& a, const Image& b);
+
+}  // namespace tessera

@@ -1,0 +1,186 @@
+#pragma once
+// The scene model shared by every renderer and by the sync channel that drives it.
+//
+// Entries (buffers, textures, materials, meshes, lights) are keyed by ids the client
+// chooses and can be added, changed or removed at any time. Each entry carries the
+// scene-wide version at which it last changed, so a renderer syncs by comparing versions
+// with what it saw last time and touches only what changed (scene_sync.h).
+//
+// A mesh references geometry buffers by id and carries its own transform and material.
+// Meshes that reference the same geometry buffers are instances of one geometry.
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "renderer/math.h"
+
+namespace tessera {
+
+using Id = uint32_t;
+constexpr Id kNoId = 0;  // "no reference" (ids chosen by clients start at 1)
+
+// A typed array: float (positions, normals, texcoords) or uint32 (indices).
+struct Buffer {
+  enum class Type : uint8_t { f32 = 0, u32 = 1 };
+  Type type = Type::f32;
+  uint8_t components = 1;  // 1..4 per element
+  std::vector<float> f;    // type == f32
+  std::vector<uint32_t> u; // type == u32
+  size_t count() const { return (type == Type::f32 ? f.size() : u.size()) / (components ? components : 1); }
+  size_t bytes() const { return f.size() * 4 + u.size() * 4; }
+};
+
+struct Sampler {
+  enum class Wrap : uint8_t { clamp = 0, repeat = 1 };
+  enum class Filter : uint8_t { nearest = 0, linear = 1 };
+  Wrap wrap_s = Wrap::repeat, wrap_t = Wrap::repeat;
+  Filter filter = Filter::linear;
+};
+
+// RGBA8 texels, row 0 at the top (texcoord v = 0), as images are stored and as glTF maps them.
+struct Texture {
+  int32_t width = 0, height = 0;
+  std::vector<uint8_t> rgba;
+  Sampler sampler;
+  bool srgb = true;  // texels are sRGB-encoded colours (decoded to linear when shading, if the scene is linear)
+  bool has_alpha() const;  // any texel with alpha < 255 (computed on demand)
+};
+
+// XML3D's matte / diffuse / phong materials plus the paper's reflection, refraction and IOR.
+struct Material {
+  enum class Model : uint8_t { matte = 0, diffuse = 1, phong = 2 };
+  Model model = Model::phong;
+  Vec3 diffuse_color{1, 1, 1};
+  Vec3 specular_color{0, 0, 0};
+  float shininess = 0.2f;         // XML3D: the specular exponent is shininess * 128
+  Vec3 emissive_color{0, 0, 0};
+  float ambient_intensity = 0.0f;  // XML3D's ambientIntensity
+  float opacity = 1.0f;
+  Id diffuse_texture = kNoId, specular_texture = kNoId, emissive_texture = kNoId;
+  float reflection = 0.0f;  // mirror reflection coefficient (0..1), Fresnel-weighted when refracting
+  float refraction = 0.0f;  // transmission coefficient (0..1)
+  float ior = 1.0f;         // index of refraction of the material's inside
+  bool alpha_mask = false;  // cut out where diffuse texture alpha (x opacity) < alpha_cutoff
+  float alpha_cutoff = 0.5f;
+  bool double_sided = true;
+};
+
+struct Mesh {
+  Id positions = kNoId;  // float3, required
+  Id normals = kNoId;    // float3, optional (flat normals when missing)
+  Id texcoords = kNoId;  // float2, optional
+  Id indices = kNoId;    // uint32 triangles, optional (non-indexed: positions taken in threes)
+  Mat4 transform;        // object to world
+  Id material = kNoId;   // kNoId: the default material
+  bool visible = true;
+};
+
+struct Light {
+  enum class Type : uint8_t { point = 0, directional = 1, spot = 2 };
+  Type type = Type::directional;
+  Vec3 color{1, 1, 1};
+  float intensity = 1.0f;
+  Vec3 position{0, 0, 0};      // point, spot (world)
+  Vec3 direction{0, 0, -1};    // directional, spot: the direction light travels (world)
+  Vec3 attenuation{0, 0, 1};   // point, spot: constant, linear, quadratic (XML3D)
+  float cutoff = kPi / 4;      // spot: half-angle in radians
+  float softness = 0.0f;       // spot: 0 = hard edge, 1 = fades over the whole cone
+  bool on = true;
+};
+
+struct Camera {
+  Mat4 to_world;                  // camera looks down -Z, +Y up (XML3D / glTF convention)
+  float fov_y = kPi / 4;          // vertical field of view in radians
+};
+
+// Lighting and colour conventions that are per scene, not per entry.
+struct Environment {
+  Vec3 ambient{0, 0, 0};  // radiance of a uniform sky, applied to diffuse surfaces (times AO)
+  Vec3 background{0, 0, 0};
+  float exposure = 1.0f;
+  bool linear = true;     // true: sRGB textures decoded, output sRGB-encoded (glTF);
+                          // false: XML3D/WebGL convention, colours used and written as given
+};
+
+template <class T>
+struct Entry {
+  T value;
+  uint64_t version = 0;
+};
+
+class Scene {
+ public:
+  // Mutators bump the scene version and stamp the entry with it.
+  void set_buffer(Id id, Buffer b) { put(buffers_, id, std::move(b)); }
+  void set_texture(Id id, Texture t) { put(textures_, id, std::move(t)); }
+  void set_material(Id id, Material m) { put(materials_, id, std::move(m)); }
+  void set_mesh(Id id, Mesh m) { put(meshes_, id, std::move(m)); }
+  void set_light(Id id, Light l) { put(lights_, id, std::move(l)); }
+  bool remove_buffer(Id id) { return drop(buffers_, id); }
+  bool remove_texture(Id id) { return drop(textures_, id); }
+  bool remove_material(Id id) { return drop(materials_, id); }
+  bool remove_mesh(Id id) { return drop(meshes_, id); }
+  bool remove_light(Id id) { return drop(lights_, id); }
+
+  void set_camera(const Camera& c) { camera_ = c; camera_version_ = ++version_; }
+  void set_environment(const Environment& e) { env_ = e; env_version_ = ++version_; }
+  void set_resolution(int32_t w, int32_t h) { width_ = w; height_ = h; ++version_; }
+
+  const std::map<Id, Entry<Buffer>>& buffers() const { return buffers_; }
+  const std::map<Id, Entry<Texture>>& textures() const { return textures_; }
+  const std::map<Id, Entry<Material>>& materials() const { return materials_; }
+  const std::map<Id, Entry<Mesh>>& meshes() const { return meshes_; }
+  const std::map<Id, Entry<Light>>& lights() const { return lights_; }
+  const Camera& camera() const { return camera_; }
+  const Environment& environment() const { return env_; }
+  int32_t width() const { return width_; }
+  int32_t height() const { return height_; }
+  uint64_t version() const { return version_; }
+  uint64_t camera_version() const { return camera_version_; }
+  uint64_t environment_version() const { return env_version_; }
+
+  const Buffer* buffer(Id id) const { return find(buffers_, id); }
+  const Texture* texture(Id id) const { return find(textures_, id); }
+  const Material* material(Id id) const { return find(materials_, id); }
+
+  // Checks a mesh against the buffers it references: existence, element types and
+  // component counts, matching vertex counts, index range, finite positions. Returns an
+  // empty string when the mesh can be rendered, else what is wrong. A missing material is
+  // not an error (the default material is used until it arrives).
+  std::string validate_mesh(const Mesh& m) const;
+
+  size_t triangle_count() const;  // over visible meshes, instances counted each time
+
+ private:
+  template <class T>
+  void put(std::map<Id, Entry<T>>& map, Id id, T v) {
+    auto& e = map[id];
+    e.value = std::move(v);
+    e.version = ++version_;
+  }
+  template <class T>
+  bool drop(std::map<Id, Entry<T>>& map, Id id) {
+    if (map.erase(id) == 0) return false;
+    ++version_;
+    return true;
+  }
+  template <class T>
+  static const T* find(const std::map<Id, Entry<T>>& map, Id id) {
+    auto it = map.find(id);
+    return it == map.end() ? nullptr : &it->second.value;
+  }
+
+  std::map<Id, Entry<Buffer>> buffers_;
+  std::map<Id, Entry<Texture>> textures_;
+  std::map<Id, Entry<Material>> materials_;
+  std::map<Id, Entry<Mesh>> meshes_;
+  std::map<Id, Entry<Light>> lights_;
+  Camera camera_;
+  Environment env_;
+  int32_t width_ = 640, height_ = 480;
+  uint64_t version_ = 0, camera_version_ = 0, env_version_ = 0;
+};
+
+}  // namespace tessera
