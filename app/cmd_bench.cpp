@@ -1,0 +1,139 @@
+// tessera bench --scene S.gltf --camera-loop L.json [--frames N] [--step K] [--ao N] ...
+// Replays a camera loop on this node and prints one JSON line per frame, then a summary.
+#include <chrono>
+#include <cstdio>
+
+#include "app/command.h"
+#include "app/common.h"
+#include "renderer/raytracer.h"
+
+namespace tessera::app {
+namespace {
+
+const char* kHelp =
+    "tessera bench --scene S.gltf --camera-loop L.json [--frames N] [--step K] [--size W H]\n"
+    "              [--ao N] [--depth D] [--shadows 0|1] [--threads T] [--warmup W]\n"
+    "              [--compare bare|specialised|costmap|breakdown]\n"
+    "Replays the camera loop (every K-th frame with --step K) and prints one JSON line per frame:\n"
+    "kernel_ms (sum of the cost map), rendering_ms (wall), rays by kind and Mrays/s, then a summary\n"
+    "line with medians and conditions. --compare adds, in the same run and per frame:\n"
+    "  bare        a bare Embree loop tracing the same camera rays in the same packets, no shading\n"
+    "  specialised the kernel with AO, secondary rays, textures and filters compiled out\n"
+    "  costmap     the same render with the per-packet TSC timing switched off\n"
+    "  breakdown   marginal Mrays/s per ray kind (primary; +shadow; +AO; +secondary)\n";
+
+double mrays(uint64_t rays, double ms) { return ms > 0 ? double(rays) / (ms * 1e3) : 0; }
+
+int run(const std::vector<std::string>& argv) {
+  Args args(argv);
+  if (args.flag("--help")) { std::fputs(kHelp, stdout); return 0; }
+  int threads = 0;
+  auto limit = limit_threads(args, &threads);
+  SceneSetup setup = load_scene(args);
+  if (setup.loop.frames.empty()) throw std::invalid_argument("--camera-loop is required");
+  long step = args.integer("--step", 1);
+  long frames = args.integer("--frames", long(setup.loop.frames.size()) / std::max(1L, step));
+  long warmup = args.integer("--warmup", 1);
+  std::string compare = args.str("--compare");
+  RenderSettings settings = read_settings(args);
+  args.finish();
+  if (step < 1 || frames < 1) throw std::invalid_argument("--step and --frames must be >= 1");
+  if (!compare.empty() && compare != "bare" && compare != "specialised" && compare != "costmap" && compare != "breakdown")
+    throw std::invalid_argument("--compare must be bare, specialised, costmap or breakdown");
+
+  RayTracer rt;
+  std::vector<std::string> warnings;
+  Scene& scene = setup.loaded.scene;
+  const Rect full{0, 0, scene.width(), scene.height()};
+  auto sync = [&] { warnings.clear(); rt.sync(scene, warnings); };
+  setup.set_frame(0);
+  sync();
+  for (auto& w : warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
+  for (long i = 0; i < warmup; ++i) { TaskResult r; rt.render(full, settings, r); }
+
+  std::vector<double> kernel, rendering, rate, cmp_ms, cmp_ratio, b_primary, b_shadow, b_ao, b_secondary;
+  RayCounts total_rays;
+  for (long f = 0; f < frames; ++f) {
+    size_t k = size_t(f * step) % setup.loop.frames.size();
+    setup.set_frame(k);
+    settings.frame = uint32_t(k);
+    sync();
+    TaskResult r;
+    rt.render(full, settings, r);
+    kernel.push_back(r.kernel_ms);
+    rendering.push_back(r.rendering_ms);
+    rate.push_back(mrays(r.rays.total(), r.rendering_ms));
+    total_rays += r.rays;
+    std::printf("{\"frame\": %zu, \"kernel_ms\": %.3f, \"rendering_ms\": %.3f, \"rays\": {\"primary\": %llu, \"shadow\": %llu, "
+                "\"ao\": %llu, \"secondary\": %llu}, \"mrays_per_s\": %.3f",
+                k, r.kernel_ms, r.rendering_ms, (unsigned long long)r.rays.primary, (unsigned long long)r.rays.shadow,
+                (unsigned long long)r.rays.ao, (unsigned long long)r.rays.secondary, rate.back());
+    if (compare == "bare") {
+      uint64_t n = 0;
+      double ms = rt.trace_primary_only(full, &n);
+      double ours = mrays(r.rays.primary, r.rendering_ms), bare = mrays(n, ms);
+      cmp_ms.push_back(ms);
+      cmp_ratio.push_back(bare > 0 ? ours / bare : 0);
+      std::printf(", \"bare_ms\": %.3f, \"bare_mrays_per_s\": %.3f, \"primary_mrays_per_s\": %.3f, \"ours_over_bare\": %.4f", ms, bare,
+                  ours, cmp_ratio.back());
+    } else if (compare == "specialised") {
+      TaskResult s;
+      rt.render_specialised(full, settings, s);
+      cmp_ms.push_back(s.rendering_ms);
+      cmp_ratio.push_back(s.rendering_ms > 0 ? r.rendering_ms / s.rendering_ms : 0);
+      std::printf(", \"specialised_rendering_ms\": %.3f, \"general_over_specialised\": %.4f", s.rendering_ms, cmp_ratio.back());
+    } else if (compare == "costmap") {
+      RenderSettings off = settings;
+      off.cost_map = false;
+      TaskResult s;
+      rt.render(full, off, s);
+      cmp_ms.push_back(s.rendering_ms);
+      cmp_ratio.push_back(s.rendering_ms > 0 ? r.rendering_ms / s.rendering_ms : 0);
+      std::printf(", \"no_costmap_rendering_ms\": %.3f, \"with_over_without\": %.4f", s.rendering_ms, cmp_ratio.back());
+    } else if (compare == "breakdown") {
+      // Marginal throughput: each configuration adds one kind of ray to the previous one.
+      RenderSettings c = settings;
+      c.shadows = false; c.ao_samples = 0; c.max_depth = 1;
+      TaskResult p, sh, ao, sec;
+      rt.render(full, c, p);
+      c.shadows = true;
+      rt.render(full, c, sh);
+      c.ao_samples = settings.ao_samples;
+      rt.render(full, c, ao);
+      c.max_depth = settings.max_depth;
+      rt.render(full, c, sec);
+      auto marginal = [](uint64_t rays, double ms) { return ms > 0 ? double(rays) / (ms * 1e3) : 0.0; };
+      b_primary.push_back(marginal(p.rays.primary, p.rendering_ms));
+      b_shadow.push_back(marginal(sh.rays.shadow, sh.rendering_ms - p.rendering_ms));
+      b_ao.push_back(marginal(ao.rays.ao, ao.rendering_ms - sh.rendering_ms));
+      b_secondary.push_back(marginal(sec.rays.total() - ao.rays.total(), sec.rendering_ms - ao.rendering_ms));
+      std::printf(", \"breakdown_mrays_per_s\": {\"primary\": %.3f, \"shadow\": %.3f, \"ao\": %.3f, \"secondary\": %.3f}",
+                  b_primary.back(), b_shadow.back(), b_ao.back(), b_secondary.back());
+    }
+    std::printf("}\n");
+    std::fflush(stdout);
+  }
+  PacketLayout pl = rt.packet_layout();
+  SceneFeatures feat = rt.features();
+  std::printf("{\"summary\": true, \"scene\": %s, \"width\": %d, \"height\": %d, \"frames\": %ld, \"step\": %ld, "
+              "\"ao\": %d, \"depth\": %d, \"kernel_ms\": %.3f, \"rendering_ms\": %.3f, \"mrays_per_s\": %.3f, "
+              "\"triangles\": %zu, \"features\": {\"secondary\": %s, \"textures\": %s, \"alpha_masks\": %s}, "
+              "\"cpu\": %s, \"isa\": %s, \"packet\": \"%dx%d\", \"threads\": %d",
+              json_str(setup.scene_path).c_str(), scene.width(), scene.height(), frames, step, settings.ao_samples,
+              settings.max_depth, median(kernel), median(rendering), median(rate), scene.triangle_count(),
+              feat.secondary ? "true" : "false", feat.textures ? "true" : "false", feat.alpha_masks ? "true" : "false",
+              json_str(cpu_model()).c_str(), json_str(isa_name(pl)).c_str(), pl.w, pl.h, threads);
+  if (!cmp_ratio.empty())
+    std::printf(", \"compare\": %s, \"compare_ms\": %.3f, \"compare_ratio\": %.4f", json_str(compare).c_str(), median(cmp_ms),
+                median(cmp_ratio));
+  if (!b_primary.empty())
+    std::printf(", \"breakdown_mrays_per_s\": {\"primary\": %.3f, \"shadow\": %.3f, \"ao\": %.3f, \"secondary\": %.3f}",
+                median(b_primary), median(b_shadow), median(b_ao), median(b_secondary));
+  std::printf("}\n");
+  return 0;
+}
+
+const Command reg("bench", "replay a camera loop and print per-frame figures", run);
+
+}  // namespace
+}  // namespace tessera::app

@@ -1,0 +1,73 @@
+#include "app/common.h"
+
+#include <algorithm>
+#include <fstream>
+#include <thread>
+
+namespace tessera::app {
+
+std::string cpu_model() {
+  std::ifstream f("/proc/cpuinfo");
+  std::string line;
+  while (std::getline(f, line))
+    if (line.rfind("model name", 0) == 0) {
+      auto p = line.find(':');
+      return p == std::string::npos ? line : line.substr(p + 2);
+    }
+  return "unknown";
+}
+
+int hardware_threads() { return int(std::max(1u, std::thread::hardware_concurrency())); }
+
+std::unique_ptr<tbb::global_control> limit_threads(Args& args, int* threads) {
+  int t = int(args.integer("--threads", hardware_threads()));
+  if (t < 1 || t > 1024) throw std::invalid_argument("--threads must be in 1..1024");
+  if (threads) *threads = t;
+  return std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, size_t(t));
+}
+
+RenderSettings read_settings(Args& args) {
+  RenderSettings s;
+  s.ao_samples = int(args.integer("--ao", 0));
+  s.max_depth = int(args.integer("--depth", 4));
+  s.shadows = args.integer("--shadows", 1) != 0;
+  s.ao_distance = float(args.number("--ao-distance", 0));
+  if (s.ao_samples < 0 || s.ao_samples > 4096) throw std::invalid_argument("--ao must be in 0..4096");
+  if (s.max_depth < 1 || s.max_depth > 64) throw std::invalid_argument("--depth must be in 1..64");
+  return s;
+}
+
+void SceneSetup::set_frame(size_t k) {
+  if (!loop.frames.empty()) loaded.scene.set_camera(loop.camera(k));
+}
+
+SceneSetup load_scene(Args& args, int default_w, int default_h) {
+  SceneSetup s;
+  s.scene_path = args.required("--scene");
+  long w = args.integer("--size", default_w, 0), h = args.integer("--size", default_h, 1);
+  if (w < 0 || h < 0 || w > 16384 || h > 16384) throw std::invalid_argument("--size must be within 0..16384");
+  std::string loop = args.str("--camera-loop");
+  s.loaded = load_gltf(s.scene_path);
+  s.loaded.scene.set_resolution(int32_t(w), int32_t(h));
+  if (!loop.empty()) s.loop = load_camera_loop(loop);
+  return s;
+}
+
+std::string json_str(const std::string& s) {
+  std::string o = "\"";
+  for (char c : s) {
+    if (c == '"' || c == '\\') { o += '\\'; o += c; }
+    else if (static_cast<unsigned char>(c) < 0x20) { o += ' '; }
+    else o += c;
+  }
+  return o + "\"";
+}
+
+double median(std::vector<double> v) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  size_t n = v.size();
+  return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+}  // namespace tessera::app

@@ -1,0 +1,36 @@
+#pragma once
+// Helpers shared by the render, bench and balance subcommands.
+#include <memory>
+#include <string>
+
+#include <tbb/global_control.h>
+
+#include "app/args.h"
+#include "renderer/gltf_loader.h"
+#include "renderer/renderer.h"
+
+namespace tessera::app {
+
+std::string cpu_model();
+int hardware_threads();
+
+// --threads N (default: all hardware threads) as a TBB limit that lives as long as the result.
+std::unique_ptr<tbb::global_control> limit_threads(Args& args, int* threads);
+
+// --ao N --depth D --shadows 0|1 --ao-distance X
+RenderSettings read_settings(Args& args);
+
+// Loads --scene (+ optional --camera-loop), sets the resolution from --size W H.
+struct SceneSetup {
+  LoadedScene loaded;
+  CameraLoop loop;     // empty frames when no loop was given
+  std::string scene_path;
+  void set_frame(size_t k);  // camera of loop frame k (no-op without a loop)
+};
+SceneSetup load_scene(Args& args, int default_w = 1280, int default_h = 720);
+
+// JSON string escaping for the figures we print.
+std::string json_str(const std::string& s);
+double median(std::vector<double> v);
+
+}  // namespace tessera::app

@@ -1,0 +1,430 @@
+#include "renderer/gltf_loader.h"
+
+#include <cmath>
+#include <fstream>
+#include <functional>
+#include <map>
+#include <stdexcept>
+
+#define TINYGLTF_IMPLEMENTATION
+#define TINYGLTF_NO_STB_IMAGE_WRITE
+#define TINYGLTF_NO_INCLUDE_STB_IMAGE_WRITE
+#if defined(__GNUC__)
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmissing-field-initializers"
+#pragma GCC diagnostic ignored "-Wsign-compare"
+#pragma GCC diagnostic ignored "-Wunused-function"
+#pragma GCC diagnostic ignored "-Wunused-variable"
+#pragma GCC diagnostic ignored "-Wunused-but-set-variable"
+#pragma GCC diagnostic ignored "-Wimplicit-fallthrough"
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#pragma GCC diagnostic ignored "-Wpedantic"
+#endif
+#include <tiny_gltf.h>
+#if defined(__GNUC__)
+#pragma GCC diagnostic pop
+#endif
+
+#include "renderer/image.h"
+
+namespace tessera {
+namespace {
+
+struct LoadError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+// Reads accessor `index` as `comps` floats per element (converting normalized integers).
+std::vector<float> read_floats(const tinygltf::Model& m, int index, int comps, const std::string& what) {
+  if (index < 0 || size_t(index) >= m.accessors.size()) throw LoadError(what + ": accessor index out of range");
+  const auto& acc = m.accessors[index];
+  int nc = tinygltf::GetNumComponentsInType(acc.type);
+  if (nc != comps) throw LoadError(what + ": expected " + std::to_string(comps) + " components, got " + std::to_string(nc));
+  std::vector<float> out(acc.count * comps, 0.0f);
+  if (acc.bufferView < 0) return out;  // all zeros (sparse-only accessors are not used by our scenes)
+  if (size_t(acc.bufferView) >= m.bufferViews.size()) throw LoadError(what + ": bufferView out of range");
+  const auto& bv = m.bufferViews[acc.bufferView];
+  if (bv.buffer < 0 || size_t(bv.buffer) >= m.buffers.size()) throw LoadError(what + ": buffer out of range");
+  const auto& buf = m.buffers[bv.buffer].data;
+  int csize = tinygltf::GetComponentSizeInBytes(acc.componentType);
+  if (csize <= 0) throw LoadError(what + ": bad component type");
+  size_t stride = bv.byteStride ? bv.byteStride : size_t(csize) * comps;
+  size_t start = bv.byteOffset + acc.byteOffset;
+  if (acc.count > 0) {
+    size_t need = start + stride * (acc.count - 1) + size_t(csize) * comps;
+    if (need > buf.size() || acc.byteOffset + stride * (acc.count - 1) + size_t(csize) * comps > bv.byteLength)
+      throw LoadError(what + ": accessor reads past the end of its buffer");
+  }
+  for (size_t i = 0; i < acc.count; ++i) {
+    const unsigned char* p = buf.data() + start + i * stride;
+    for (int c = 0; c < comps; ++c) {
+      float v = 0;
+      switch (acc.componentType) {
+        case TINYGLTF_COMPONENT_TYPE_FLOAT: std::memcpy(&v, p + c * 4, 4); break;
+        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: v = p[c] / (acc.normalized ? 255.0f : 1.0f); break;
+        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: {
+          uint16_t s; std::memcpy(&s, p + c * 2, 2); v = s / (acc.normalized ? 65535.0f : 1.0f); break;
+        }
+        default: throw LoadError(what + ": unsupported component type " + std::to_string(acc.componentType));
+      }
+      out[i * comps + c] = v;
+    }
+  }
+  return out;
+}
+
+std::vector<uint32_t> read_indices(const tinygltf::Model& m, int index, const std::string& what) {
+  if (index < 0 || size_t(index) >= m.accessors.size()) throw LoadError(what + ": index accessor out of range");
+  const auto& acc = m.accessors[index];
+  if (acc.type != TINYGLTF_TYPE_SCALAR || acc.bufferView < 0 || size_t(acc.bufferView) >= m.bufferViews.size())
+    throw LoadError(what + ": indices must be a scalar accessor with a bufferView");
+  const auto& bv = m.bufferViews[acc.bufferView];
+  if (bv.buffer < 0 || size_t(bv.buffer) >= m.buffers.size()) throw LoadError(what + ": buffer out of range");
+  const auto& buf = m.buffers[bv.buffer].data;
+  int csize = tinygltf::GetComponentSizeInBytes(acc.componentType);
+  if (csize != 1 && csize != 2 && csize != 4) throw LoadError(what + ": bad index component type");
+  size_t stride = bv.byteStride ? bv.byteStride : size_t(csize);
+  size_t start = bv.byteOffset + acc.byteOffset;
+  if (acc.count > 0 && start + stride * (acc.count - 1) + csize > buf.size())
+    throw LoadError(what + ": indices read past the end of their buffer");
+  std::vector<uint32_t> out(acc.count);
+  for (size_t i = 0; i < acc.count; ++i) {
+    const unsigned char* p = buf.data() + start + i * stride;
+    if (csize == 1) out[i] = p[0];
+    else if (csize == 2) { uint16_t s; std::memcpy(&s, p, 2); out[i] = s; }
+    else std::memcpy(&out[i], p, 4);
+  }
+  return out;
+}
+
+Mat4 node_local(const tinygltf::Node& n) {
+  if (n.matrix.size() == 16) {
+    Mat4 r;
+    for (int i = 0; i < 16; ++i) r.m[i] = float(n.matrix[i]);
+    return r;
+  }
+  Mat4 t, r, s;
+  if (n.translation.size() == 3) t = Mat4::translate({float(n.translation[0]), float(n.translation[1]), float(n.translation[2])});
+  if (n.rotation.size() == 4) {
+    float x = float(n.rotation[0]), y = float(n.rotation[1]), z = float(n.rotation[2]), w = float(n.rotation[3]);
+    r(0, 0) = 1 - 2 * (y * y + z * z); r(0, 1) = 2 * (x * y - z * w);     r(0, 2) = 2 * (x * z + y * w);
+    r(1, 0) = 2 * (x * y + z * w);     r(1, 1) = 1 - 2 * (x * x + z * z); r(1, 2) = 2 * (y * z - x * w);
+    r(2, 0) = 2 * (x * z - y * w);     r(2, 1) = 2 * (y * z + x * w);     r(2, 2) = 1 - 2 * (x * x + y * y);
+  }
+  if (n.scale.size() == 3) s = Mat4::scale({float(n.scale[0]), float(n.scale[1]), float(n.scale[2])});
+  return t * r * s;
+}
+
+Vec3 vec3_of(const std::vector<double>& v, Vec3 fallback) {
+  return v.size() >= 3 ? Vec3{float(v[0]), float(v[1]), float(v[2])} : fallback;
+}
+
+double number_or(const tinygltf::Value& obj, const char* key, double fallback) {
+  if (!obj.IsObject() || !obj.Has(key)) return fallback;
+  const auto& v = obj.Get(key);
+  return v.IsNumber() ? v.GetNumberAsDouble() : fallback;
+}
+
+Material convert_material(const tinygltf::Material& gm, const std::map<int, Id>& texture_ids,
+                          const tinygltf::Model& model, std::vector<std::string>& warnings, const std::string& file) {
+  Material mat;
+  mat.model = Material::Model::phong;
+  const auto& pbr = gm.pbrMetallicRoughness;
+  Vec3 base{float(pbr.baseColorFactor[0]), float(pbr.baseColorFactor[1]), float(pbr.baseColorFactor[2])};
+  float alpha = float(pbr.baseColorFactor[3]);
+  float metallic = float(pbr.metallicFactor), rough = float(pbr.roughnessFactor);
+  if (pbr.baseColorTexture.index >= 0) {
+    auto it = texture_ids.find(pbr.baseColorTexture.index);
+    if (it != texture_ids.end()) mat.diffuse_texture = it->second;
+    else warnings.push_back(file + ": material '" + gm.name + "' references missing texture " + std::to_string(pbr.baseColorTexture.index));
+  }
+  float transmission = 0, ior = 1.5f;
+  if (auto it = gm.extensions.find("KHR_materials_transmission"); it != gm.extensions.end())
+    transmission = float(number_or(it->second, "transmissionFactor", 0));
+  if (auto it = gm.extensions.find("KHR_materials_ior"); it != gm.extensions.end())
+    ior = float(number_or(it->second, "ior", 1.5));
+  float emissive_strength = 1;
+  if (auto it = gm.extensions.find("KHR_materials_emissive_strength"); it != gm.extensions.end())
+    emissive_strength = float(number_or(it->second, "emissiveStrength", 1));
+  mat.emissive_color = vec3_of(gm.emissiveFactor, {0, 0, 0}) * emissive_strength;
+
+  // Specular lobe: Phong exponent ~ 2/alpha^2 - 2 with alpha = roughness^2 (clamped to XML3D's 0..1 range).
+  float a = std::fmax(rough * rough, 1e-3f);
+  float exponent = std::fmin(2.0f / (a * a) - 2.0f, 128.0f);
+  mat.shininess = std::fmax(exponent, 1.0f) / 128.0f;
+
+  if (transmission > 0) {  // dielectric: refraction with Fresnel reflection
+    mat.refraction = transmission;
+    mat.ior = ior;
+    mat.diffuse_color = base * (1 - transmission);
+    mat.specular_color = Vec3{0.04f};
+    mat.reflection = 0;  // Fresnel adds reflection to refracting materials
+  } else if (metallic >= 0.5f) {  // conductor: mirror reflection tinted by the base colour
+    float gloss = 1.0f - std::fmin(rough * 2.0f, 0.9f);
+    mat.reflection = std::fmin(max_component(base), 1.0f) * gloss;
+    mat.diffuse_color = base * (1.0f - gloss);
+    mat.specular_color = base;
+  } else {
+    mat.diffuse_color = base;
+    mat.specular_color = Vec3{rough < 0.5f ? 0.04f * (1 - rough) * 4 : 0.0f};
+  }
+  if (gm.alphaMode == "MASK") {
+    mat.alpha_mask = true;
+    mat.alpha_cutoff = float(gm.alphaCutoff);
+    mat.opacity = alpha;
+  } else if (gm.alphaMode == "BLEND") {
+    mat.opacity = alpha;  // see-through weighted by 1 - opacity
+  }
+  mat.double_sided = gm.doubleSided;
+  (void)model;
+  return mat;
+}
+
+}  // namespace
+
+LoadedScene load_gltf(const std::string& path) {
+  tinygltf::TinyGLTF ctx;
+  tinygltf::Model model;
+  std::string err, warn;
+  bool ok = false;
+  try {
+    bool binary = path.size() > 4 && path.compare(path.size() - 4, 4, ".glb") == 0;
+    ok = binary ? ctx.LoadBinaryFromFile(&model, &err, &warn, path) : ctx.LoadASCIIFromFile(&model, &err, &warn, path);
+  } catch (const std::exception& e) {
+    throw LoadError(path + ": " + e.what());
+  }
+  if (!ok) throw LoadError(path + ": " + (err.empty() ? "cannot load glTF" : err));
+
+  LoadedScene out;
+  Scene& scene = out.scene;
+  if (!warn.empty()) out.warnings.push_back(path + ": " + warn);
+  Id next_id = 1;
+
+  // Textures: decode images (tinygltf already did, via stb_image) and attach the sampler.
+  std::map<int, Id> texture_ids;
+  for (size_t ti = 0; ti < model.textures.size(); ++ti) {
+    const auto& gt = model.textures[ti];
+    if (gt.source < 0 || size_t(gt.source) >= model.images.size()) {
+      out.warnings.push_back(path + ": texture " + std::to_string(ti) + " has no image");
+      continue;
+    }
+    const auto& img = model.images[gt.source];
+    int nc = img.component, bytes_per = img.bits == 16 ? 2 : 1;
+    if (img.image.empty() || img.width <= 0 || img.height <= 0 || nc < 1 || nc > 4 || (img.bits != 8 && img.bits != 16) ||
+        img.image.size() != size_t(img.width) * img.height * nc * bytes_per) {
+      out.warnings.push_back(path + ": image '" + img.uri + "' could not be decoded; texture left out");
+      continue;
+    }
+    Texture tex;
+    tex.width = img.width;
+    tex.height = img.height;
+    tex.rgba.resize(size_t(img.width) * img.height * 4);
+    for (size_t i = 0, n = size_t(img.width) * img.height; i < n; ++i) {
+      uint8_t c[4] = {0, 0, 0, 255};
+      for (int k = 0; k < nc; ++k) c[k] = img.image[(i * nc + k) * bytes_per + (bytes_per - 1)];  // 16-bit: high byte (LE)
+      if (nc == 1) c[1] = c[2] = c[0];
+      if (nc == 2) { c[3] = c[1]; c[1] = c[2] = c[0]; }
+      std::memcpy(&tex.rgba[i * 4], c, 4);
+    }
+    if (gt.sampler >= 0 && size_t(gt.sampler) < model.samplers.size()) {
+      const auto& s = model.samplers[gt.sampler];
+      auto wrap = [](int w) { return w == TINYGLTF_TEXTURE_WRAP_CLAMP_TO_EDGE ? Sampler::Wrap::clamp : Sampler::Wrap::repeat; };
+      tex.sampler.wrap_s = wrap(s.wrapS);
+      tex.sampler.wrap_t = wrap(s.wrapT);
+      tex.sampler.filter = s.magFilter == TINYGLTF_TEXTURE_FILTER_NEAREST ? Sampler::Filter::nearest : Sampler::Filter::linear;
+    }
+    Id id = next_id++;
+    scene.set_texture(id, std::move(tex));
+    texture_ids[int(ti)] = id;
+  }
+
+  std::vector<Id> material_ids(model.materials.size(), kNoId);
+  for (size_t mi = 0; mi < model.materials.size(); ++mi) {
+    material_ids[mi] = next_id++;
+    scene.set_material(material_ids[mi], convert_material(model.materials[mi], texture_ids, model, out.warnings, path));
+  }
+
+  // Geometry: one set of buffers per primitive, shared by every node that instances the mesh.
+  struct Prim {
+    Id positions = kNoId, normals = kNoId, texcoords = kNoId, indices = kNoId, material = kNoId;
+    std::vector<float> pos;  // kept for bounds
+  };
+  std::vector<std::vector<Prim>> prims(model.meshes.size());
+  for (size_t mi = 0; mi < model.meshes.size(); ++mi) {
+    const auto& gmesh = model.meshes[mi];
+    for (size_t pi = 0; pi < gmesh.primitives.size(); ++pi) {
+      const auto& p = gmesh.primitives[pi];
+      std::string what = path + ": mesh '" + gmesh.name + "' primitive " + std::to_string(pi);
+      if (p.mode != TINYGLTF_MODE_TRIANGLES && p.mode != -1) {
+        out.warnings.push_back(what + ": mode " + std::to_string(p.mode) + " is not triangles; left out");
+        continue;
+      }
+      auto pit = p.attributes.find("POSITION");
+      if (pit == p.attributes.end()) throw LoadError(what + ": no POSITION attribute");
+      Prim prim;
+      prim.pos = read_floats(model, pit->second, 3, what + " POSITION");
+      size_t nv = prim.pos.size() / 3;
+      for (float v : prim.pos)
+        if (!std::isfinite(v)) throw LoadError(what + ": POSITION holds NaN or Inf");
+      Buffer pb;
+      pb.components = 3;
+      pb.f = prim.pos;
+      prim.positions = next_id++;
+      scene.set_buffer(prim.positions, std::move(pb));
+      if (auto it = p.attributes.find("NORMAL"); it != p.attributes.end()) {
+        Buffer nb;
+        nb.components = 3;
+        nb.f = read_floats(model, it->second, 3, what + " NORMAL");
+        prim.normals = next_id++;
+        scene.set_buffer(prim.normals, std::move(nb));
+      }
+      if (auto it = p.attributes.find("TEXCOORD_0"); it != p.attributes.end()) {
+        Buffer tb;
+        tb.components = 2;
+        tb.f = read_floats(model, it->second, 2, what + " TEXCOORD_0");
+        prim.texcoords = next_id++;
+        scene.set_buffer(prim.texcoords, std::move(tb));
+      }
+      if (p.indices >= 0) {
+        Buffer ib;
+        ib.type = Buffer::Type::u32;
+        ib.u = read_indices(model, p.indices, what);
+        for (uint32_t i : ib.u)
+          if (i >= nv) throw LoadError(what + ": index " + std::to_string(i) + " >= vertex count " + std::to_string(nv));
+        if (ib.u.size() % 3) throw LoadError(what + ": index count is not a multiple of 3");
+        prim.indices = next_id++;
+        scene.set_buffer(prim.indices, std::move(ib));
+      } else if (nv % 3) {
+        throw LoadError(what + ": non-indexed vertex count is not a multiple of 3");
+      }
+      if (p.material >= 0 && size_t(p.material) < material_ids.size()) prim.material = material_ids[p.material];
+      prims[mi].push_back(std::move(prim));
+    }
+  }
+
+  // Nodes: walk the default scene, instancing meshes, picking up the first camera and the lights.
+  int scene_index = model.defaultScene >= 0 ? model.defaultScene : 0;
+  std::vector<int> roots;
+  if (size_t(scene_index) < model.scenes.size()) roots = model.scenes[scene_index].nodes;
+  const tinygltf::Value* lights_ext = nullptr;
+  if (auto it = model.extensions.find("KHR_lights_punctual"); it != model.extensions.end()) lights_ext = &it->second;
+
+  std::vector<int> depth_guard;
+  std::function<void(int, const Mat4&, int)> visit = [&](int ni, const Mat4& parent, int depth) {
+    if (ni < 0 || size_t(ni) >= model.nodes.size()) throw LoadError(path + ": node index " + std::to_string(ni) + " out of range");
+    if (depth > 256) throw LoadError(path + ": node hierarchy deeper than 256 (a cycle?)");
+    const auto& node = model.nodes[ni];
+    Mat4 world = parent * node_local(node);
+    if (!world.finite()) throw LoadError(path + ": node '" + node.name + "' has a non-finite transform");
+    if (node.mesh >= 0 && size_t(node.mesh) < prims.size()) {
+      for (const Prim& prim : prims[node.mesh]) {
+        Mesh mesh;
+        mesh.positions = prim.positions;
+        mesh.normals = prim.normals;
+        mesh.texcoords = prim.texcoords;
+        mesh.indices = prim.indices;
+        mesh.material = prim.material;
+        mesh.transform = world;
+        scene.set_mesh(next_id++, mesh);
+        for (size_t i = 0; i + 2 < prim.pos.size(); i += 3)
+          out.bounds.extend(world.transform_point({prim.pos[i], prim.pos[i + 1], prim.pos[i + 2]}));
+      }
+    }
+    if (node.camera >= 0 && size_t(node.camera) < model.cameras.size() && !out.has_camera) {
+      const auto& cam = model.cameras[node.camera];
+      Camera c;
+      c.to_world = world;
+      if (cam.type == "perspective") c.fov_y = float(cam.perspective.yfov);
+      scene.set_camera(c);
+      out.has_camera = true;
+    }
+    if (auto it = node.extensions.find("KHR_lights_punctual"); it != node.extensions.end() && lights_ext) {
+      int li = int(number_or(it->second, "light", -1));
+      const auto& arr = lights_ext->Get("lights");
+      if (li >= 0 && arr.IsArray() && size_t(li) < arr.ArrayLen()) {
+        const auto& gl = arr.Get(li);
+        Light l;
+        std::string type = gl.Get("type").IsString() ? gl.Get("type").Get<std::string>() : "point";
+        l.type = type == "directional" ? Light::Type::directional : type == "spot" ? Light::Type::spot : Light::Type::point;
+        if (gl.Has("color") && gl.Get("color").IsArray() && gl.Get("color").ArrayLen() == 3)
+          l.color = {float(gl.Get("color").Get(0).GetNumberAsDouble()), float(gl.Get("color").Get(1).GetNumberAsDouble()),
+                     float(gl.Get("color").Get(2).GetNumberAsDouble())};
+        l.intensity = float(number_or(gl, "intensity", 1.0));
+        l.position = world.transform_point({0, 0, 0});
+        l.direction = normalize(world.transform_vector({0, 0, -1}));
+        l.attenuation = {0, 0, 1};  // glTF: inverse square
+        if (l.type == Light::Type::spot && gl.Has("spot")) {
+          float inner = float(number_or(gl.Get("spot"), "innerConeAngle", 0));
+          float outer = float(number_or(gl.Get("spot"), "outerConeAngle", kPi / 4));
+          l.cutoff = outer;
+          l.softness = outer > 0 ? 1.0f - inner / outer : 0.0f;
+        }
+        scene.set_light(next_id++, l);
+      }
+    }
+    for (int child : node.children) visit(child, world, depth + 1);
+  };
+  for (int r : roots) visit(r, Mat4{}, 0);
+
+  // The sky: an ambient term of the sky's average radiance over the upper hemisphere.
+  Environment env;
+  env.linear = true;
+  if (size_t(scene_index) < model.scenes.size()) {
+    const auto& extras = model.scenes[scene_index].extras;
+    if (extras.IsObject() && extras.Has("environment")) {
+      const auto& e = extras.Get("environment");
+      double integral = -1;
+      if (e.Has("analysis")) integral = number_or(e.Get("analysis"), "integral_L_dOmega", -1);
+      if (integral < 0 && lights_ext && lights_ext->Has("lights")) {
+        const auto& arr = lights_ext->Get("lights");
+        for (size_t i = 0; i < arr.ArrayLen(); ++i)
+          if (arr.Get(int(i)).Has("extras")) integral = std::fmax(integral, number_or(arr.Get(int(i)).Get("extras"), "sky_total_L_dOmega", -1));
+      }
+      if (integral > 0) {
+        float l = float(integral / (2.0 * kPi));
+        env.ambient = Vec3{l};
+        env.background = Vec3{l * 0.8f, l * 0.9f, l * 1.1f};
+        // Expose so that a white surface under the sky alone is mid grey.
+        env.exposure = l > 0.3f ? 0.3f / l : 1.0f;
+      }
+    }
+  }
+  scene.set_environment(env);
+  if (!out.has_camera) {
+    Camera c;
+    if (out.bounds.valid()) {
+      Vec3 center = (out.bounds.lo + out.bounds.hi) * 0.5f;
+      c.to_world = Mat4::look_at(center + Vec3{0, 0, out.bounds.extent()}, center, {0, 1, 0});
+    }
+    scene.set_camera(c);
+  }
+  return out;
+}
+
+Camera CameraLoop::camera(size_t frame) const {
+  Camera c;
+  c.fov_y = fov_y_deg * kPi / 180.0f;
+  if (frames.empty()) return c;
+  const Frame& f = frames[frame % frames.size()];
+  c.to_world = Mat4::look_at(f.eye, f.target, f.up);
+  return c;
+}
+
+CameraLoop load_camera_loop(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw LoadError(path + ": cannot open camera loop");
+  CameraLoop loop;
+  try {
+    auto j = nlohmann::json::parse(in);
+    loop.fov_y_deg = j.at("fovY_deg").get<float>();
+    auto v3 = [](const nlohmann::json& a) { return Vec3{a.at(0).get<float>(), a.at(1).get<float>(), a.at(2).get<float>()}; };
+    for (const auto& f : j.at("frames")) loop.frames.push_back({v3(f.at("eye")), v3(f.at("target")), v3(f.at("up"))});
+  } catch (const std::exception& e) {
+    throw LoadError(path + ": " + e.what());
+  }
+  if (loop.frames.empty()) throw LoadError(path + ": camera loop has no frames");
+  if (!(loop.fov_y_deg > 0 && loop.fov_y_deg < 180)) throw LoadError(path + ": fovY_deg must be in (0, 180)");
+  return loop;
+}
+
+}  // namespace tessera

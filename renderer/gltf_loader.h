@@ -1,0 +1,44 @@
+#pragma once
+// glTF 2.0 scenes into the scene model: meshes (instanced through nodes), materials
+// (incl. KHR_materials_transmission, KHR_materials_ior, KHR_materials_emissive_strength,
+// alphaMode MASK/BLEND), KHR_lights_punctual, cameras, and the sky described in
+// scenes[0].extras.environment as an ambient term.
+#include <string>
+#include <vector>
+
+#include "renderer/scene.h"
+
+namespace tessera {
+
+struct Bounds {
+  Vec3 lo{1e30f, 1e30f, 1e30f}, hi{-1e30f, -1e30f, -1e30f};
+  void extend(const Vec3& p) {
+    lo = {std::fmin(lo.x, p.x), std::fmin(lo.y, p.y), std::fmin(lo.z, p.z)};
+    hi = {std::fmax(hi.x, p.x), std::fmax(hi.y, p.y), std::fmax(hi.z, p.z)};
+  }
+  bool valid() const { return lo.x <= hi.x; }
+  float extent() const { return valid() ? length(hi - lo) : 0.0f; }
+};
+
+struct LoadedScene {
+  Scene scene;
+  Bounds bounds;                      // world bounds of all instances
+  bool has_camera = false;            // the scene's first camera node was found
+  std::vector<std::string> warnings;  // things left out or repaired, each naming the file
+};
+
+// Throws std::runtime_error naming the file and what is wrong; never crashes on a broken file.
+LoadedScene load_gltf(const std::string& path);
+
+// A recorded camera loop (../shared/scenes/*/camera-loop.json).
+struct CameraLoop {
+  float fov_y_deg = 45;
+  struct Frame {
+    Vec3 eye, target, up;
+  };
+  std::vector<Frame> frames;
+  Camera camera(size_t frame) const;  // frame taken modulo the loop length
+};
+CameraLoop load_camera_loop(const std::string& path);
+
+}  // namespace tessera

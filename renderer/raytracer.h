@@ -1,0 +1,59 @@
+#pragma once
+// The Embree ray tracer (paper section 5.1): ray packets sized to the CPU (16 rays as 4x4
+// pixels on AVX-512, 8 as 4x2 on AVX2, 4 as 2x2 on SSE) for tracing and shading, TBB's
+// work stealing over the packets of a task, and a TSC cost map per packet.
+#include <memory>
+
+#include "renderer/renderer.h"
+
+namespace tessera {
+
+// Which features the scene in its current state needs; everything else is skipped.
+struct SceneFeatures {
+  bool secondary = false;   // some visible material reflects, refracts or is see-through
+  bool textures = false;    // some visible material is textured
+  bool alpha_masks = false; // some visible geometry runs an alpha-mask filter function
+  bool lights = false;      // at least one light is on
+};
+
+// The packet layout for the widest ISA this CPU and Embree both support natively.
+PacketLayout detect_packet_layout();
+const char* isa_name(PacketLayout p);
+// The time-stamp counter's frequency in kHz (read from the kernel or calibrated once).
+double tsc_khz();
+
+class RayTracer final : public Renderer {
+ public:
+  // layout.w * layout.h must be 4, 8 or 16; {0, 0} picks detect_packet_layout().
+  explicit RayTracer(PacketLayout layout = {0, 0});
+  ~RayTracer() override;
+  RayTracer(const RayTracer&) = delete;
+  RayTracer& operator=(const RayTracer&) = delete;
+
+  const char* name() const override { return "raytracer"; }
+  void sync(const Scene& scene, std::vector<std::string>& warnings) override;
+  void render(const Rect& pixels, const RenderSettings& settings, TaskResult& out) override;
+  PacketLayout packet_layout() const override;
+
+  SceneFeatures features() const;
+  float scene_extent() const;  // diagonal of the world bounds
+  // Number of BLAS builds and instance updates done by the last sync (for tests of incrementality).
+  struct SyncStats {
+    int geometries_built = 0, instances_updated = 0, instances_removed = 0;
+  };
+  SyncStats last_sync() const;
+
+  // Benchmark hooks. A "specialised" kernel has AO, secondary rays, textures and alpha
+  // filters compiled out; it renders only scenes that need none of them (else it throws).
+  void render_specialised(const Rect& pixels, const RenderSettings& settings, TaskResult& out);
+  // The physical limit: the same camera rays in the same packets, traced with no shading
+  // and no timing. Returns wall milliseconds; rays traced in *rays.
+  double trace_primary_only(const Rect& pixels, uint64_t* rays);
+
+  struct Impl;  // opaque; public so the kernel and filter functions in the .cpp can name it
+
+ private:
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace tessera

@@ -1,0 +1,58 @@
+#pragma once
+// The renderer API that every renderer implements (paper section 5.1): sync with the
+// scene model, render any rectangle of the image into RGBA, report its cost data.
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "renderer/cost_map.h"
+#include "renderer/image.h"
+#include "renderer/rect.h"
+#include "renderer/scene.h"
+
+namespace tessera {
+
+struct RenderSettings {
+  int32_t ao_samples = 0;     // ambient occlusion rays per hit; 0 = off (no AO rays traced)
+  float ao_distance = 0.0f;   // AO ray length; 0 = a fraction of the scene's extent
+  int32_t max_depth = 4;      // maximum recursion depth of reflection/refraction (1 = primary only)
+  bool shadows = true;
+  bool cost_map = true;       // time each packet with the TSC
+  uint32_t frame = 0;         // seeds the AO sample pattern
+};
+
+struct RayCounts {
+  uint64_t primary = 0, shadow = 0, ao = 0, secondary = 0;
+  uint64_t total() const { return primary + shadow + ao + secondary; }
+  RayCounts& operator+=(const RayCounts& o) {
+    primary += o.primary; shadow += o.shadow; ao += o.ao; secondary += o.secondary;
+    return *this;
+  }
+};
+
+// What a renderer produces for one task (a pixel rectangle of the frame).
+struct TaskResult {
+  Rect pixels;            // the task, in pixels
+  Image image;            // pixels.width() x pixels.height()
+  CostMap cost;           // per-packet cost (cost_map.h for the unit); empty if not measured
+  double kernel_ms = 0;   // sum of the cost map, in milliseconds of one core
+  double rendering_ms = 0;  // wall time of the multi-threaded rendering
+  RayCounts rays;
+};
+
+class Renderer {
+ public:
+  virtual ~Renderer() = default;
+  virtual const char* name() const = 0;
+  // Brings the renderer up to date with the scene, touching only what changed since the
+  // last sync. Meshes that cannot be rendered yet (buffers missing or inconsistent) are
+  // skipped; why is appended to warnings.
+  virtual void sync(const Scene& scene, std::vector<std::string>& warnings) = 0;
+  // Renders the given pixel rectangle of the scene's current resolution. The rectangle is
+  // clipped to the image; an empty rectangle gives an empty result.
+  virtual void render(const Rect& pixels, const RenderSettings& settings, TaskResult& out) = 0;
+  // The pixel footprint of one packet (cost map granularity).
+  virtual PacketLayout packet_layout() const = 0;
+};
+
+}  // namespace tessera
