@@ -167,6 +167,7 @@ struct RayTracer::Impl {
     std::vector<uint32_t> indices; // 3 per triangle
     uint64_t version = 0;          // max version of the buffers it was built from
     bool filter = false;           // alpha-mask filter attached
+    bool see_through = false;      // occlusion filter for refracting materials attached
     bool used = false;
   };
   struct Inst {
@@ -282,6 +283,7 @@ static inline void sample_texture(const Tex& t, float u, float v, bool linear, f
   texel(x0 + 1, y0 + 1, fx * fy, out);
 }
 
+template <bool kOcclusion>
 static void alpha_filter(const RTCFilterFunctionNArguments* args) {
   auto* g = static_cast<RayTracer::Impl::Geom*>(args->geometryUserPtr);
   const RayTracer::Impl& impl = *g->owner;
@@ -291,6 +293,10 @@ static void alpha_filter(const RTCFilterFunctionNArguments* args) {
     if (inst >= impl.inst_by_rtc.size() || !impl.inst_by_rtc[inst]) continue;
     int mi = impl.inst_by_rtc[inst]->material;
     const Material& m = impl.materials[mi];
+    if (kOcclusion && m.refraction > 0) {  // refracting surfaces cast no shadow and no occlusion
+      args->valid[i] = 0;
+      continue;
+    }
     if (!m.alpha_mask) continue;
     float alpha = m.opacity;
     const auto* tex = impl.mat_diffuse_tex[mi];
@@ -338,10 +344,8 @@ void RayTracer::Impl::build_geom(const Scene& scene, const GeomKey& key, Geom& g
   std::memcpy(ib, g.indices.data(), nt * 3 * sizeof(uint32_t));
   g.owner = this;
   rtcSetGeometryUserData(tri, &g);
-  if (g.filter) {
-    rtcSetGeometryIntersectFilterFunction(tri, alpha_filter);
-    rtcSetGeometryOccludedFilterFunction(tri, alpha_filter);
-  }
+  if (g.filter) rtcSetGeometryIntersectFilterFunction(tri, alpha_filter<false>);
+  if (g.filter || g.see_through) rtcSetGeometryOccludedFilterFunction(tri, alpha_filter<true>);
   rtcCommitGeometry(tri);
   rtcAttachGeometry(g.blas, tri);
   rtcReleaseGeometry(tri);
@@ -402,7 +406,7 @@ void RayTracer::Impl::sync(const Scene& scene, std::vector<std::string>& warning
 
   // Geometry: which (buffer set) keys are used by renderable meshes, and which need filters.
   for (auto& [k, g] : geoms) g.used = false;
-  std::map<GeomKey, bool> needs_filter;
+  std::map<GeomKey, bool> needs_filter, see_through;
   std::map<Id, GeomKey> mesh_key;
   for (auto& [id, e] : scene.meshes()) {
     const Mesh& m = e.value;
@@ -417,6 +421,7 @@ void RayTracer::Impl::sync(const Scene& scene, std::vector<std::string>& warning
     auto mit = material_index.find(m.material);
     const Material& mat = mit == material_index.end() ? materials[0] : materials[mit->second];
     needs_filter[key] = needs_filter[key] || mat.alpha_mask;
+    see_through[key] = see_through[key] || mat.refraction > 0;
   }
   for (auto& [id, key] : mesh_key) {
     auto [p, n, t, i] = key;
@@ -425,10 +430,11 @@ void RayTracer::Impl::sync(const Scene& scene, std::vector<std::string>& warning
       if (b != kNoId) v = std::max(v, scene.buffers().at(b).version);
     Geom& g = geoms[key];
     g.used = true;
-    bool filter = needs_filter[key];
-    if (!g.blas || g.version != v || g.filter != filter) {
+    bool filter = needs_filter[key], thru = see_through[key];
+    if (!g.blas || g.version != v || g.filter != filter || g.see_through != thru) {
       g.version = v;
       g.filter = filter;
+      g.see_through = thru;
       build_geom(scene, key, g);
       ++stats.geometries_built;
     }
