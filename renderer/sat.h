@@ -52,7 +52,7 @@ class Sat {
   uint64_t at(int32_t x, int32_t y) const { return p(x - packets_.x0 + 1, y - packets_.y0 + 1); }
   // Cost of the part of r that lies inside this SAT's rectangle (0 when disjoint).
   uint64_t cost(const Rect& r) const;
-  // Cost of r, which must lie inside packets() and be non-empty: four loads, no checks.
+  // Cost of r, which must lie inside packets() (empty is fine): four loads, no checks.
   uint64_t cost_inside(const Rect& r) const {
     const int32_t ax = r.x0 - packets_.x0, ay = r.y0 - packets_.y0;
     const int32_t bx = r.x1 - packets_.x0, by = r.y1 - packets_.y0;

@@ -13,12 +13,16 @@ enum class Axis { x, y };
 
 struct Tiler {
   const SatArray* sats;
+  const Sat* single = nullptr;  // the only SAT when it covers the whole array: no search, no fill
+  double single_perf = 1.0;
   std::vector<double> prefix;  // prefix[i] = sum of the coefficients of nodes [0, i)
   Rect* out;
   int32_t parallel_min_nodes;
 
   double weight(const Rect& r, bool by_area) const {
-    return by_area ? double(r.area()) : sats->cost(r);
+    if (by_area) return double(r.area());
+    if (single) return single_perf * double(single->cost_inside(r));
+    return sats->cost(r);
   }
 
   // The first side of t cut at line s along axis.
@@ -145,6 +149,10 @@ std::vector<Rect> tile(const SatArray* sats, Rect packet_space, const std::vecto
   }
   std::vector<Rect> out(coefficients.size());
   t.sats = sats;
+  if (sats && sats->size() == 1 && !sats->has_missing()) {
+    t.single = &sats->entries()[0].sat;
+    t.single_perf = sats->entries()[0].perf;
+  }
   t.out = out.data();
   t.parallel_min_nodes = options.parallel_min_nodes;
   const bool by_area = sats == nullptr;

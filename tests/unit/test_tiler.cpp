@@ -428,3 +428,18 @@ TEST_CASE("Parallel tiling of 50,000 tasks gives the same tasks as serial tiling
   REQUIRE(a == b);
   require_exact_cover(a, space, coef.size());
 }
+
+TEST_CASE("One SAT or many SATs of the same cost map give the same tiling", "[tiler]") {
+  std::mt19937_64 rng(21);
+  const Rect space{0, 0, 200, 120};
+  const CostMap truth = make_map(rng, space, Kind::spiky);
+  SatArray one(space), many(space);
+  make_frame(truth, {space}, {1.0}, {false}, one);
+  const std::vector<double> split(17, 1.0);
+  make_frame(truth, tile(nullptr, space, split), split, std::vector<bool>(17, false), many);
+  REQUIRE(one.total() == many.total());
+  for (size_t nodes : {size_t(2), size_t(7), size_t(64), size_t(3000)}) {
+    const std::vector<double> coef(nodes, 1.0);
+    REQUIRE(tile(&one, space, coef) == tile(&many, space, coef));
+  }
+}
