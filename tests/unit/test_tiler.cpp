@@ -443,3 +443,34 @@ TEST_CASE("One SAT or many SATs of the same cost map give the same tiling", "[ti
     REQUIRE(tile(&one, space, coef) == tile(&many, space, coef));
   }
 }
+
+TEST_CASE("Over a camera-like sequence each node keeps most of its area from frame to frame", "[tiler]") {
+  // The cost field drifts by one packet per frame; each frame is tiled from the SATs the nodes
+  // measured for the previous frame's tasks, as in the real pipeline.
+  std::mt19937_64 rng(22);
+  const Rect space{0, 0, 160, 90};
+  const size_t nodes = 16;
+  const std::vector<double> coef(nodes, 1.0);
+  const CostMap base = make_map(rng, {0, 0, 260, 90}, Kind::smooth);
+  std::vector<Rect> tasks = tile(nullptr, space, coef);
+  double overlap_sum = 0;
+  int frames = 0;
+  for (int f = 0; f < 40; ++f) {
+    CostMap truth{space, {}};
+    for (int32_t y = 0; y < 90; ++y)
+      for (int32_t x = 0; x < 160; ++x) truth.cost.push_back(base.at(x + f, y));
+    SatArray array(space);
+    make_frame(truth, tasks, coef, std::vector<bool>(nodes, false), array);
+    const auto next = tile(&array, space, coef);
+    require_exact_cover(next, space, nodes);
+    if (f > 0) {  // frame 0 -> 1 moves from the area split to the cost split
+      for (size_t i = 0; i < nodes; ++i)
+        overlap_sum += double(tessera::intersect(tasks[i], next[i]).area()) / double(std::max(tasks[i].area(), next[i].area()));
+      ++frames;
+    }
+    tasks = next;
+  }
+  const double mean_overlap = overlap_sum / (double(frames) * nodes);
+  INFO("mean overlap " << mean_overlap);
+  REQUIRE(mean_overlap > 0.9);
+}
