@@ -1,0 +1,297 @@
+#pragma once
+// The client protocol: binary messages on the sync and display WebSockets (docs/protocol.md
+// documents every byte). Pure code: no sockets, no actors.
+//
+// A WebSocket binary message is a header followed by one or more records:
+//   message = "TS" u8 version u8 channel u32 record_count, record*
+//   record  = u8 type u8 op u16 reserved(0) u32 body_length, body
+// Everything is little endian. Decoding validates the whole message before anything is
+// returned (all or nothing); `apply` then changes the scene record by record, checking what
+// depends on the scene (mesh consistency, per-client totals).
+#include <cstddef>
+#include <cstdint>
+#include <string>
+#include <utility>
+#include <variant>
+#include <vector>
+
+#include "renderer/scene.h"
+
+namespace tessera::protocol {
+
+constexpr uint8_t kVersion = 1;
+constexpr uint8_t kMagic0 = 'T', kMagic1 = 'S';
+constexpr size_t kMessageHeaderSize = 8;
+constexpr size_t kRecordHeaderSize = 8;
+constexpr uint32_t kNoRecord = 0xffffffffu;
+
+// ---------------------------------------------------------------------------------------
+// Errors are values.
+
+enum class ErrorCode : uint16_t {
+  ok = 0,
+  truncated = 1,         // fewer bytes than the header or a declared length needs
+  bad_magic = 2,         // not "TS"
+  bad_version = 3,       // protocol version not supported (fatal)
+  bad_channel = 4,       // a server message on the client channel or vice versa
+  too_large = 5,         // message size or record count beyond the limits
+  unknown_record = 6,    // record type not defined for this direction
+  bad_op = 7,            // op not defined, or remove on a record that has no id
+  bad_length = 8,        // body length does not match what the record needs
+  bad_reserved = 9,      // a reserved byte or flag bit is not zero
+  bad_id = 10,           // id 0 where an id is required
+  bad_enum = 11,         // enum value out of range
+  bad_components = 12,   // component count not 1..4, or values not a multiple of it
+  not_finite = 13,       // NaN or infinity where a finite number is required
+  out_of_range = 14,     // a number outside its documented range
+  limit_exceeded = 15,   // beyond a Limits value (resolution, bytes, triangles, texture size)
+  bad_payload = 16,      // deflate data corrupt, truncated, or not the declared size
+  bad_texture = 17,      // texture bytes do not decode or do not match the declared size
+  bad_mesh = 18,         // mesh inconsistent with buffers already in the scene
+  unknown_id = 19,       // remove of an id the scene does not hold
+  bad_handshake = 20,    // handshake missing, repeated or not alone in its message (fatal)
+  not_scene_update = 21, // apply() given a record that is not a scene update
+  internal = 22,         // server-side failure (server -> client only)
+};
+constexpr uint16_t kMaxErrorCode = 22;
+
+const char* to_string(ErrorCode c);
+// Whether the session ends after this error (the server closes both channels).
+bool is_fatal(ErrorCode c);
+
+struct Error {
+  ErrorCode code = ErrorCode::ok;
+  std::string message;          // human readable, names the record and the field
+  uint32_t record = kNoRecord;  // index of the offending record in its message
+};
+
+template <class T>
+class Result {
+ public:
+  Result(T v) : v_(std::move(v)) {}
+  Result(Error e) : v_(std::move(e)) {}
+  bool ok() const { return v_.index() == 0; }
+  explicit operator bool() const { return ok(); }
+  T& value() { return std::get<0>(v_); }
+  const T& value() const { return std::get<0>(v_); }
+  const Error& error() const { return std::get<1>(v_); }
+  ErrorCode code() const { return ok() ? ErrorCode::ok : error().code; }
+
+ private:
+  std::variant<T, Error> v_;
+};
+struct Ok {};
+using Status = Result<Ok>;
+
+// ---------------------------------------------------------------------------------------
+// Limits, enforced before any allocation that depends on a declared size.
+
+struct Limits {
+  uint32_t max_message_bytes = 64u << 20;      // one WebSocket message
+  uint32_t max_records = 1u << 16;             // records in one message
+  int32_t max_width = 7680, max_height = 4320; // resolution
+  uint64_t max_message_payload_bytes = 256ull << 20;  // inflated buffers + decoded textures in one message
+  uint64_t max_buffer_bytes = 256ull << 20;    // one buffer, inflated
+  uint64_t max_client_bytes = 1ull << 30;      // buffers + textures held in one client's scene
+  uint64_t max_triangles = 20'000'000;         // scene total, instances counted each time
+  uint64_t max_vertices = 20'000'000;          // elements in one buffer
+  int32_t max_texture_size = 8192;             // texture width and height each
+  uint32_t max_nodes = 1024;                   // handshake max_nodes
+  uint32_t max_ao_samples = 256;
+  uint32_t max_depth = 64;
+};
+
+// ---------------------------------------------------------------------------------------
+// Record types and enums on the wire.
+
+enum class Channel : uint8_t { client = 0, server = 1 };  // who sends the message
+
+enum class RecordType : uint8_t {
+  // client -> server
+  handshake = 0x01,
+  settings = 0x02,
+  resolution = 0x03,
+  camera = 0x04,
+  environment = 0x05,
+  buffer = 0x10,
+  texture = 0x11,
+  material = 0x12,
+  mesh = 0x13,
+  light = 0x14,
+  render = 0x20,
+  // server -> client
+  handshake_reply = 0x81,
+  frame = 0x82,
+  error = 0x83,
+  stats = 0x84,
+};
+
+enum class Op : uint8_t { set = 0, remove = 1 };  // set = add or change
+
+enum class RendererKind : uint8_t { raytracer = 0, rasterizer = 1 };
+enum class DisplayKind : uint8_t { jpeg = 0, s3tc = 1, mjpeg = 2 };
+enum class FrameEncoding : uint8_t { jpeg = 0, dxt1 = 1 };
+enum class TextureFormat : uint8_t { rgba8 = 0, png = 1, jpeg = 2 };
+
+// Buffer flags.
+constexpr uint8_t kBufferDeflate = 1;
+// Material flags.
+constexpr uint8_t kMaterialAlphaMask = 1, kMaterialDoubleSided = 2;
+
+// ---------------------------------------------------------------------------------------
+// Client -> server records.
+
+struct Handshake {
+  RendererKind renderer = RendererKind::raytracer;
+  DisplayKind display = DisplayKind::jpeg;
+  uint8_t jpeg_quality = 85;  // 1..100
+  uint32_t max_nodes = 0;     // 0: as many as the server offers
+  int32_t width = 640, height = 480;
+};
+
+struct Settings {
+  uint32_t ao_samples = 0;  // ambient occlusion rays per hit, 0 = off
+  uint32_t max_depth = 4;   // reflection/refraction bounces
+};
+
+struct Resolution {
+  int32_t width = 640, height = 480;
+};
+
+struct SetCamera {
+  Camera camera;
+};
+struct SetEnvironment {
+  Environment environment;
+};
+
+struct SetBuffer {
+  Id id = kNoId;
+  Buffer buffer;
+  bool deflate = false;  // encode: compress the payload; decode: it was compressed
+};
+
+struct SetTexture {
+  Id id = kNoId;
+  Texture texture;             // decoded RGBA8 (after decode; before encode when format is rgba8)
+  TextureFormat format = TextureFormat::rgba8;
+  std::vector<uint8_t> encoded;  // PNG/JPEG bytes when format != rgba8 (encode only; decode leaves it empty)
+};
+
+struct SetMaterial {
+  Id id = kNoId;
+  Material material;
+};
+struct SetMesh {
+  Id id = kNoId;
+  Mesh mesh;
+};
+struct SetLight {
+  Id id = kNoId;
+  Light light;
+};
+
+struct Remove {
+  RecordType what = RecordType::buffer;  // buffer, texture, material, mesh or light
+  Id id = kNoId;
+};
+
+struct RenderRequest {
+  uint32_t frame = 0;  // client's frame number, echoed in the frame reply
+};
+
+using ClientRecord = std::variant<Handshake, Settings, Resolution, SetCamera, SetEnvironment, SetBuffer, SetTexture,
+                                  SetMaterial, SetMesh, SetLight, Remove, RenderRequest>;
+
+// ---------------------------------------------------------------------------------------
+// Server -> client records.
+
+struct HandshakeReply {
+  RendererKind renderer = RendererKind::raytracer;  // accepted settings
+  DisplayKind display = DisplayKind::jpeg;
+  uint8_t jpeg_quality = 85;
+  uint32_t nodes = 1;                 // nodes the session renders on
+  int32_t width = 640, height = 480;  // accepted initial resolution
+  uint32_t max_message_bytes = 0;     // the server's Limits, so the client can split uploads
+  uint64_t max_buffer_bytes = 0;
+  std::string server_version;         // e.g. "tessera 0.1.0", at most 255 bytes
+};
+
+struct FrameTimings {
+  float kernel_ms = 0, rendering_ms = 0, sat_ms = 0, tiling_ms = 0, pipeline_ms = 0, encode_ms = 0;
+};
+
+struct Frame {
+  uint32_t frame = 0;  // the client's frame number from the render request
+  int32_t width = 0, height = 0;
+  FrameEncoding encoding = FrameEncoding::jpeg;
+  FrameTimings timings;
+  std::vector<uint8_t> payload;  // JPEG file, or DXT1 blocks (dxt1_size(width, height) bytes)
+};
+
+struct ErrorReply {
+  ErrorCode code = ErrorCode::internal;
+  bool fatal = false;           // the server closes the session after sending it
+  uint32_t record = kNoRecord;  // offending record in the client's message
+  std::string message;          // at most 65535 bytes
+};
+
+struct Stats {
+  uint32_t frames = 0;          // frames sent in this session
+  uint32_t dropped = 0;         // render requests merged into a later frame
+  uint64_t bytes_sent = 0;      // frame payload bytes in this session
+  uint64_t scene_bytes = 0;     // buffers + textures held for this client
+  uint64_t triangles = 0;       // scene triangles (instances counted each time)
+  uint32_t nodes = 1;
+  float fps = 0;                // over the last second
+  float mean_pipeline_ms = 0;   // over the last second
+};
+
+using ServerRecord = std::variant<HandshakeReply, Frame, ErrorReply, Stats>;
+
+// ---------------------------------------------------------------------------------------
+// Encoding (infallible for valid values; values outside the wire's ranges are the caller's bug
+// and are written as given, so the decoder's checks can be tested).
+
+std::vector<uint8_t> encode(const std::vector<ClientRecord>& records);
+std::vector<uint8_t> encode(const std::vector<ServerRecord>& records);
+std::vector<uint8_t> encode(const ClientRecord& record);
+std::vector<uint8_t> encode(const ServerRecord& record);
+
+// Appends the message header and the frame record header (everything but the payload) to
+// `out`, so a server can encode the image straight after it (JpegEncoder offset).
+void encode_frame_header(const Frame& frame_without_payload, size_t payload_size, std::vector<uint8_t>& out);
+
+// ---------------------------------------------------------------------------------------
+// Decoding: validates framing, lengths, ids, enums, finiteness, ranges and Limits; inflates
+// buffers and decodes textures (within the limits). All or nothing.
+
+Result<std::vector<ClientRecord>> decode_client(const uint8_t* data, size_t size, const Limits& limits);
+Result<std::vector<ServerRecord>> decode_server(const uint8_t* data, size_t size, const Limits& limits);
+
+// ---------------------------------------------------------------------------------------
+// Applying decoded client records to a scene.
+
+bool is_scene_update(const ClientRecord& r);  // resolution, camera, environment, set/remove of entries
+
+// Applies one scene update. Scene-dependent checks:
+// - a mesh whose referenced buffers are all present must pass Scene::validate_mesh, else
+//   bad_mesh and the scene is unchanged; a mesh with missing buffers is accepted (progressive
+//   loading: it is rendered once its buffers arrive and validate_mesh passes);
+// - buffers and textures held for the client stay within limits.max_client_bytes;
+// - the scene's triangle count stays within limits.max_triangles;
+// - remove of an id the scene does not hold: unknown_id.
+// Returns not_scene_update for handshake, settings and render requests (the session handles them).
+Status apply(Scene& scene, ClientRecord&& record, const Limits& limits);
+
+// Buffers + textures held by the scene (what max_client_bytes limits).
+uint64_t scene_bytes(const Scene& scene);
+
+// Session order on the sync channel: the first message is exactly one handshake, and no
+// handshake comes later (bad_handshake, fatal). `handshake_done` is the session's state.
+Status check_session_order(bool handshake_done, const std::vector<ClientRecord>& records);
+
+// Convenience for the sync channel: an ErrorReply for a failed decode/apply.
+ErrorReply to_reply(const Error& e);
+
+}  // namespace tessera::protocol
