@@ -27,7 +27,10 @@ md = ["# Image error against render time", "",
       f"{summ[0]['ao_reference']} AO rays per hit at depth {summ[0]['ao_series_depth']}; for the depth series, AO off and depth "
       f"{summ[0]['depth_reference']}. Time is the median wall time of {summ[0]['reps']} renders.", "",
       f"Conditions: {summ[0]['width']}x{summ[0]['height']}, frame {summ[0]['frame']} of each camera loop, "
-      f"CPU {summ[0]['cpu']}, {summ[0]['isa']}, packets {summ[0]['packet']}, {summ[0]['threads']} threads.", ""]
+      f"CPU {summ[0]['cpu']}, {summ[0]['isa']}, packets {summ[0]['packet']}, {summ[0]['threads']} threads.",
+      "The machine is a shared 2-core VM: times are medians but still carry noise from neighbours (a",
+      "later row can come out faster than an earlier, heavier one); the error column is exact and",
+      "deterministic (the AO pattern is seeded by the frame number).", ""]
 for series, key, label in (("ao", "ao", "AO rays per hit"), ("depth", "depth", "recursion depth")):
     md += [f"## {label}", "", f"| scene | {label} | render ms | RMSE (0-255) | PSNR dB |", "|---|---|---|---|---|"]
     for r in data:
