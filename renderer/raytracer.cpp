@@ -107,10 +107,24 @@ const SrgbLut& srgb_lut() {
   return lut;
 }
 
-inline uint8_t encode_srgb(float c) {
-  c = std::fmin(std::fmax(c, 0.0f), 1.0f);
-  float s = c <= 0.0031308f ? 12.92f * c : 1.055f * std::pow(c, 1.0f / 2.4f) - 0.055f;
-  return uint8_t(s * 255.0f + 0.5f);
+// Linear [0, 1] to sRGB bytes through a 4096-entry table (max error under half a step).
+struct SrgbEncodeLut {
+  std::array<uint8_t, 4097> table;
+  SrgbEncodeLut() {
+    for (int i = 0; i <= 4096; ++i) {
+      float c = i / 4096.0f;
+      float s = c <= 0.0031308f ? 12.92f * c : 1.055f * std::pow(c, 1.0f / 2.4f) - 0.055f;
+      table[i] = uint8_t(s * 255.0f + 0.5f);
+    }
+  }
+};
+const SrgbEncodeLut& srgb_encode_lut() {
+  static const SrgbEncodeLut lut;
+  return lut;
+}
+inline uint8_t encode_srgb(float c, const SrgbEncodeLut& lut) {
+  c = c > 0.0f ? (c < 1.0f ? c : 1.0f) : 0.0f;  // also maps NaN to 0
+  return lut.table[int(c * 4096.0f + 0.5f)];
 }
 inline uint8_t encode_linear(float c) { return uint8_t(std::fmin(std::fmax(c, 0.0f), 1.0f) * 255.0f + 0.5f); }
 
@@ -526,7 +540,7 @@ namespace {
 
 template <int N>
 struct alignas(64) Lanes {
-  int valid[N];
+  alignas(64) int valid[N];  // Embree needs the mask aligned to the packet width
   float ox[N], oy[N], oz[N], dx[N], dy[N], dz[N];
   float weight[N];  // throughput of this path (for culling)
 };
@@ -624,7 +638,8 @@ struct Kernel {
       h.n = n;
       h.ng = ng;
       if constexpr ((F & kTextures) != 0) {
-        if (!g.texcoords.empty()) {
+        if (!g.texcoords.empty() && (s.mat_diffuse_tex[h.material] || s.mat_specular_tex[h.material] ||
+                                     s.mat_emissive_tex[h.material])) {
           const float* t0 = &g.texcoords[size_t(tri[0]) * 2];
           const float* t1 = &g.texcoords[size_t(tri[1]) * 2];
           const float* t2 = &g.texcoords[size_t(tri[2]) * 2];
@@ -673,7 +688,7 @@ struct Kernel {
     // Direct light with shadows: one occlusion packet per light.
     for (const Light& light : s.lights) {
       alignas(64) typename P::Ray sr;
-      int valid[N];
+      alignas(64) int valid[N];  // Embree needs the mask aligned to the packet width
       Vec3 contrib[N];
       int count = 0;
       for (int i = 0; i < N; ++i) {
@@ -782,7 +797,7 @@ struct Kernel {
       }
     for (int k = 0; k < S; ++k) {
       alignas(64) typename P::Ray r;
-      int valid[N];
+      alignas(64) int valid[N];  // Embree needs the mask aligned to the packet width
       int count = 0;
       for (int i = 0; i < N; ++i) {
         valid[i] = 0;
@@ -920,6 +935,7 @@ void RayTracer::Impl::render_task(const Rect& requested, const RenderSettings& c
   const double ns_per_tick = 1e6 / tsc_khz();
   const float exposure = env.exposure;
   const bool linear = env.linear;
+  const SrgbEncodeLut& enc = srgb_encode_lut();
 
   tbb::combinable<RayCounts> counts;
   tbb::parallel_for(
@@ -938,7 +954,7 @@ void RayTracer::Impl::render_task(const Rect& requested, const RenderSettings& c
               lanes.valid[i] = pixels.contains(x, y) ? -1 : 0;
               float sx = (2.0f * (x + 0.5f) / float(width) - 1.0f) * tan_half * aspect;
               float sy = (1.0f - 2.0f * (y + 0.5f) / float(height)) * tan_half;
-              Vec3 d = normalize(cz + cx * sx + cy * sy);
+              Vec3 d = cz + cx * sx + cy * sy;  // not normalised: Embree does not need it
               lanes.ox[i] = cam_o.x; lanes.oy[i] = cam_o.y; lanes.oz[i] = cam_o.z;
               lanes.dx[i] = d.x; lanes.dy[i] = d.y; lanes.dz[i] = d.z;
               lanes.weight[i] = 1.0f;
@@ -949,7 +965,7 @@ void RayTracer::Impl::render_task(const Rect& requested, const RenderSettings& c
               if (!lanes.valid[i]) continue;
               uint8_t* p = out.image.pixel(xs[i] - pixels.x0, ys[i] - pixels.y0);
               float r_ = c.r[i] * exposure, g_ = c.g[i] * exposure, b_ = c.b[i] * exposure;
-              if (linear) { p[0] = encode_srgb(r_); p[1] = encode_srgb(g_); p[2] = encode_srgb(b_); }
+              if (linear) { p[0] = encode_srgb(r_, enc); p[1] = encode_srgb(g_, enc); p[2] = encode_srgb(b_, enc); }
               else { p[0] = encode_linear(r_); p[1] = encode_linear(g_); p[2] = encode_linear(b_); }
               p[3] = 255;
             }
@@ -987,18 +1003,19 @@ double RayTracer::Impl::trace_primary(const Rect& requested, uint64_t* rays) {
                       for (int py = r.rows().begin(); py != r.rows().end(); ++py)
                         for (int px = r.cols().begin(); px != r.cols().end(); ++px) {
                           alignas(64) typename Packet<N>::RayHit rh;
-                          int valid[N];
+                          alignas(64) int valid[N];  // Embree needs the mask aligned to the packet width
                           for (int i = 0; i < N; ++i) {
                             int x = px * pw + i % pw, y = py * ph + i / pw;
                             valid[i] = pixels.contains(x, y) ? -1 : 0;
                             float sx = (2.0f * (x + 0.5f) / float(width) - 1.0f) * tan_half * aspect;
                             float sy = (1.0f - 2.0f * (y + 0.5f) / float(height)) * tan_half;
-                            Vec3 d = normalize(cz + cx * sx + cy * sy);
+                            Vec3 d = cz + cx * sx + cy * sy;
                             rh.ray.org_x[i] = cam_o.x; rh.ray.org_y[i] = cam_o.y; rh.ray.org_z[i] = cam_o.z;
                             rh.ray.dir_x[i] = d.x; rh.ray.dir_y[i] = d.y; rh.ray.dir_z[i] = d.z;
                             rh.ray.tnear[i] = 0; rh.ray.tfar[i] = std::numeric_limits<float>::infinity();
                             rh.ray.time[i] = 0; rh.ray.mask[i] = 0xFFFFFFFFu; rh.ray.id[i] = 0; rh.ray.flags[i] = 0;
                             rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
+                            rh.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;  // required with instancing
                             n += valid[i] != 0;
                           }
                           RTCIntersectContext ctx;
