@@ -47,7 +47,20 @@ SceneSetup load_scene(Args& args, int default_w, int default_h) {
   long w = args.integer("--size", default_w, 0), h = args.integer("--size", default_h, 1);
   if (w < 0 || h < 0 || w > 16384 || h > 16384) throw std::invalid_argument("--size must be within 0..16384");
   std::string loop = args.str("--camera-loop");
+  bool plain = args.flag("--plain");
   s.loaded = load_gltf(s.scene_path);
+  if (plain) {  // strip every optional shading feature (for kernel comparisons)
+    Scene& sc = s.loaded.scene;
+    std::vector<std::pair<Id, Material>> mats;
+    for (auto& [id, e] : sc.materials()) mats.emplace_back(id, e.value);
+    for (auto& [id, m] : mats) {
+      m.diffuse_texture = m.specular_texture = m.emissive_texture = kNoId;
+      m.reflection = m.refraction = 0;
+      m.alpha_mask = false;
+      m.opacity = 1;
+      sc.set_material(id, m);
+    }
+  }
   s.loaded.scene.set_resolution(int32_t(w), int32_t(h));
   if (!loop.empty()) s.loop = load_camera_loop(loop);
   return s;

@@ -762,7 +762,9 @@ struct Kernel {
 
     // Reflection, refraction and see-through, each as a packet of secondary rays.
     if constexpr ((F & kSecondary) != 0) {
-      if (depth + 1 < cfg.max_depth) {
+      if (!s.features.secondary) {
+        // No material reflects, refracts or is see-through: nothing to trace.
+      } else if (depth + 1 < cfg.max_depth) {
         secondary(in, hits, hit_mask, opacity, color, depth);
       } else {
         // At the depth limit, see-through surfaces show the background.
