@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <iterator>
 #include <limits>
@@ -909,4 +910,18 @@ TEST_CASE("Server-side rules: frame payload size and error codes", "[protocol]")
   REQUIRE_FALSE(r.ok());
   CHECK(r.error().code == ErrorCode::bad_enum);
   for (uint16_t c = 0; c <= kMaxErrorCode; ++c) CHECK(std::string(to_string(ErrorCode(c))) != "unknown");
+}
+
+TEST_CASE("The checked-in fuzz corpus holds valid messages", "[protocol]") {
+  namespace fs = std::filesystem;
+  size_t n = 0;
+  for (auto& entry : fs::directory_iterator("tests/fuzz/corpus")) {
+    std::ifstream f(entry.path(), std::ios::binary);
+    std::vector<uint8_t> m((std::istreambuf_iterator<char>(f)), {});
+    INFO(entry.path().string());
+    bool server = m.size() > 3 && m[3] == uint8_t(Channel::server);
+    CHECK((server ? decode_server(m.data(), m.size(), Limits{}).ok() : dec(m).ok()));
+    ++n;
+  }
+  CHECK(n >= 15);
 }
