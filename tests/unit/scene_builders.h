@@ -3,9 +3,11 @@
 // slabs as Scene buffers + meshes, a camera helper, full-frame rendering and pixel access.
 #include <cmath>
 #include <cstdint>
+#include <cstdlib>
 #include <string>
 #include <vector>
 
+#include "renderer/image.h"
 #include "renderer/raytracer.h"
 #include "renderer/scene.h"
 
@@ -184,6 +186,12 @@ inline Image render_full(RayTracer& rt, const Scene& scene, const RenderSettings
   Image img = r.image;
   if (result) *result = std::move(r);
   return img;
+}
+
+// Writes img to $TESSERA_TEST_DUMP/name.png when that variable is set (for looking at failures).
+inline void dump(const std::string& name, const Image& img) {
+  if (const char* dir = std::getenv("TESSERA_TEST_DUMP"))
+    if (img.width > 0 && img.height > 0) write_png(std::string(dir) + "/" + name + ".png", img);
 }
 
 struct Rgb {
