@@ -1,0 +1,304 @@
+// glTF loading: the three shared scenes load with the counts their READMEs state, and
+// broken files throw std::runtime_error naming the file, never crash.
+#include <catch2/catch.hpp>
+
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <unistd.h>
+
+#include "renderer/gltf_loader.h"
+
+using namespace tessera;
+
+namespace {
+
+std::string scene_path(const std::string& name, const std::string& file) {
+  return std::string(TESSERA_SCENES_DIR) + "/" + name + "/" + file;
+}
+
+struct Expect {
+  const char* name;
+  size_t triangles, textures, materials, meshes, lights;
+  float extent;  // metres, from the README's "% of the ... m scene extent"
+  bool sky;
+};
+
+void check_scene(const Expect& x) {
+  const std::string path = scene_path(x.name, "scene.gltf");
+  LoadedScene ls = load_gltf(path);
+  const Scene& s = ls.scene;
+  INFO(x.name);
+  std::string warnings;
+  for (auto& w : ls.warnings) warnings += w + "\n";
+  INFO("loader warnings:\n" << warnings);
+  CHECK(ls.warnings.empty());
+  CHECK(s.triangle_count() == x.triangles);
+  CHECK(s.textures().size() == x.textures);
+  CHECK(s.materials().size() == x.materials);
+  CHECK(s.meshes().size() == x.meshes);
+  CHECK(s.lights().size() == x.lights);
+  // Every texture was decoded into consistent RGBA8, and is referenced by a material.
+  for (auto& [id, e] : s.textures()) {
+    const Texture& t = e.value;
+    CHECK(t.width > 0);
+    CHECK(t.height > 0);
+    CHECK(t.rgba.size() == size_t(t.width) * t.height * 4);
+    bool used = false;
+    for (auto& [mid, m] : s.materials())
+      used = used || m.value.diffuse_texture == id || m.value.specular_texture == id || m.value.emissive_texture == id;
+    CHECK(used);
+  }
+  // Every mesh passes validation.
+  for (auto& [id, e] : s.meshes()) {
+    std::string err = s.validate_mesh(e.value);
+    INFO("mesh " << id << ": " << err);
+    CHECK(err.empty());
+  }
+  // The camera: found in the file, not mirrored, and the camera loop starts there.
+  CHECK(ls.has_camera);
+  CHECK(s.camera().to_world.det3() == Approx(1.0f).margin(1e-3f));
+  CameraLoop loop = load_camera_loop(scene_path(x.name, "camera-loop.json"));
+  CHECK(loop.frames.size() == 240);
+  Camera c0 = loop.camera(0);
+  CHECK(c0.fov_y == Approx(s.camera().fov_y).margin(1e-3f));
+  for (int i = 0; i < 16; ++i) CHECK(c0.to_world.m[size_t(i)] == Approx(s.camera().to_world.m[size_t(i)]).margin(2e-3f));
+  // The loop is closed: frame 240 is frame 0.
+  CHECK(loop.camera(240).to_world == c0.to_world);
+  CHECK(ls.bounds.extent() == Approx(x.extent).epsilon(0.05));
+  // Sky: an ambient term where the scene has an environment, none where it has not.
+  const Environment& env = s.environment();
+  CHECK(env.linear);
+  if (x.sky) {
+    CHECK(env.ambient.x > 0);
+    CHECK(env.exposure > 0);
+  } else {
+    CHECK(env.ambient == Vec3{0, 0, 0});
+  }
+}
+
+}  // namespace
+
+TEST_CASE("pavilion loads: 130,503 triangles, 6 textures, the sun, water with IOR 1.33", "[gltf][scenes]") {
+  check_scene({"pavilion", 130503, 6, 17, 106, 1, 168.9f, true});
+  LoadedScene ls = load_gltf(scene_path("pavilion", "scene.gltf"));
+  REQUIRE(ls.scene.lights().size() == 1);
+  const Light& sun = ls.scene.lights().begin()->second.value;
+  CHECK(sun.type == Light::Type::directional);
+  // README: direction to the sun [0.3697, 0.5874, 0.72]; light travels the other way.
+  Vec3 to_sun = normalize(Vec3{0.3697f, 0.5874f, 0.72f});
+  CHECK(dot(normalize(sun.direction), -to_sun) == Approx(1.0f).margin(1e-3f));
+  CHECK(sun.intensity == Approx(1.013f).margin(1e-3f));
+  bool water = false, glass = false;
+  for (auto& [id, e] : ls.scene.materials()) {
+    if (e.value.refraction > 0 && std::fabs(e.value.ior - 1.33f) < 1e-3f) water = true;
+    if (e.value.refraction > 0 && std::fabs(e.value.ior - 1.5f) < 1e-3f) glass = true;
+  }
+  CHECK(water);
+  CHECK(glass);
+}
+
+TEST_CASE("living-room loads: 143,035 triangles, 4 textures, no lights, alpha-masked leaves, a mirror", "[gltf][scenes]") {
+  check_scene({"living-room", 143035, 4, 19, 65, 0, 7.6f, true});
+  LoadedScene ls = load_gltf(scene_path("living-room", "scene.gltf"));
+  bool masked = false, mirror = false, glass = false;
+  for (auto& [id, e] : ls.scene.materials()) {
+    const Material& m = e.value;
+    if (m.alpha_mask) {
+      masked = true;
+      CHECK(m.alpha_cutoff == Approx(0.5f));
+      const Texture* t = ls.scene.texture(m.diffuse_texture);
+      REQUIRE(t);
+      CHECK(t->has_alpha());  // leaf.png's alpha channel is the mask
+    }
+    if (m.reflection > 0.9f) mirror = true;
+    if (m.refraction > 0 && std::fabs(m.ior - 1.5f) < 1e-3f) glass = true;
+  }
+  CHECK(masked);
+  CHECK(mirror);
+  CHECK(glass);
+}
+
+TEST_CASE("kitchen loads: 1,050,727 triangles, 11 textures, 4 point lights, blended blinds", "[gltf][scenes]") {
+  // Loaded once: it is the big one.
+  check_scene({"kitchen", 1050727, 11, 88, 293, 4, 11.6f, false});
+}
+
+TEST_CASE("kitchen lights and materials match its README", "[gltf][scenes]") {
+  LoadedScene ls = load_gltf(scene_path("kitchen", "scene.gltf"));
+  int points = 0;
+  bool window_light = false;
+  for (auto& [id, e] : ls.scene.lights()) {
+    const Light& l = e.value;
+    points += l.type == Light::Type::point;
+    if (length(l.position - Vec3{0.06031f, 1.974f, -3.067f}) < 1e-3f) {
+      window_light = true;
+      CHECK(l.intensity == Approx(14.32f).margin(0.01f));
+    }
+  }
+  CHECK(points == 4);
+  CHECK(window_light);
+  bool blinds = false, emissive = false;
+  for (auto& [id, e] : ls.scene.materials()) {
+    if (!e.value.alpha_mask && std::fabs(e.value.opacity - 0.612f) < 1e-3f) blinds = true;
+    if (max_component(e.value.emissive_color) > 1) emissive = true;
+  }
+  CHECK(blinds);
+  CHECK(emissive);
+}
+
+// ---------------------------------------------------------------------------------------
+// Broken files
+// ---------------------------------------------------------------------------------------
+namespace {
+
+struct TempDir {
+  std::string path;
+  TempDir() {
+    char tmpl[] = "/tmp/tessera-gltf-XXXXXX";
+    char* p = mkdtemp(tmpl);
+    if (!p) throw std::runtime_error("mkdtemp failed");
+    path = p;
+  }
+  ~TempDir() { std::system(("rm -rf '" + path + "'").c_str()); }
+  std::string write(const std::string& name, const std::string& data) const {
+    std::string p = path + "/" + name;
+    std::ofstream(p, std::ios::binary) << data;
+    return p;
+  }
+};
+
+// One triangle (float3 positions, uint16 indices) in tri.bin: 36 + 6 bytes (+2 padding).
+std::string tri_bin() {
+  float pos[9] = {0, 0, 0, 1, 0, 0, 0, 1, 0};
+  uint16_t idx[4] = {0, 1, 2, 0};
+  std::string s(reinterpret_cast<const char*>(pos), sizeof(pos));
+  s.append(reinterpret_cast<const char*>(idx), sizeof(idx));
+  return s;
+}
+
+// A valid glTF instancing the triangle twice (once mirrored); fields can be overridden.
+std::string tri_gltf(const std::string& buffer_uri = "tri.bin", int pos_count = 3, int pos_accessor = 0,
+                     const std::string& index_max = "2") {
+  std::ostringstream j;
+  j << R"({"asset":{"version":"2.0"},"scene":0,"scenes":[{"nodes":[0,1]}],)"
+    << R"("nodes":[{"mesh":0},{"mesh":0,"scale":[-1,1,1],"translation":[3,0,0]}],)"
+    << R"("meshes":[{"primitives":[{"attributes":{"POSITION":)" << pos_accessor << R"(},"indices":1}]}],)"
+    << R"("buffers":[{"uri":")" << buffer_uri << R"(","byteLength":44}],)"
+    << R"("bufferViews":[{"buffer":0,"byteOffset":0,"byteLength":36},{"buffer":0,"byteOffset":36,"byteLength":6}],)"
+    << R"("accessors":[{"bufferView":0,"componentType":5126,"count":)" << pos_count
+    << R"(,"type":"VEC3","min":[0,0,0],"max":[1,1,0]},)"
+    << R"({"bufferView":1,"componentType":5123,"count":3,"type":"SCALAR","min":[0],"max":[)" << index_max << R"(]}]})";
+  return j.str();
+}
+
+// Loads and expects a std::runtime_error whose message names the file.
+void expect_error(const std::string& path, const char* what) {
+  INFO(what << " (" << path << ")");
+  try {
+    load_gltf(path);
+    FAIL("loaded without an error");
+  } catch (const std::runtime_error& e) {
+    std::string msg = e.what();
+    INFO("message: " << msg);
+    CHECK(msg.find(path) != std::string::npos);
+  }
+}
+
+}  // namespace
+
+TEST_CASE("a minimal glTF loads, instancing one mesh through two nodes (one mirrored)", "[gltf][broken]") {
+  TempDir dir;
+  dir.write("tri.bin", tri_bin());
+  LoadedScene ls = load_gltf(dir.write("tri.gltf", tri_gltf()));
+  REQUIRE(ls.scene.meshes().size() == 2);
+  const Mesh& a = ls.scene.meshes().begin()->second.value;
+  const Mesh& b = std::next(ls.scene.meshes().begin())->second.value;
+  CHECK(a.positions == b.positions);  // instances share the buffers
+  CHECK(a.indices == b.indices);
+  CHECK(a.transform.det3() > 0);
+  CHECK(b.transform.det3() < 0);
+  CHECK(ls.scene.triangle_count() == 2);
+  CHECK(ls.bounds.lo.x == Approx(0));
+  CHECK(ls.bounds.hi.x == Approx(3));
+  CHECK_FALSE(ls.has_camera);
+}
+
+TEST_CASE("broken glTF files throw std::runtime_error naming the file", "[gltf][broken]") {
+  TempDir dir;
+  dir.write("tri.bin", tri_bin());
+  const std::string good = tri_gltf();
+
+  expect_error(dir.path + "/does-not-exist.gltf", "nonexistent path");
+  expect_error(dir.write("truncated.gltf", good.substr(0, good.size() / 2)), "truncated JSON");
+  expect_error(dir.write("empty.gltf", ""), "empty file");
+  expect_error(dir.write("garbage.gltf", "\x01\x02not json at all"), "not JSON");
+  expect_error(dir.write("nobuffer.gltf", tri_gltf("missing.bin")), "buffer file missing");
+  expect_error(dir.write("range.gltf", tri_gltf("tri.bin", 30)), "accessor reads past its buffer");
+  expect_error(dir.write("badaccessor.gltf", tri_gltf("tri.bin", 3, 7)), "accessor index out of range");
+  // Index 2 -> 5 in the data: the index accessor points at vertex 5 of 3.
+  std::string bin = tri_bin();
+  uint16_t five = 5;
+  bin.replace(36 + 4, 2, reinterpret_cast<const char*>(&five), 2);
+  dir.write("badindex.bin", bin);
+  expect_error(dir.write("badindex.gltf", tri_gltf("badindex.bin", 3, 0, "5")), "index out of range");
+  // A node that is its own child.
+  std::string cyc = good;
+  cyc.replace(cyc.find(R"({"mesh":0},)"), 11, R"({"mesh":0,"children":[0]},)");
+  expect_error(dir.write("cycle.gltf", cyc), "node cycle");
+  // A .glb that is not one.
+  expect_error(dir.write("fake.glb", std::string("glTF\x02\x00\x00\x00garbage", 15)), "bad binary glTF");
+}
+
+TEST_CASE("mutated glTF files never crash: they load or throw a runtime_error naming the file", "[gltf][broken]") {
+  TempDir dir;
+  dir.write("tri.bin", tri_bin());
+  const std::string good = tri_gltf();
+  int thrown = 0, loaded = 0;
+  // Every prefix length (every truncation) and a byte flip at every 7th position.
+  for (size_t n = 0; n < good.size(); n += 5) {
+    for (int mode = 0; mode < 2; ++mode) {
+      std::string text = mode == 0 ? good.substr(0, n) : good;
+      if (mode == 1) text[n] = text[n] == '1' ? '9' : '1';
+      std::string path = dir.write("m.gltf", text);
+      try {
+        LoadedScene ls = load_gltf(path);
+        ++loaded;
+      } catch (const std::runtime_error& e) {
+        ++thrown;
+        std::string msg = e.what();
+        INFO("mutation " << mode << " at " << n << ": " << msg);
+        REQUIRE(msg.find(path) != std::string::npos);
+      }
+    }
+  }
+  CHECK(thrown > 0);
+  CHECK(loaded > 0);
+}
+
+TEST_CASE("broken camera loops throw std::runtime_error naming the file", "[gltf][broken]") {
+  TempDir dir;
+  auto expect = [&](const std::string& name, const std::string& text) {
+    std::string path = dir.write(name, text);
+    INFO(name);
+    try {
+      load_camera_loop(path);
+      FAIL("loaded without an error");
+    } catch (const std::runtime_error& e) {
+      CHECK(std::string(e.what()).find(path) != std::string::npos);
+    }
+  };
+  expect("truncated.json", R"({"fovY_deg": 45, "frames": [{"eye": [0,0,)");
+  expect("empty.json", R"({"fovY_deg": 45, "frames": []})");
+  expect("fov.json", R"({"fovY_deg": 0, "frames": [{"eye":[0,0,0],"target":[0,0,-1],"up":[0,1,0]}]})");
+  expect("types.json", R"({"fovY_deg": "wide", "frames": 3})");
+  try {
+    load_camera_loop(dir.path + "/none.json");
+    FAIL("loaded without an error");
+  } catch (const std::runtime_error& e) {
+    CHECK(std::string(e.what()).find(dir.path + "/none.json") != std::string::npos);
+  }
+}

@@ -1,0 +1,657 @@
+// Analytic scenes for the Embree ray tracer: every expected pixel comes from geometry
+// computed here (ray-sphere, ray-plane, Snell's law), not from an earlier rendering.
+//
+// Colour convention: Environment.linear = false and exposure 1, so a shaded value c in
+// 0..1 is written as round(c * 255) and can be predicted to +-1 (float rounding) or to
+// the stated tolerance where tessellation enters.
+#include <catch2/catch.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+
+#include "renderer/raytracer.h"
+#include "scene_builders.h"
+
+using namespace tessera;
+using namespace tessera::testing;
+
+namespace {
+
+constexpr float kDeg = kPi / 180.0f;
+
+// Exact ray-sphere intersection (unit direction); returns t > 0 or -1.
+float hit_sphere(Vec3 o, Vec3 d, Vec3 c, float r) {
+  Vec3 oc = o - c;
+  float b = dot(oc, d), cc = dot(oc, oc) - r * r;
+  float disc = b * b - cc;
+  if (disc < 0) return -1;
+  float s = std::sqrt(disc);
+  float t = -b - s;
+  if (t > 1e-4f) return t;
+  t = -b + s;
+  return t > 1e-4f ? t : -1;
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------
+// Sphere over a plane: silhouette, N.L shading, plane edges and the sphere's shadow,
+// all against an exact analytic model, pixel by pixel.
+// ---------------------------------------------------------------------------------------
+TEST_CASE("sphere and plane: silhouette, N.L shading, plane edges and shadow match geometry", "[raytracer][analytic]") {
+  Scene scene;
+  const int W = 65, H = 65;
+  scene.set_resolution(W, H);
+  scene.set_environment(plain_env({0, 0, 1}));
+  scene.set_material(1, diffuse({1, 1, 1}));
+  scene.set_material(2, diffuse({1, 1, 0}));
+  const float R = 1.0f;
+  add_object(scene, 100, sphere(R, 128), 1);
+  // Plane y = -1, x in [-10, 10], z in [-20, 0.5] (its near edge and far edge are in view).
+  add_object(scene, 200, quad({-10, -1, 0.5f}, {20, 0, 0}, {0, 0, -20.5f}), 2);
+  const Vec3 travel{0, -1, -1};
+  scene.set_light(1, directional(travel));
+  const Vec3 L = normalize(-travel);
+  Camera cam = look({0, 0, 5}, {0, 0, 0}, 30 * kDeg);
+  scene.set_camera(cam);
+
+  RayTracer rt;
+  std::vector<std::string> warnings;
+  Image img = render_full(rt, scene, no_ao(), &warnings);
+  REQUIRE(warnings.empty());
+  REQUIRE(img.width == W);
+  REQUIRE(img.height == H);
+
+  // The analytic model: 0 background, 1 sphere, 2 lit plane, 3 shadowed plane.
+  const Vec3 eye = cam_pos(cam);
+  auto classify = [&](float x, float y, Vec3* n_out) {
+    Vec3 d = pixel_dir(cam, W, H, x, y);
+    float ts = hit_sphere(eye, d, {0, 0, 0}, R);
+    float tp = -1;
+    if (d.y < 0) {
+      float t = (-1 - eye.y) / d.y;
+      Vec3 p = eye + d * t;
+      if (p.x >= -10 && p.x <= 10 && p.z >= -20 && p.z <= 0.5f) tp = t;
+    }
+    if (ts > 0 && (tp < 0 || ts < tp)) {
+      if (n_out) *n_out = normalize(eye + d * ts);
+      return 1;
+    }
+    if (tp > 0) {
+      Vec3 p = eye + d * tp;
+      return hit_sphere(p, L, {0, 0, 0}, R) > 0 ? 3 : 2;
+    }
+    return 0;
+  };
+
+  // Centre pixel: the ray through the sphere centre hits at normal (0,0,1): N.L = 1/sqrt(2).
+  Rgb c = px(img, W / 2, H / 2);
+  int expect_centre = int(std::lround(255 * dot(Vec3{0, 0, 1}, L)));
+  INFO("centre pixel " << str(c) << " expected " << expect_centre);
+  CHECK(std::abs(c.r - expect_centre) <= 2);
+  CHECK(std::abs(c.g - expect_centre) <= 2);
+  CHECK(std::abs(c.b - expect_centre) <= 2);
+
+  int counted[4] = {0, 0, 0, 0};
+  int bad = 0;
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      // Only pixels whose whole footprint (centre and the 4 pixel corners, i.e. +-0.5 pixel)
+      // falls in one class are checked: "the silhouette is where geometry says within a pixel".
+      Vec3 n;
+      int k = classify(float(x), float(y), &n);
+      bool robust = true;
+      for (float dx : {-0.5f, 0.5f})
+        for (float dy : {-0.5f, 0.5f})
+          if (classify(x + dx, y + dy, nullptr) != k) robust = false;
+      if (!robust) continue;
+      ++counted[k];
+      Rgb p = px(img, x, y);
+      Rgb e{0, 0, 0};
+      int tol = 1;
+      switch (k) {
+        case 0: e = {0, 0, 255}; break;
+        case 1: {
+          int v = int(std::lround(255 * std::max(0.0f, dot(n, L))));
+          e = {v, v, v};
+          tol = 4;  // 128-segment tessellation with interpolated normals
+          break;
+        }
+        case 2: {
+          int v = int(std::lround(255 * dot(Vec3{0, 1, 0}, L)));
+          e = {v, v, 0};
+          break;
+        }
+        case 3: e = {0, 0, 0}; break;
+      }
+      if (std::abs(p.r - e.r) > tol || std::abs(p.g - e.g) > tol || std::abs(p.b - e.b) > tol) {
+        if (bad < 10) UNSCOPED_INFO("pixel " << x << "," << y << " class " << k << " got " << str(p) << " expected " << str(e));
+        ++bad;
+      }
+    }
+  CHECK(bad == 0);
+  // Every class was actually exercised.
+  CHECK(counted[0] > 100);
+  CHECK(counted[1] > 1000);
+  CHECK(counted[2] > 50);
+  CHECK(counted[3] > 20);
+}
+
+// ---------------------------------------------------------------------------------------
+// Instancing: two meshes share one buffer set (one BLAS), placed by their transforms.
+// ---------------------------------------------------------------------------------------
+TEST_CASE("instances of one geometry appear at their exact offsets; moving one only updates its instance", "[raytracer][instancing]") {
+  Scene scene;
+  const int W = 80, H = 40;
+  scene.set_resolution(W, H);
+  scene.set_environment(plain_env({0, 0, 0}));
+  // A 1x1 quad at z = 0 with a 2x2 texture so that the copies are not uniform.
+  Texture tex;
+  tex.width = tex.height = 2;
+  tex.rgba = {200, 0, 0, 255, 0, 200, 0, 255, 0, 0, 200, 255, 200, 200, 200, 255};
+  tex.sampler.filter = Sampler::Filter::nearest;
+  tex.sampler.wrap_s = tex.sampler.wrap_t = Sampler::Wrap::clamp;
+  scene.set_texture(1, tex);
+  Material m = matte({1, 1, 1});
+  m.diffuse_texture = 1;
+  scene.set_material(1, m);
+  Mesh base = add_geometry(scene, 100, quad({-0.5f, -0.5f, 0}, {1, 0, 0}, {0, 1, 0}));
+  base.material = 1;
+  Mesh a = base, b = base;
+  a.transform = Mat4::translate({-2, 0, 0});
+  b.transform = Mat4::translate({2, 0, 0});
+  scene.set_mesh(10, a);
+  scene.set_mesh(20, b);
+  // tan(fov/2) = 0.25, aspect 2, distance 10: exactly 8 pixels per world unit at z = 0.
+  scene.set_camera(look({0, 0, 10}, {0, 0, 0}, 2 * std::atan(0.25f)));
+
+  RayTracer rt;
+  std::vector<std::string> warnings;
+  Image img = render_full(rt, scene, no_ao(), &warnings);
+  REQUIRE(warnings.empty());
+  // One BLAS for both instances.
+  CHECK(rt.last_sync().geometries_built == 1);
+  CHECK(rt.last_sync().instances_updated == 2);
+
+  // Quad A covers x in [-2.5, -1.5] -> pixels [20, 28), y in [-0.5, 0.5] -> rows [16, 24).
+  // Quad B covers pixels [52, 60): exactly 32 pixels to the right.
+  auto covered = [](const Image& im, int x, int y) {
+    Rgb p = px(im, x, y);
+    return p.r + p.g + p.b > 0;
+  };
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      bool in_a = x >= 20 && x < 28 && y >= 16 && y < 24;
+      bool in_b = x >= 52 && x < 60 && y >= 16 && y < 24;
+      INFO("pixel " << x << "," << y);
+      REQUIRE(covered(img, x, y) == (in_a || in_b));
+    }
+  // The copies are pixel-identical (same texels at the same places).
+  for (int y = 16; y < 24; ++y)
+    for (int x = 20; x < 28; ++x) {
+      INFO("pixel " << x << "," << y);
+      REQUIRE(std::memcmp(img.pixel(x, y), img.pixel(x + 32, y), 4) == 0);
+    }
+  // The top-left texel of copy A is red, bottom-right grey.
+  CHECK(px(img, 21, 17).r == 200);
+  CHECK(px(img, 21, 17).g == 0);
+  CHECK(px(img, 26, 22).g == 200);
+
+  // Move B up by one unit (8 pixels): no BLAS rebuild, one instance update.
+  b.transform = Mat4::translate({2, 1, 0});
+  scene.set_mesh(20, b);
+  Image moved = render_full(rt, scene, no_ao(), &warnings);
+  REQUIRE(warnings.empty());
+  CHECK(rt.last_sync().geometries_built == 0);
+  CHECK(rt.last_sync().instances_updated == 1);
+  CHECK(rt.last_sync().instances_removed == 0);
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      bool in_a = x >= 20 && x < 28 && y >= 16 && y < 24;
+      bool in_b = x >= 52 && x < 60 && y >= 8 && y < 16;
+      INFO("pixel " << x << "," << y);
+      REQUIRE(covered(moved, x, y) == (in_a || in_b));
+    }
+  for (int y = 16; y < 24; ++y)
+    for (int x = 20; x < 28; ++x) REQUIRE(std::memcmp(moved.pixel(x, y), moved.pixel(x + 32, y - 8), 4) == 0);
+
+  // A sync with nothing changed touches nothing.
+  render_full(rt, scene, no_ao(), &warnings);
+  CHECK(rt.last_sync().geometries_built == 0);
+  CHECK(rt.last_sync().instances_updated == 0);
+}
+
+// ---------------------------------------------------------------------------------------
+// Textures
+// ---------------------------------------------------------------------------------------
+TEST_CASE("a 2x2 nearest texture on a quad facing the camera shows its texels exactly", "[raytracer][texture]") {
+  Scene scene;
+  const int W = 64, H = 64;
+  scene.set_resolution(W, H);
+  scene.set_environment(plain_env({0, 0, 0}));
+  Texture tex;
+  tex.width = tex.height = 2;
+  // Row 0 is the top of the image (v = 0).
+  const uint8_t texels[4][4] = {{250, 10, 20, 255}, {15, 240, 30, 255}, {5, 25, 235, 255}, {123, 77, 201, 255}};
+  tex.rgba.resize(16);
+  for (int i = 0; i < 16; ++i) tex.rgba[size_t(i)] = texels[i / 4][i % 4];
+  tex.sampler.filter = Sampler::Filter::nearest;
+  scene.set_texture(7, tex);
+  Material m = matte({1, 1, 1});
+  m.diffuse_texture = 7;
+  scene.set_material(1, m);
+  // Quad [-1,1]^2 at z = 0; its top-left corner has texcoord (0, 0).
+  add_object(scene, 100, quad({-1, -1, 0}, {2, 0, 0}, {0, 2, 0}), 1);
+  Camera cam = look({0, 0, 3}, {0, 0, 0}, 60 * kDeg);
+  scene.set_camera(cam);
+
+  for (bool linear : {false, true}) {
+    Environment env = plain_env({0, 0, 0});
+    env.linear = linear;  // sRGB decode on lookup, sRGB encode on output: the texel comes back
+    scene.set_environment(env);
+    RayTracer rt;
+    Image img = render_full(rt, scene, no_ao());
+    REQUIRE(rt.features().textures);
+    const Vec3 centres[4] = {{-0.5f, 0.5f, 0}, {0.5f, 0.5f, 0}, {-0.5f, -0.5f, 0}, {0.5f, -0.5f, 0}};
+    for (int q = 0; q < 4; ++q) {
+      float fx, fy;
+      project(cam, W, H, centres[q], fx, fy);
+      // The quadrant's central 5x5 pixels.
+      for (int dy = -2; dy <= 2; ++dy)
+        for (int dx = -2; dx <= 2; ++dx) {
+          Rgb p = px(img, int(std::lround(fx)) + dx, int(std::lround(fy)) + dy);
+          INFO("linear " << linear << " texel " << q << " got " << str(p));
+          int tol = linear ? 1 : 0;  // sRGB round trip through float
+          CHECK(std::abs(p.r - texels[q][0]) <= tol);
+          CHECK(std::abs(p.g - texels[q][1]) <= tol);
+          CHECK(std::abs(p.b - texels[q][2]) <= tol);
+        }
+    }
+  }
+}
+
+// ---------------------------------------------------------------------------------------
+// Alpha masks
+// ---------------------------------------------------------------------------------------
+TEST_CASE("alpha-masked cut-outs are transparent to camera rays and cast no shadow", "[raytracer][alpha]") {
+  Scene scene;
+  const int W = 101, H = 101;
+  scene.set_resolution(W, H);
+  scene.set_environment(plain_env({0, 0, 1}, {0.2f, 0.2f, 0.2f}));
+  // Left half opaque, right half cut out (alpha 0).
+  Texture tex;
+  tex.width = tex.height = 2;
+  tex.rgba = {255, 255, 255, 255, 255, 255, 255, 0, 255, 255, 255, 255, 255, 255, 255, 0};
+  tex.sampler.filter = Sampler::Filter::nearest;
+  scene.set_texture(1, tex);
+  Material front = diffuse({1, 0, 0});
+  front.diffuse_texture = 1;
+  front.alpha_mask = true;
+  front.alpha_cutoff = 0.5f;
+  scene.set_material(1, front);
+  scene.set_material(2, diffuse({0, 1, 0}));
+  add_object(scene, 100, quad({-1, -1, 0}, {2, 0, 0}, {0, 2, 0}), 1);
+  add_object(scene, 200, quad({-4, -4, -1}, {8, 0, 0}, {0, 8, 0}), 2);
+  // Light travels along (1, 0, -1): shadows fall one unit to +x on the back quad.
+  scene.set_light(1, directional({1, 0, -1}));
+  Camera cam = look({0, 0, 5}, {0, 0, 0}, 60 * kDeg);
+  scene.set_camera(cam);
+  RayTracer rt;
+  std::vector<std::string> warnings;
+  Image img = render_full(rt, scene, no_ao(), &warnings);
+  REQUIRE(warnings.empty());
+  REQUIRE(rt.features().alpha_masks);
+
+  const int lit = int(std::lround(255 * (0.2f + std::sqrt(0.5f))));
+  const int dark = int(std::lround(255 * 0.2f));
+  struct Probe {
+    Vec3 p;
+    Rgb expect;
+    const char* what;
+  };
+  const Probe probes[] = {
+      {{-0.5f, 0, 0}, {lit, 0, 0}, "opaque half of the masked quad"},
+      {{0.2f, 0, -1}, {0, dark, 0}, "back quad seen through the cut-out, shadowed by the opaque half"},
+      {{1.1f, 0, -1}, {0, lit, 0}, "back quad seen through the cut-out, its light passing through the cut-out"},
+      {{1.5f, 0, -1}, {0, lit, 0}, "back quad beside the masked quad, its light passing through the cut-out"},
+      {{0.5f, 0.5f, -1}, {0, dark, 0}, "back quad through the cut-out, in the opaque half's shadow"},
+      {{3.0f, 0, -1}, {0, lit, 0}, "back quad, unshadowed"},
+  };
+  for (const Probe& pr : probes) {
+    float fx, fy;
+    project(cam, W, H, pr.p, fx, fy);
+    Rgb p = px(img, int(std::lround(fx)), int(std::lround(fy)));
+    INFO(pr.what << ": got " << str(p) << " expected " << str(pr.expect));
+    CHECK(std::abs(p.r - pr.expect.r) <= 1);
+    CHECK(std::abs(p.g - pr.expect.g) <= 1);
+    CHECK(std::abs(p.b - pr.expect.b) <= 1);
+  }
+}
+
+// ---------------------------------------------------------------------------------------
+// Refraction: Snell offset through a tilted slab, total internal reflection.
+// ---------------------------------------------------------------------------------------
+namespace {
+
+// Snell refraction of unit d at a surface with unit normal n (any side), eta = n1 / n2.
+bool refract_dir(Vec3 d, Vec3 n, float eta, Vec3& t) {
+  if (dot(d, n) > 0) n = -n;
+  float cosi = -dot(d, n);
+  float k = 1 - eta * eta * (1 - cosi * cosi);
+  if (k < 0) return false;
+  t = normalize(d * eta + n * (eta * cosi - std::sqrt(k)));
+  return true;
+}
+
+}  // namespace
+
+TEST_CASE("a ray through a tilted glass slab leaves parallel to its entry, offset as Snell's law says", "[raytracer][refraction]") {
+  const float ior = 1.5f, thickness = 1.0f, tilt = 30 * kDeg;
+  const int W = 201, H = 11;
+  Mat4 rot = Mat4::rotate({0, 1, 0}, tilt);
+  Vec3 n = normalize(rot.transform_vector({0, 0, 1}));  // slab normal; faces at +-thickness/2 along n
+
+  for (float target_z : {-5.0f, -30.0f}) {
+    Scene scene;
+    scene.set_resolution(W, H);
+    scene.set_environment(plain_env({0, 0, 0}));
+    Material glass;
+    glass.diffuse_color = {0, 0, 0};
+    glass.refraction = 1;
+    glass.ior = ior;
+    scene.set_material(1, glass);
+    scene.set_material(2, matte({1, 1, 1}));
+    add_object(scene, 100, box({-3, -20, -thickness / 2}, {3, 20, thickness / 2}), 1, rot);
+    // A thin vertical stripe, 0.1 wide, centred on x = 0.
+    add_object(scene, 200, quad({-0.05f, -10, target_z}, {0.1f, 0, 0}, {0, 20, 0}), 2);
+    // 1/15 of the camera distance... the view spans x in [-1, 1] at z = -5.
+    float tan_half_x = 1.0f / 15.0f;
+    Camera cam = look({0, 0, 10}, {0, 0, 0}, 2 * std::atan(tan_half_x * H / W));
+    scene.set_camera(cam);
+    RayTracer rt;
+    RenderSettings s = no_ao(4);
+    Image img = render_full(rt, scene, s);
+    REQUIRE(rt.features().secondary);
+
+    // The analytic path of each pixel of the middle row: refract in, refract out, hit the target plane.
+    const Vec3 eye = cam_pos(cam);
+    auto hits_stripe = [&](float x, bool through_slab, Vec3* exit_dir, Vec3* entry_dir) {
+      Vec3 d = pixel_dir(cam, W, H, x, float(H / 2));
+      Vec3 o = eye;
+      if (entry_dir) *entry_dir = d;
+      if (through_slab) {
+        // Front face: dot(p, n) = +thickness/2 (the camera is on the +n side).
+        float t1 = (thickness / 2 - dot(o, n)) / dot(d, n);
+        Vec3 p1 = o + d * t1, d1;
+        REQUIRE(refract_dir(d, n, 1 / ior, d1));
+        float t2 = (-thickness / 2 - dot(p1, n)) / dot(d1, n);
+        Vec3 p2 = p1 + d1 * t2, d2;
+        REQUIRE(refract_dir(d1, n, ior, d2));
+        o = p2;
+        d = d2;
+      }
+      if (exit_dir) *exit_dir = d;
+      float t = (target_z - o.z) / d.z;
+      float hx = o.x + d.x * t;
+      return std::fabs(hx) <= 0.05f;
+    };
+    // Expected centroid of the stripe in the middle row, sampled at 1/16 pixel.
+    double sum = 0, cnt = 0, sum_direct = 0, cnt_direct = 0;
+    for (int i = 0; i < W * 16; ++i) {
+      float x = (i + 0.5f) / 16.0f - 0.5f;
+      if (hits_stripe(x, true, nullptr, nullptr)) { sum += x; cnt += 1; }
+      if (hits_stripe(x, false, nullptr, nullptr)) { sum_direct += x; cnt_direct += 1; }
+    }
+    REQUIRE(cnt > 0);
+    double expected = sum / cnt, direct = sum_direct / cnt_direct;
+    // Parallel exit: the analytic exit direction equals the entry direction.
+    Vec3 din, dout;
+    hits_stripe(float(W / 2), true, &dout, &din);
+    CHECK(length(dout - din) < 1e-5f);
+
+    double wsum = 0, wcnt = 0;
+    int peak = 0;
+    for (int x = 0; x < W; ++x) {
+      int v = px(img, x, H / 2).r;
+      peak = std::max(peak, v);
+      if (v > 20) { wsum += double(x) * v; wcnt += v; }
+    }
+    REQUIRE(wcnt > 0);
+    double got = wsum / wcnt;
+    INFO("target z " << target_z << ": stripe centroid " << got << " px, Snell predicts " << expected
+                     << " px, without the slab " << direct << " px");
+    // The slab shifts the stripe by many pixels; the renderer agrees to a quarter pixel.
+    CHECK(std::fabs(expected - direct) > 5);
+    CHECK(std::fabs(got - expected) < 0.25);
+    // Two Fresnel transmissions at 30 degrees keep about 92% of the light.
+    CHECK(peak > 200);
+  }
+}
+
+TEST_CASE("total internal reflection past the critical angle shows the mirror image, not the outside", "[raytracer][refraction]") {
+  // The camera sits inside a glass block (ior 1.5, critical angle 41.8 degrees) and looks
+  // up at its top face. Outside, above: a red ceiling. Inside: a green wall, seen only by
+  // rays reflected at the top face.
+  const float ior = 1.5f;
+  const float critical = std::asin(1 / ior) / kDeg;
+  REQUIRE(critical == Approx(41.81f).margin(0.01f));
+  Scene scene;
+  const int W = 5, H = 5;
+  scene.set_resolution(W, H);
+  scene.set_environment(plain_env({0, 0, 0}));
+  Material glass;
+  glass.diffuse_color = {0, 0, 0};
+  glass.refraction = 1;
+  glass.ior = ior;
+  scene.set_material(1, glass);
+  scene.set_material(2, matte({1, 0, 0}));
+  scene.set_material(3, matte({0, 1, 0}));
+  add_object(scene, 100, box({-10, -1, -10}, {10, 1, 10}), 1);
+  add_object(scene, 200, quad({-20, 3, -20}, {40, 0, 0}, {0, 0, 40}), 2);
+  add_object(scene, 300, quad({-5, -1, -4.5f}, {10, 0, 0}, {0, 2, 0}), 3);
+  for (float incidence : {20.0f, 38.0f, 44.0f, 70.0f}) {
+    float e = (90 - incidence) * kDeg;  // elevation of the view direction
+    scene.set_camera(look({0, 0, 0}, {0, std::sin(e), -std::cos(e)}, 1 * kDeg));
+    RayTracer rt;
+    Image img = render_full(rt, scene, no_ao(8));
+    Rgb p = px(img, W / 2, H / 2);
+    INFO("incidence " << incidence << " deg inside the glass: " << str(p));
+    if (incidence > critical) {
+      CHECK(p.r <= 2);     // nothing gets out
+      CHECK(p.g >= 253);   // all of it is reflected (Fresnel = 1)
+    } else {
+      // Fresnel transmission from inside: ~0.95 at 20 degrees, ~0.86 at 38 degrees.
+      CHECK(p.r >= 200);
+      CHECK(p.g <= 40);
+    }
+  }
+}
+
+// ---------------------------------------------------------------------------------------
+// Ambient occlusion
+// ---------------------------------------------------------------------------------------
+TEST_CASE("ambient occlusion is 1 on an open plane and 0 inside a closed box", "[raytracer][ao]") {
+  RenderSettings s = no_ao();
+  s.ao_samples = 8;
+  s.ao_distance = 1;
+  {
+    Scene scene;
+    scene.set_resolution(48, 32);
+    scene.set_environment(plain_env({0, 0, 0}, {1, 1, 1}));
+    scene.set_material(1, diffuse({1, 1, 1}));
+    add_object(scene, 100, quad({-100, 0, 100}, {200, 0, 0}, {0, 0, -200}), 1);
+    scene.set_camera(look({0, 3, 3}, {0, 0, 0}, 40 * kDeg));
+    RayTracer rt;
+    TaskResult r;
+    Image img = render_full(rt, scene, s, nullptr, &r);
+    CHECK(r.rays.ao == uint64_t(48 * 32 * 8));
+    int lo = 255;
+    for (int y = 0; y < 32; ++y)
+      for (int x = 0; x < 48; ++x) lo = std::min({lo, px(img, x, y).r, px(img, x, y).g, px(img, x, y).b});
+    CHECK(lo >= 254);
+  }
+  {
+    Scene scene;
+    scene.set_resolution(48, 32);
+    scene.set_environment(plain_env({1, 1, 1}, {1, 1, 1}));
+    scene.set_material(1, diffuse({1, 1, 1}));
+    add_object(scene, 100, box({-1, -1, -1}, {1, 1, 1}), 1);
+    scene.set_camera(look({0, 0, 0}, {0.3f, 0.2f, -1}, 90 * kDeg));
+    s.ao_distance = 10;
+    RayTracer rt;
+    Image img = render_full(rt, scene, s);
+    int hi = 0;
+    for (int y = 0; y < 32; ++y)
+      for (int x = 0; x < 48; ++x) hi = std::max({hi, px(img, x, y).r, px(img, x, y).g, px(img, x, y).b});
+    CHECK(hi <= 1);
+  }
+}
+
+// ---------------------------------------------------------------------------------------
+// Tasks: cost maps, sub-rectangles, packet layouts
+// ---------------------------------------------------------------------------------------
+namespace {
+
+// A scene that exercises every path: lights, shadows, AO, reflection, refraction, textures, masks.
+Scene busy_scene(int W, int H) {
+  Scene scene;
+  scene.set_resolution(W, H);
+  scene.set_environment(plain_env({0.2f, 0.3f, 0.5f}, {0.3f, 0.3f, 0.3f}));
+  Material white = diffuse({0.8f, 0.8f, 0.8f});
+  white.model = Material::Model::phong;
+  white.specular_color = {0.5f, 0.5f, 0.5f};
+  scene.set_material(1, white);
+  Material mirror = diffuse({0.1f, 0.1f, 0.1f});
+  mirror.reflection = 0.8f;
+  scene.set_material(2, mirror);
+  Material glass;
+  glass.diffuse_color = {0, 0, 0};
+  glass.refraction = 0.9f;
+  glass.ior = 1.5f;
+  scene.set_material(3, glass);
+  Texture tex;
+  tex.width = tex.height = 4;
+  for (int i = 0; i < 16; ++i) {
+    uint8_t a = (i % 3) ? 255 : 0;
+    tex.rgba.insert(tex.rgba.end(), {uint8_t(40 * (i % 4) + 60), uint8_t(16 * i), uint8_t(200 - 10 * i), a});
+  }
+  scene.set_texture(1, tex);
+  Material leaf = diffuse({1, 1, 1});
+  leaf.diffuse_texture = 1;
+  leaf.alpha_mask = true;
+  scene.set_material(4, leaf);
+  add_object(scene, 100, quad({-5, -1, 5}, {10, 0, 0}, {0, 0, -10}), 1);
+  add_object(scene, 200, sphere(0.7f, 32), 2, Mat4::translate({-1, -0.3f, 0}));
+  add_object(scene, 300, sphere(0.6f, 32), 3, Mat4::translate({0.8f, -0.4f, 0.8f}));
+  add_object(scene, 400, quad({-1, -1, -1.5f}, {2.5f, 0, 0}, {0, 2.5f, 0}), 4);
+  scene.set_light(1, directional({0.4f, -1, -0.3f}, 0.8f));
+  Light pl;
+  pl.type = Light::Type::point;
+  pl.position = {1, 2, 2};
+  pl.intensity = 3;
+  scene.set_light(2, pl);
+  scene.set_camera(look({0.5f, 1.2f, 4}, {0, -0.3f, 0}, 50 * kDeg));
+  return scene;
+}
+
+RenderSettings busy_settings() {
+  RenderSettings s;
+  s.ao_samples = 4;
+  s.ao_distance = 2;
+  s.max_depth = 4;
+  s.frame = 3;
+  return s;
+}
+
+}  // namespace
+
+TEST_CASE("the cost map covers exactly the task's packets and sums to the kernel time", "[raytracer][cost]") {
+  const int W = 61, H = 37;  // not multiples of any packet size
+  Scene scene = busy_scene(W, H);
+  for (PacketLayout layout : {PacketLayout{2, 2}, PacketLayout{4, 2}, PacketLayout{4, 4}}) {
+    RayTracer rt(layout);
+    std::vector<std::string> warnings;
+    rt.sync(scene, warnings);
+    REQUIRE(warnings.empty());
+    REQUIRE(rt.packet_layout().w == layout.w);
+    REQUIRE(rt.packet_layout().h == layout.h);
+    const Rect tasks[] = {{0, 0, W, H}, {3, 5, 37, 29}, {8, 8, 16, 16}, {50, 30, 200, 200}, {60, 36, 61, 37}};
+    for (const Rect& task : tasks) {
+      TaskResult r;
+      rt.render(task, busy_settings(), r);
+      Rect px_rect = intersect(task, {0, 0, W, H});
+      INFO("layout " << layout.w << "x" << layout.h << " task " << task.x0 << "," << task.y0 << "," << task.x1 << "," << task.y1);
+      CHECK(r.pixels == px_rect);
+      CHECK(r.image.width == px_rect.width());
+      CHECK(r.image.height == px_rect.height());
+      // The packets whose footprint meets the task, and no others.
+      Rect want{px_rect.x0 / layout.w, px_rect.y0 / layout.h, (px_rect.x1 + layout.w - 1) / layout.w,
+                (px_rect.y1 + layout.h - 1) / layout.h};
+      CHECK(r.cost.packets == want);
+      CHECK(r.cost.cost.size() == size_t(want.area()));
+      CHECK(packet_space(W, H, layout).contains(r.cost.packets));
+      for (uint32_t c : r.cost.cost) CHECK(c > 0);  // every packet did work
+      // kernel_ms is the sum of the cost map in ms (cost unit: ns at the nominal TSC rate).
+      CHECK(r.kernel_ms == double(r.cost.total()) * 1e-6);
+      CHECK(r.kernel_ms > 0);
+      CHECK(r.rays.primary == uint64_t(px_rect.area()));
+    }
+    // Without a cost map: no entries and no kernel time.
+    RenderSettings s = busy_settings();
+    s.cost_map = false;
+    TaskResult r;
+    rt.render({0, 0, W, H}, s, r);
+    CHECK(r.cost.cost.empty());
+    CHECK(r.kernel_ms == 0);
+  }
+}
+
+TEST_CASE("a sub-rectangle renders exactly the same pixels as the full image", "[raytracer][tasks]") {
+  const int W = 61, H = 37;
+  Scene scene = busy_scene(W, H);
+  RayTracer rt;
+  TaskResult full;
+  std::vector<std::string> warnings;
+  rt.sync(scene, warnings);
+  rt.render({0, 0, W, H}, busy_settings(), full);
+  const Rect tasks[] = {{0, 0, 16, 16}, {16, 0, 61, 16}, {3, 5, 37, 29}, {1, 1, 2, 2}, {30, 20, 61, 37}, {0, 36, 61, 37}, {7, 0, 8, 37}};
+  for (const Rect& t : tasks) {
+    TaskResult r;
+    rt.render(t, busy_settings(), r);
+    REQUIRE(r.image.width == t.width());
+    REQUIRE(r.image.height == t.height());
+    int diff = 0;
+    for (int y = t.y0; y < t.y1; ++y)
+      for (int x = t.x0; x < t.x1; ++x)
+        if (std::memcmp(r.image.pixel(x - t.x0, y - t.y0), full.image.pixel(x, y), 4) != 0) ++diff;
+    INFO("task " << t.x0 << "," << t.y0 << "," << t.x1 << "," << t.y1);
+    CHECK(diff == 0);
+  }
+  // Tiling the frame with unaligned tasks reassembles the full image byte for byte.
+  Image tiled(W, H);
+  for (int y = 0; y < H; y += 7)
+    for (int x = 0; x < W; x += 13) {
+      TaskResult r;
+      rt.render({x, y, x + 13, y + 7}, busy_settings(), r);
+      blit(tiled, r.image, r.pixels.x0, r.pixels.y0);
+    }
+  CHECK(tiled.rgba == full.image.rgba);
+}
+
+TEST_CASE("packet layouts 2x2, 4x2 and 4x4 give identical images", "[raytracer][packets]") {
+  const int W = 61, H = 37;
+  Scene scene = busy_scene(W, H);
+  std::vector<Image> images;
+  for (PacketLayout layout : {PacketLayout{2, 2}, PacketLayout{4, 2}, PacketLayout{4, 4}}) {
+    RayTracer rt(layout);
+    images.push_back(render_full(rt, scene, busy_settings()));
+  }
+  for (size_t i = 1; i < images.size(); ++i) {
+    int diff = 0;
+    for (size_t k = 0; k < images[0].rgba.size(); ++k) diff += images[i].rgba[k] != images[0].rgba[k];
+    INFO("layout " << i << " differs from 2x2 in " << diff << " bytes");
+    CHECK(diff == 0);
+  }
+  CHECK_THROWS_AS(RayTracer(PacketLayout{3, 3}), std::invalid_argument);
+}
