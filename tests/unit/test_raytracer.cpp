@@ -655,3 +655,108 @@ TEST_CASE("packet layouts 2x2, 4x2 and 4x4 give identical images", "[raytracer][
   }
   CHECK_THROWS_AS(RayTracer(PacketLayout{3, 3}), std::invalid_argument);
 }
+
+// ---------------------------------------------------------------------------------------
+// Incremental sync
+// ---------------------------------------------------------------------------------------
+TEST_CASE("incremental sync: late materials, hidden and removed meshes, changed shared buffers", "[raytracer][sync]") {
+  Scene scene;
+  const int W = 80, H = 40;
+  scene.set_resolution(W, H);
+  scene.set_environment(plain_env({0, 0, 0}));
+  Mesh base = add_geometry(scene, 100, quad({-0.5f, -0.5f, 0}, {1, 0, 0}, {0, 1, 0}));
+  Mesh a = base, b = base;
+  a.transform = Mat4::translate({-2, 0, 0});
+  a.material = 5;  // not there yet: the default material (matte red) until it arrives
+  b.transform = Mat4::translate({2, 0, 0});
+  b.material = 6;
+  scene.set_material(6, matte({0, 0, 1}));
+  scene.set_mesh(10, a);
+  scene.set_mesh(20, b);
+  scene.set_camera(look({0, 0, 10}, {0, 0, 0}, 2 * std::atan(0.25f)));
+  RayTracer rt;
+  std::vector<std::string> warnings;
+  Image img = render_full(rt, scene, no_ao(), &warnings);
+  CHECK(warnings.empty());
+  // Quad A covers pixels [20, 28) x [16, 24), quad B [52, 60) x [16, 24) (8 px per unit).
+  CHECK(px(img, 24, 20).r == 255);
+  CHECK(px(img, 24, 20).b == 0);
+  CHECK(px(img, 56, 20).b == 255);
+
+  // The material arrives: no geometry work, the colour changes.
+  scene.set_material(5, matte({0, 1, 0}));
+  img = render_full(rt, scene, no_ao(), &warnings);
+  CHECK(rt.last_sync().geometries_built == 0);
+  CHECK(px(img, 24, 20).g == 255);
+  CHECK(px(img, 24, 20).r == 0);
+
+  // Hiding B removes its instance; showing it again restores it.
+  b.visible = false;
+  scene.set_mesh(20, b);
+  img = render_full(rt, scene, no_ao(), &warnings);
+  CHECK(rt.last_sync().instances_removed == 1);
+  CHECK(px(img, 56, 20).b == 0);
+  b.visible = true;
+  scene.set_mesh(20, b);
+  img = render_full(rt, scene, no_ao(), &warnings);
+  CHECK(rt.last_sync().instances_updated == 1);
+  CHECK(px(img, 56, 20).b == 255);
+
+  // Changing the shared positions rebuilds one BLAS and updates both instances: the quad
+  // doubles in size (now [-1, 1]^2 around each centre: pixels [16, 32) and [48, 64)).
+  Buffer pos = *scene.buffer(100);
+  for (float& v : pos.f) v *= 2;
+  scene.set_buffer(100, pos);
+  img = render_full(rt, scene, no_ao(), &warnings);
+  CHECK(rt.last_sync().geometries_built == 1);
+  CHECK(rt.last_sync().instances_updated == 2);
+  CHECK(px(img, 17, 13).g == 255);
+  CHECK(px(img, 62, 26).b == 255);
+  CHECK(px(img, 40, 20).r + px(img, 40, 20).g + px(img, 40, 20).b == 0);
+
+  // Removing the index buffer makes both meshes invalid: warned about, not drawn.
+  scene.remove_buffer(103);
+  img = render_full(rt, scene, no_ao(), &warnings);
+  CHECK(warnings.size() == 2);
+  CHECK(rt.last_sync().instances_removed == 2);
+  for (size_t i = 0; i < img.rgba.size(); i += 4) REQUIRE(img.rgba[i] + img.rgba[i + 1] + img.rgba[i + 2] == 0);
+
+  // Removing a mesh.
+  Buffer idx;
+  idx.type = Buffer::Type::u32;
+  idx.u = {0, 1, 2, 0, 2, 3};
+  scene.set_buffer(103, idx);
+  scene.remove_mesh(10);
+  img = render_full(rt, scene, no_ao(), &warnings);
+  CHECK(warnings.empty());
+  CHECK(px(img, 24, 20).g == 0);
+  CHECK(px(img, 56, 20).b == 255);
+}
+
+TEST_CASE("opacity below 1 is see-through along the straight ray", "[raytracer][opacity]") {
+  Scene scene;
+  scene.set_resolution(21, 21);
+  scene.set_environment(plain_env({0, 0, 1}));
+  Material glassy = matte({1, 1, 1});
+  glassy.opacity = 0.5f;
+  scene.set_material(1, glassy);
+  scene.set_material(2, matte({0, 1, 0}));
+  add_object(scene, 100, quad({-1, -1, 0}, {2, 0, 0}, {0, 2, 0}), 1);          // half-transparent white
+  add_object(scene, 200, quad({0, -1, -1}, {2, 0, 0}, {0, 2, 0}), 2);          // green behind, right half
+  scene.set_camera(look({0, 0, 5}, {0, 0, 0}, 20 * kDeg));
+  RayTracer rt;
+  Image img = render_full(rt, scene, no_ao(4));
+  CHECK(rt.features().secondary);
+  Rgb left = px(img, 6, 10), right = px(img, 14, 10);
+  INFO("left " << str(left) << " right " << str(right));
+  // 0.5 white + 0.5 of what is behind: the blue background, or the green quad.
+  CHECK(std::abs(left.r - 128) <= 1);
+  CHECK(std::abs(left.g - 128) <= 1);
+  CHECK(std::abs(left.b - 255) <= 1);
+  CHECK(std::abs(right.r - 128) <= 1);
+  CHECK(std::abs(right.g - 255) <= 1);
+  CHECK(std::abs(right.b - 128) <= 1);
+  // With max_depth 1 (primary rays only) the see-through share shows the background.
+  Image flat = render_full(rt, scene, no_ao(1));
+  CHECK(std::abs(px(flat, 14, 10).g - 128) <= 1);
+}
