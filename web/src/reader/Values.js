@@ -63,7 +63,7 @@ export function parseValueElement(el) {
     if (stripped.length) error = `<${type} name="${el.getAttribute('name')}"> holds text that is not a number: "${stripped.slice(0, 40)}"`;
     let n = nums.length - (nums.length % info.size);
     if (n !== nums.length)
-      error = `<${type} name="${el.getAttribute('name')}"> has ${nums.length} numbers, not a multiple of ${info.size}`;
+      error = (error ? error + '; ' : '') + `<${type} name="${el.getAttribute('name')}"> has ${nums.length} numbers, not a multiple of ${info.size}`;
     value = new info.array(n);
     for (let i = 0; i < n; i++) value[i] = info.array === Int32Array ? parseInt(nums[i], 10) : parseFloat(nums[i]);
   }
