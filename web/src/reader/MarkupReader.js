@@ -47,6 +47,10 @@ export class MarkupReader {
     this.derived = new WeakMap();
     this.walk(xml3d, M.identity(), null, true, 'visible');
     this.chooseView(xml3d);
+    // Tessera extension: ambient="r g b" (a uniform sky on diffuse surfaces; XML3D has none).
+    const amb = (xml3d.getAttribute('ambient') || '').trim().split(/[\s,]+/).map(Number);
+    if (amb.length === 3 && amb.every((v) => Number.isFinite(v) && v >= 0)) scene.environment.ambient = amb;
+    else if (xml3d.getAttribute('ambient')) this.error(xml3d, `xml3d ambient="${xml3d.getAttribute('ambient')}" is not three numbers >= 0`);
     return scene;
   }
 

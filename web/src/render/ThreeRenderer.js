@@ -90,7 +90,7 @@ export class ThreeRenderer {
   // Syncs three's scene with the description.
   update(scene) {
     this.desc = scene;
-    this.counts = updateLightUniforms(this.lightUniforms, scene.lights.values());
+    this.counts = updateLightUniforms(this.lightUniforms, scene.lights.values(), scene.environment.ambient);
     for (const [id, o] of this.objects)
       if (!scene.meshes.has(id)) { this.scene.remove(o); this.objects.delete(id); }
     for (const m of scene.meshes.values()) {

@@ -33,6 +33,7 @@ uniform float shininess;
 uniform float ambientIntensity;
 uniform float opacity;
 uniform float alphaCutoff;
+uniform vec3 sceneAmbient;
 uniform sampler2D diffuseTexture;
 uniform sampler2D specularTexture;
 uniform sampler2D emissiveTexture;
@@ -97,7 +98,7 @@ void main() {
 #endif
   vec3 N = normalize(vNormal);
   vec3 V = normalize(cameraPosition - vWorldPos);
-  vec3 color = ke + ambientIntensity * kd;
+  vec3 color = ke + ambientIntensity * kd + sceneAmbient * kd;
 #if NUM_POINT > 0
   for (int i = 0; i < NUM_POINT; i++) {
     vec3 L = pointPosition[i] - vWorldPos;
@@ -128,6 +129,7 @@ void main() {
 export function createLightUniforms() {
   const arr = (n) => Array.from({ length: n }, () => new THREE.Vector3());
   return {
+    sceneAmbient: { value: new THREE.Vector3() },
     pointPosition: { value: arr(MAX_LIGHTS) }, pointIntensity: { value: arr(MAX_LIGHTS) }, pointAttenuation: { value: arr(MAX_LIGHTS) },
     dirDirection: { value: arr(MAX_LIGHTS) }, dirIntensity: { value: arr(MAX_LIGHTS) },
     spotPosition: { value: arr(MAX_LIGHTS) }, spotDirection: { value: arr(MAX_LIGHTS) }, spotIntensity: { value: arr(MAX_LIGHTS) },
@@ -137,7 +139,8 @@ export function createLightUniforms() {
 }
 
 // Fills the shared uniforms from the scene's lights; returns the counts per type.
-export function updateLightUniforms(u, lights) {
+export function updateLightUniforms(u, lights, ambient = [0, 0, 0]) {
+  u.sceneAmbient.value.fromArray(ambient);
   const counts = { point: 0, directional: 0, spot: 0 };
   for (const l of lights) {
     if (!l.on || counts[l.type] >= MAX_LIGHTS) continue;
