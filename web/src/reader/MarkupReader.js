@@ -37,6 +37,7 @@ export class MarkupReader {
     this.resources = resources;
     this.computedStyle = computedStyle;
     this.ids = ids || new IdRegistry();
+    this.derived = new WeakMap();  // converted arrays, kept across reads (stable buffer identity)
   }
 
   read(xml3d) {
@@ -44,7 +45,6 @@ export class MarkupReader {
     this.scene = scene;
     this.views = [];
     this.warned = new Set();
-    this.derived = new WeakMap();
     this.walk(xml3d, M.identity(), null, true, 'visible');
     this.chooseView(xml3d);
     // Tessera extension: ambient="r g b" (a uniform sky on diffuse surfaces; XML3D has none).
