@@ -42,7 +42,7 @@ test('an unchanged page sends nothing; a change sends only what changed; removal
   recs = sync.diff(reader.read(x), VIEW);
   assert.deepEqual(recs.map((r) => `${r.type}:${r.what}`).sort(), ['remove:buffer', 'remove:buffer', 'remove:material', 'remove:mesh'].sort());
   recs = sync.diff(reader.read(x), { width: 640, height: 480 });
-  assert.deepEqual(recs.map((r) => r.type), ['resolution', 'camera']);
+  assert.deepEqual(recs.map((r) => r.type), ['resolution']);
 });
 
 test('reset re-sends the whole scene (after a reconnect)', () => {
