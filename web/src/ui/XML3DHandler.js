@@ -68,12 +68,12 @@ export class XML3DHandler {
     xml3d.parentNode.insertBefore(c, xml3d);
     xml3d.classList.add('tessera-hidden');
 
-    this.backend = createBackend(this);
-    this.inputElement = this.backend.inputElement || this.backend.element;
     this.status = doc.createElement('div');
     this.status.className = 'tessera-status';
-    c.appendChild(this.status);
     this.messages = new Map();  // key -> {text, error}
+    this.backend = createBackend(this);
+    this.inputElement = this.backend.inputElement || this.backend.element;
+    c.appendChild(this.status);  // above the display and input elements
 
     this.installApi();
     this.installEvents();
