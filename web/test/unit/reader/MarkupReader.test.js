@@ -297,3 +297,24 @@ test('glTF 2.0 model: primitives with baked node matrices, materials and KHR lig
   assert.equal(light.type, 'directional');
   nearArr(light.color, [2, 2, 2]);
 });
+
+test('XML resource documents: mesh data and materials referenced as file.xml#id', async () => {
+  const { DOMParser } = await import('linkedom');
+  const files = {
+    'http://localhost/res/lib.xml': `<xml3d xmlns="http://www.xml3d.org/2009/xml3d"><data id="tri">
+      <float3 name="position">0 0 0 1 0 0 0 1 0</float3></data>
+      <material id="green" model="urn:xml3d:material:matte"><float3 name="diffuseColor">0 1 0</float3></material></xml3d>`,
+  };
+  let loaded;
+  const done = new Promise((r) => (loaded = r));
+  const resources = new Resources({ fetch: fakeFetch(files), onLoad: () => loaded(),
+    parseXml: (t) => new DOMParser().parseFromString(t, 'text/xml') });
+  const doc = page(`<xml3d><mesh src="res/lib.xml#tri" material="res/lib.xml#green"></mesh></xml3d>`);
+  const reader = new MarkupReader({ resources });
+  reader.read(doc.querySelector('xml3d'));
+  await done;
+  const scene = reader.read(doc.querySelector('xml3d'));
+  assert.deepEqual(scene.errors, []);
+  const mesh = only(scene.meshes);
+  assert.deepEqual(scene.materials.get(mesh.material).diffuseColor, [0, 1, 0]);
+});
