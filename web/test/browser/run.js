@@ -3,10 +3,14 @@ import { spawnSync } from 'node:child_process';
 import fs from 'node:fs';
 import path from 'node:path';
 import { fileURLToPath } from 'node:url';
-import { CHROMIUM, hasChromium } from './browser.js';
 
 const dir = path.dirname(fileURLToPath(import.meta.url));
-if (!hasChromium()) {
+const CHROMIUM = process.env.CHROMIUM || '/usr/bin/chromium';  // as in browser.js
+if (!fs.existsSync(path.resolve(dir, '../../node_modules/playwright-core'))) {
+  console.log('SKIP: web/node_modules missing (run npm ci in web/ or scripts/install-deps.sh --browser)');
+  process.exit(77);
+}
+if (!fs.existsSync(CHROMIUM)) {
   console.log(`SKIP: ${CHROMIUM} not found (install it with scripts/install-deps.sh --browser)`);
   process.exit(77);
 }
