@@ -1,0 +1,45 @@
+// Shared code of the demo pages: places the view from data-eye / data-target / data-fov on
+// the <view>, and switches between local WebGL and server rendering.
+//   ?server=host:port   render on that Tessera node (default: local WebGL)
+import { lookAt, toAxisAngle } from '../src/math/Mat4.js';
+import '../src/xml3d.js';
+
+const xml3d = document.querySelector('xml3d');
+const view = xml3d.querySelector('view');
+const num = (s) => s.split(/[\s,]+/).map(Number);
+if (view && view.dataset.eye) {
+  const m = lookAt(num(view.dataset.eye), num(view.dataset.target), [0, 1, 0]);
+  const t = document.getElementById(view.getAttribute('transform').slice(1));
+  t.setAttribute('translation', `${m[12]} ${m[13]} ${m[14]}`);
+  t.setAttribute('rotation', toAxisAngle(m).join(' '));
+}
+
+const params = new URLSearchParams(location.search);
+const defaultServer = params.get('server') || `${location.hostname}:${location.port || 80}`;
+if (params.get('server')) xml3d.setAttribute('server', params.get('server'));
+
+// The switch: toggling the server attribute makes xml3d.js rebuild the backend.
+const bar = document.getElementById('controls');
+if (bar) {
+  const box = document.createElement('label');
+  box.innerHTML = `<input type="checkbox" id="remote"> render on Tessera node <input id="host" size="18">
+    <span id="info"></span>`;
+  bar.appendChild(box);
+  const remote = box.querySelector('#remote'), host = box.querySelector('#host'), info = box.querySelector('#info');
+  remote.checked = xml3d.hasAttribute('server');
+  host.value = xml3d.getAttribute('server') || defaultServer;
+  const apply = () => {
+    if (remote.checked) xml3d.setAttribute('server', host.value); else xml3d.removeAttribute('server');
+  };
+  remote.addEventListener('change', apply);
+  host.addEventListener('change', () => remote.checked && apply());
+  let frames = 0, last = performance.now();
+  xml3d.addEventListener('framedrawn', () => {
+    frames++;
+    const now = performance.now();
+    if (now - last > 1000) {
+      info.textContent = ` ${(frames * 1000 / (now - last)).toFixed(1)} frames/s, ${xml3d.hasAttribute('server') ? 'server' : 'WebGL'}`;
+      frames = 0; last = now;
+    }
+  });
+}

@@ -1,0 +1,112 @@
+// Server rendering backend: <xml3d server="host:port" renderer="raytracer" display="jpeg|s3tc|mjpeg"
+// nodes="N" sync-rate="30" jpeg-quality="85" ao-samples="0" max-depth="4">. The scene goes to
+// the node over the sync channel; frames come back on the same WebSocket and are shown in a
+// display element behind a transparent input canvas (which takes the mouse).
+import { SyncChannel } from './SyncChannel.js';
+import { JpegDisplay, S3tcDisplay, MjpegDisplay } from './FrameDisplay.js';
+import { hasS3TC } from './Features.js';
+
+function cssColor(doc, el) {
+  const c = doc.defaultView.getComputedStyle(el).backgroundColor || '';
+  const m = /rgba?\(([^)]*)\)/.exec(c);
+  if (!m) return [0, 0, 0];
+  const v = m[1].split(/[\s,/]+/).map(Number);
+  if (v.length > 3 && v[3] === 0) return [0, 0, 0];
+  return [v[0] / 255, v[1] / 255, v[2] / 255];
+}
+
+const int = (el, name, def) => {
+  const v = parseInt(el.getAttribute(name) ?? '', 10);
+  return Number.isFinite(v) ? v : def;
+};
+
+export class RemoteBackend {
+  constructor(handler, server) {
+    const doc = handler.container.ownerDocument, x = handler.xml3d;
+    this.handler = handler;
+    let display = (x.getAttribute('display') || 'jpeg').toLowerCase();
+    if (!['jpeg', 's3tc', 'mjpeg'].includes(display)) {
+      handler.setStatus('display', `⚠ display="${display}" unknown, jpeg used`, true);
+      display = 'jpeg';
+    }
+    if (display === 's3tc' && !hasS3TC()) display = 'jpeg';
+    this.display = display;
+    const host = server.replace(/^wss?:\/\//, '').replace(/\/.*$/, '');
+    const session = Math.random().toString(36).slice(2) + Date.now().toString(36);
+    const secure = doc.defaultView.location.protocol === 'https:';
+    this.url = `${secure ? 'wss' : 'ws'}://${host}/ws?session=${session}`;
+    this.frameView = display === 's3tc' ? new S3tcDisplay(doc)
+      : display === 'mjpeg' ? new MjpegDisplay(doc, `${secure ? 'https' : 'http'}://${host}/mjpeg/${session}`) : new JpegDisplay(doc);
+    this.element = this.frameView.element;
+    handler.container.appendChild(this.element);
+    this.inputElement = doc.createElement('canvas');
+    this.inputElement.className = '_xml3d tessera-input';  // transparent: never drawn
+    handler.container.appendChild(this.inputElement);
+
+    const renderer = x.getAttribute('renderer') || 'raytracer';
+    this.channel = new SyncChannel({
+      url: this.url,
+      handshake: { renderer: renderer === 'rasterizer' ? 'rasterizer' : 'raytracer', display,
+        jpegQuality: Math.min(100, Math.max(1, int(x, 'jpeg-quality', 85))), maxNodes: Math.max(0, int(x, 'nodes', 0)),
+        width: handler.width, height: handler.height },
+      settings: x.hasAttribute('ao-samples') || x.hasAttribute('max-depth')
+        ? { aoSamples: int(x, 'ao-samples', 0), maxDepth: int(x, 'max-depth', 4) } : null,
+      rate: Math.min(120, Math.max(1, int(x, 'sync-rate', 30))),
+      onState: (state, detail) => this.state(state, detail),
+      onFrame: (f) => this.frame(f),
+      onServerError: (e) => handler.setStatus(`server:${e.codeName}:${e.message}`, `⚠ server: ${e.codeName}: ${e.message}`, true),
+      onStats: (s) => { this.stats = s; },
+      onProgress: (sent, queued) => handler.setStatus('upload', queued && sent < queued
+        ? `uploading scene: ${Math.round(100 * sent / queued)}% of ${(queued / 1048576).toFixed(1)} MB` : null),
+    });
+    this.channel.connect();
+  }
+
+  state(state, detail) {
+    const h = this.handler;
+    h.container.dataset.connection = state;
+    const text = {
+      connecting: `connecting to ${this.url}…`,
+      handshake: 'connected, waiting for the node…',
+      ready: null,
+      disconnected: `⚠ connection to the Tessera node lost: ${detail}`,
+      failed: `⚠ the Tessera node refused the session: ${detail}`,
+    }[state];
+    h.setStatus('connection', text, state === 'disconnected' || state === 'failed');
+    if (state === 'ready') this.serverInfo = detail;
+  }
+
+  async frame(f) {
+    try {
+      if (f.encoding === 'jpeg' && this.display === 's3tc') {
+        // The node answered JPEG after all: switch displays.
+        this.frameView.dispose();
+        this.frameView = new JpegDisplay(this.handler.container.ownerDocument);
+        this.element = this.frameView.element;
+        this.handler.container.insertBefore(this.element, this.inputElement);
+        this.display = 'jpeg';
+      }
+      if (!(await this.frameView.show(f))) return;
+      this.handler.frameDrawn({ frame: f.frame, timeEnd: performance.now(), renderTimeInMilliseconds: f.timings.rendering,
+        timings: f.timings, encoding: f.encoding, width: f.width, height: f.height, remote: true });
+    } catch (e) {
+      this.handler.setStatus('frame', `⚠ cannot show frame ${f.frame}: ${e.message}`, true);
+    }
+  }
+
+  update(scene) {
+    const h = this.handler;
+    this.inputElement.width = h.width;
+    this.inputElement.height = h.height;
+    this.channel.setScene(scene, { width: h.width, height: h.height,
+      background: cssColor(h.container.ownerDocument, h.container) });
+  }
+
+  draw() { return null; }  // frames arrive asynchronously
+
+  dispose() {
+    this.channel.close();
+    this.frameView.dispose();
+    this.inputElement.remove();
+  }
+}

@@ -1,0 +1,177 @@
+// The sync channel to a Tessera node: one WebSocket speaking the binary protocol. After the
+// handshake, a run loop (rate Hz) collects scene changes, sends them progressively (buffers
+// deflated when CompressionStream exists, rate-controlled on ws.bufferedAmount) and asks for
+// a frame after every iteration that changed something. On connection loss it reconnects
+// with back-off and re-sends the whole scene.
+import { encodeClient, decodeServer, clientRecordSize, ProtocolError } from './Protocol.js';
+import { SceneSync } from './SceneSync.js';
+import { hasCompressionStream, deflate } from './Features.js';
+import { loadTexture } from './TextureEncoder.js';
+
+const DEFLATE_MIN_BYTES = 256;
+const MAX_OUTSTANDING_RENDERS = 2;
+
+export class SyncChannel {
+  constructor({ url, handshake, settings = null, rate = 30, highWater = 4 << 20, messageBytes = 1 << 20,
+    onFrame = () => {}, onState = () => {}, onServerError = () => {}, onStats = () => {}, onProgress = () => {} }) {
+    Object.assign(this, { url, handshake, settings, rate, highWater, messageBytes, onFrame, onState, onServerError, onStats, onProgress });
+    this.sync = new SceneSync();
+    this.queue = [];          // {size, record: Promise|object}
+    this.frameNumber = 0;
+    this.outstanding = 0;
+    this.renderWanted = false;
+    this.state = 'idle';
+    this.retry = 0;
+    this.progress = { queued: 0, sent: 0 };
+    this.closed = false;
+  }
+
+  connect() {
+    if (this.closed) return;
+    this.setState('connecting');
+    let ws;
+    try { ws = new WebSocket(this.url); } catch (e) { this.lost(`cannot open ${this.url}: ${e.message}`); return; }
+    ws.binaryType = 'arraybuffer';
+    this.ws = ws;
+    ws.onopen = () => {
+      this.send(encodeClient([{ type: 'handshake', ...this.handshake }]));  // alone in its message
+      this.setState('handshake');
+    };
+    ws.onmessage = (e) => this.receive(e.data);
+    ws.onclose = (e) => { if (this.ws === ws) this.lost(e.reason || `connection closed (code ${e.code})`); };
+    ws.onerror = () => {};
+  }
+
+  setState(state, detail = '') {
+    this.state = state;
+    this.onState(state, detail);
+  }
+
+  lost(reason) {
+    this.ws = null;
+    clearInterval(this.timer);
+    this.timer = null;
+    if (this.closed) return;
+    if (this.fatal) { this.setState('failed', this.fatal); return; }
+    const delay = Math.min(10000, 500 * 2 ** this.retry++);
+    this.setState('disconnected', `${reason}; reconnecting in ${(delay / 1000).toFixed(1)} s`);
+    this.reconnectTimer = setTimeout(() => this.connect(), delay);
+  }
+
+  close() {
+    this.closed = true;
+    clearInterval(this.timer);
+    clearTimeout(this.reconnectTimer);
+    if (this.ws) { const ws = this.ws; this.ws = null; ws.close(); }
+  }
+
+  // The latest scene and view; picked up by the next run-loop iteration.
+  setScene(scene, view) {
+    this.scene = scene;
+    this.view = view;
+    this.dirty = true;
+  }
+
+  receive(data) {
+    let records;
+    try { records = decodeServer(new Uint8Array(data)); } catch (e) {
+      this.onServerError({ codeName: 'client', message: `bad message from the server: ${e instanceof ProtocolError ? e.message : e}` });
+      return;
+    }
+    for (const r of records) {
+      if (r.type === 'handshake_reply') {
+        this.reply = r;
+        this.retry = 0;
+        if (r.maxMessageBytes) this.messageBytes = Math.min(this.messageBytes, r.maxMessageBytes);
+        this.sync.reset();
+        this.queue = [];
+        this.outstanding = 0;
+        this.dirty = true;
+        this.setState('ready', `${r.serverVersion || 'Tessera'}, ${r.nodes} node${r.nodes > 1 ? 's' : ''}, ${r.renderer}, ${r.display}`);
+        if (this.settings) this.send(encodeClient([{ type: 'settings', ...this.settings }]));
+        this.timer = setInterval(() => this.tick(), 1000 / this.rate);
+        this.tick();
+      } else if (r.type === 'frame') {
+        this.outstanding = Math.max(0, this.outstanding - 1);
+        this.onFrame(r);
+        if (this.renderWanted && this.outstanding < MAX_OUTSTANDING_RENDERS) this.requestRender();
+      } else if (r.type === 'error') {
+        if (r.fatal) this.fatal = `${r.codeName}: ${r.message}`;
+        this.onServerError(r);
+      } else if (r.type === 'stats') {
+        this.onStats(r);
+      }
+    }
+  }
+
+  send(bytes) {
+    if (this.ws && this.ws.readyState === 1) this.ws.send(bytes);
+  }
+
+  // Prepares a record for the wire: buffers deflated, textures loaded and encoded.
+  prepare(r) {
+    if (r.type === 'buffer' && r.data.byteLength >= DEFLATE_MIN_BYTES && hasCompressionStream()) {
+      const raw = new Uint8Array(r.data.buffer, r.data.byteOffset, r.data.byteLength);
+      return { size: r.data.byteLength, record: deflate(raw).then((z) => (z.length < raw.length ? { ...r, deflated: z } : r), () => r) };
+    }
+    if (r.type === 'texture') {
+      return { size: 1 << 18, record: loadTexture(r.desc).then((t) => ({ type: 'texture', id: r.id, ...t }), (e) => {
+        this.onServerError({ codeName: 'texture', message: `texture ${r.desc.url}: ${e.message || e}` });
+        return null;
+      }) };
+    }
+    return { size: clientRecordSize(r), record: r };
+  }
+
+  tick() {
+    if (this.state !== 'ready') return;
+    if (this.dirty && this.scene) {
+      this.dirty = false;
+      const records = this.sync.diff(this.scene, this.view);
+      for (const r of records) {
+        const p = this.prepare(r);
+        this.queue.push(p);
+        this.progress.queued += p.size;
+      }
+      if (records.length) this.changed = true;
+    }
+    this.flush();
+  }
+
+  async flush() {
+    if (this.flushing) return;
+    this.flushing = true;
+    try {
+      while (this.queue.length && this.ws && this.ws.bufferedAmount < this.highWater) {
+        // Pack records into one message up to messageBytes (a larger record goes alone).
+        const batch = [];
+        let bytes = 8;
+        while (this.queue.length) {
+          const item = this.queue[0];
+          const rec = await item.record;
+          const size = rec ? clientRecordSize(rec) : 0;
+          if (batch.length && bytes + size > this.messageBytes) break;
+          this.queue.shift();
+          this.progress.sent += item.size;
+          if (rec) { batch.push(rec); bytes += size; }
+        }
+        if (batch.length) this.send(encodeClient(batch));
+        this.onProgress(this.progress.sent, this.progress.queued);
+      }
+      if (!this.queue.length) this.progress = { queued: 0, sent: 0 };
+      if (this.changed) {
+        this.changed = false;
+        this.requestRender();
+      }
+    } finally {
+      this.flushing = false;
+    }
+  }
+
+  requestRender() {
+    if (this.outstanding >= MAX_OUTSTANDING_RENDERS) { this.renderWanted = true; return; }
+    this.renderWanted = false;
+    this.outstanding++;
+    this.send(encodeClient([{ type: 'render', frame: ++this.frameNumber }]));
+  }
+}

@@ -1,0 +1,175 @@
+// glTF 2.0 (JSON + external or data: buffers, or .glb) for <model src="x.gltf">. Produces
+// flat primitives with their node's world matrix baked into `matrix`, XML3D-style material
+// parameters, KHR_lights_punctual lights and the first camera.
+import { identity, multiply, translation, scaling, fromQuaternion } from '../math/Mat4.js';
+
+const COMPONENTS = { SCALAR: 1, VEC2: 2, VEC3: 3, VEC4: 4, MAT4: 16 };
+const TYPES = { 5120: Int8Array, 5121: Uint8Array, 5122: Int16Array, 5123: Uint16Array, 5125: Uint32Array, 5126: Float32Array };
+const WRAP = { 33071: 'clamp', 33648: 'repeat', 10497: 'repeat' };  // mirrored repeat read as repeat
+
+function parseGlb(buf) {
+  const dv = new DataView(buf);
+  if (dv.getUint32(0, true) !== 0x46546c67) throw new Error('not a GLB file');
+  let off = 12, json, bin;
+  while (off < buf.byteLength) {
+    const len = dv.getUint32(off, true), type = dv.getUint32(off + 4, true);
+    const chunk = buf.slice(off + 8, off + 8 + len);
+    if (type === 0x4e4f534a) json = JSON.parse(new TextDecoder().decode(chunk));
+    else if (type === 0x004e4942) bin = chunk;
+    off += 8 + len;
+  }
+  return { json, bin };
+}
+
+function decodeDataUri(uri) {
+  const b64 = uri.slice(uri.indexOf(',') + 1);
+  const s = atob(b64);
+  const out = new Uint8Array(s.length);
+  for (let i = 0; i < s.length; i++) out[i] = s.charCodeAt(i);
+  return out.buffer;
+}
+
+export async function loadGltf(body, url, fetchBinary) {
+  let json = body, glbBin = null;
+  if (body instanceof ArrayBuffer) ({ json, bin: glbBin } = parseGlb(body));
+  if (!json.asset || !String(json.asset.version).startsWith('2')) throw new Error('only glTF 2.0 is supported');
+  const buffers = await Promise.all((json.buffers || []).map((b, i) => {
+    if (b.uri === undefined) {
+      if (!glbBin) throw new Error(`buffer ${i} has no uri`);
+      return glbBin;
+    }
+    if (b.uri.startsWith('data:')) return decodeDataUri(b.uri);
+    return fetchBinary(new URL(b.uri, url).href);
+  }));
+
+  const accessorCache = new Map();
+  function accessor(i) {
+    if (accessorCache.has(i)) return accessorCache.get(i);
+    const a = json.accessors[i];
+    const T = TYPES[a.componentType];
+    const n = COMPONENTS[a.type];
+    if (!T || !n) throw new Error(`accessor ${i}: unsupported type`);
+    let out;
+    if (a.bufferView === undefined) out = new T(a.count * n);
+    else {
+      const v = json.bufferViews[a.bufferView];
+      const buf = buffers[v.buffer];
+      const base = (v.byteOffset || 0) + (a.byteOffset || 0);
+      const elem = n * T.BYTES_PER_ELEMENT;
+      const stride = v.byteStride || elem;
+      if (stride === elem && base % T.BYTES_PER_ELEMENT === 0) {
+        out = new T(buf, base, a.count * n);
+      } else {  // strided or unaligned: copy element by element
+        out = new T(a.count * n);
+        const bytes = new Uint8Array(buf);
+        const tmp = new Uint8Array(out.buffer);
+        for (let k = 0; k < a.count; k++) tmp.set(bytes.subarray(base + k * stride, base + k * stride + elem), k * elem);
+      }
+    }
+    if (a.normalized && T !== Float32Array) {
+      const max = { 5120: 127, 5121: 255, 5122: 32767, 5123: 65535 }[a.componentType] || 1;
+      out = Float32Array.from(out, (x) => Math.max(x / max, -1));
+    }
+    accessorCache.set(i, out);
+    return out;
+  }
+  const asFloat = (a) => (a instanceof Float32Array ? a : Float32Array.from(a));
+
+  function texture(info) {
+    if (!info) return null;
+    const t = json.textures[info.index];
+    const img = t && json.images[t.source];
+    if (!img || !img.uri) return null;
+    const s = (t.sampler !== undefined && json.samplers[t.sampler]) || {};
+    return {
+      url: new URL(img.uri, url).href,
+      wrapS: WRAP[s.wrapS ?? 10497], wrapT: WRAP[s.wrapT ?? 10497],
+      filter: s.magFilter === 9728 ? 'nearest' : 'linear',
+      flipY: false, srgb: true,
+    };
+  }
+
+  const materials = (json.materials || []).map((m) => {
+    const pbr = m.pbrMetallicRoughness || {};
+    const base = pbr.baseColorFactor || [1, 1, 1, 1];
+    const metallic = pbr.metallicFactor ?? 1, rough = pbr.roughnessFactor ?? 1;
+    const ext = m.extensions || {};
+    const transmission = ext.KHR_materials_transmission ? ext.KHR_materials_transmission.transmissionFactor ?? 0 : 0;
+    const spec = 0.04 * (1 - metallic);
+    return {
+      name: m.name,
+      model: 'phong',
+      diffuseColor: [base[0] * (1 - metallic), base[1] * (1 - metallic), base[2] * (1 - metallic)],
+      specularColor: [spec + base[0] * metallic, spec + base[1] * metallic, spec + base[2] * metallic],
+      shininess: Math.max(0.01, (1 - rough) * (1 - rough)),
+      emissiveColor: m.emissiveFactor ? [...m.emissiveFactor] : [0, 0, 0],
+      opacity: m.alphaMode === 'BLEND' ? base[3] : 1,
+      diffuseTexture: texture(pbr.baseColorTexture),
+      emissiveTexture: texture(m.emissiveTexture),
+      reflectionCoefficient: metallic * (1 - rough),
+      refractionCoefficient: transmission,
+      refractionIndex: ext.KHR_materials_ior ? ext.KHR_materials_ior.ior ?? 1.5 : (transmission ? 1.5 : 1),
+      alphaMask: m.alphaMode === 'MASK',
+      alphaCutoff: m.alphaCutoff ?? 0.5,
+      doubleSided: !!m.doubleSided,
+    };
+  });
+
+  const result = { meshes: [], lights: [], camera: null, url };
+  const lightDefs = (json.extensions && json.extensions.KHR_lights_punctual && json.extensions.KHR_lights_punctual.lights) || [];
+  function visit(ni, parent) {
+    const node = json.nodes[ni];
+    let local;
+    if (node.matrix) local = new Float32Array(node.matrix);
+    else {
+      const t = node.translation || [0, 0, 0], r = node.rotation || [0, 0, 0, 1], s = node.scale || [1, 1, 1];
+      local = multiply(multiply(translation(...t), fromQuaternion(...r)), scaling(...s));
+    }
+    const world = multiply(parent, local);
+    if (node.mesh !== undefined) {
+      const mesh = json.meshes[node.mesh];
+      mesh.primitives.forEach((p, k) => {
+        const mode = p.mode ?? 4;
+        if (mode !== 4 && mode !== 5) return;  // points and lines are not drawn
+        const at = p.attributes;
+        if (at.POSITION === undefined) return;
+        let indices = p.indices !== undefined ? accessor(p.indices) : null;
+        if (indices && !(indices instanceof Uint32Array)) indices = Uint32Array.from(indices);
+        result.meshes.push({
+          name: `${node.name ?? ni}${k}`,
+          nodeName: node.name, meshName: mesh.name,
+          positions: asFloat(accessor(at.POSITION)),
+          normals: at.NORMAL !== undefined ? asFloat(accessor(at.NORMAL)) : null,
+          texcoords: at.TEXCOORD_0 !== undefined ? asFloat(accessor(at.TEXCOORD_0)) : null,
+          colors: null,
+          indices, strip: mode === 5,
+          material: p.material !== undefined ? materials[p.material] : null,
+          matrix: world,
+        });
+      });
+    }
+    const lx = node.extensions && node.extensions.KHR_lights_punctual;
+    if (lx && lightDefs[lx.light]) {
+      const l = lightDefs[lx.light];
+      const c = l.color || [1, 1, 1], i = l.intensity ?? 1;
+      result.lights.push({
+        type: l.type === 'spot' ? 'spot' : l.type === 'point' ? 'point' : 'directional',
+        color: [c[0] * i, c[1] * i, c[2] * i],
+        cutoff: l.spot ? l.spot.outerConeAngle ?? Math.PI / 4 : Math.PI / 4,
+        softness: l.spot ? 1 - (l.spot.innerConeAngle ?? 0) / (l.spot.outerConeAngle ?? Math.PI / 4) : 0,
+        attenuation: l.type === 'directional' ? [1, 0, 0] : [1, 0, 1],
+        matrix: world,
+      });
+    }
+    if (node.camera !== undefined && !result.camera) {
+      const c = json.cameras[node.camera];
+      if (c.type === 'perspective') result.camera = { toWorld: world, fovY: c.perspective.yfov };
+    }
+    for (const ch of node.children || []) visit(ch, world);
+  }
+  const sceneIndex = json.scene ?? 0;
+  const scene = json.scenes ? json.scenes[sceneIndex] : { nodes: json.nodes.map((_, i) => i) };
+  for (const n of scene.nodes || []) visit(n, identity());
+  result.environment = scene.extras && scene.extras.environment;
+  return result;
+}

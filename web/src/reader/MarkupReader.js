@@ -1,0 +1,573 @@
+// Reads XML3D 5 markup from a DOM into a SceneDescription: the model both backends (three.js
+// and the Tessera sync channel) consume. Synchronous: external resources are requested from
+// a Resources object and the page is read again when they arrive.
+import * as M from '../math/Mat4.js';
+import { parseCssTransform } from '../math/CssTransform.js';
+import { parseValueElement, isValueElement, localName, first, vec3 } from './Values.js';
+import { SceneDescription, MATERIAL_DEFAULTS, defaultMaterial } from './SceneDescription.js';
+
+// Elements that are never scene nodes (skipped while walking the scene tree).
+const NON_SCENE = new Set(['defs', 'data', 'material', 'transform', 'asset', 'assetmesh', 'assetdata', 'dataflow',
+  'texture', 'img', 'video', 'canvas', 'script', 'style', 'compute', 'shader', 'lightshader',
+  'float', 'float2', 'float3', 'float4', 'float4x4', 'int', 'int4', 'bool', 'string']);
+
+const MATERIAL_PARAMS = new Set(['diffuseColor', 'specularColor', 'shininess', 'emissiveColor', 'ambientIntensity',
+  'opacity', 'diffuseTexture', 'specularTexture', 'emissiveTexture', 'useVertexColor', 'reflectionCoefficient',
+  'refractionCoefficient', 'refractionIndex', 'alphaCutoff']);
+
+const urnName = (urn, fallback) => (urn ? String(urn).trim().split(':').pop().toLowerCase() : fallback);
+
+// A minimal style reader for DOMs without getComputedStyle (unit tests): the style attribute.
+function inlineStyle(el) {
+  const out = {};
+  const s = el.getAttribute && el.getAttribute('style');
+  if (!s) return out;
+  for (const decl of s.split(';')) {
+    const i = decl.indexOf(':');
+    if (i < 0) continue;
+    out[decl.slice(0, i).trim().toLowerCase()] = decl.slice(i + 1).trim();
+  }
+  return out;
+}
+
+export class MarkupReader {
+  // resources: a Resources (or anything with get(url) and urlOfDocument(doc)).
+  // computedStyle(el): optional, e.g. window.getComputedStyle.
+  constructor({ resources = null, computedStyle = null, ids = null } = {}) {
+    this.resources = resources;
+    this.computedStyle = computedStyle;
+    this.ids = ids || new IdRegistry();
+    this.derived = new WeakMap();  // converted arrays, kept across reads (stable buffer identity)
+  }
+
+  read(xml3d) {
+    const scene = new SceneDescription(xml3d);
+    this.scene = scene;
+    this.views = [];
+    this.warned = new Set();
+    this.walk(xml3d, M.identity(), null, true, 'visible');
+    this.chooseView(xml3d);
+    // Tessera extension: ambient="r g b" (a uniform sky on diffuse surfaces; XML3D has none).
+    const amb = (xml3d.getAttribute('ambient') || '').trim().split(/[\s,]+/).map(Number);
+    if (amb.length === 3 && amb.every((v) => Number.isFinite(v) && v >= 0)) scene.environment.ambient = amb;
+    else if (xml3d.getAttribute('ambient')) this.error(xml3d, `xml3d ambient="${xml3d.getAttribute('ambient')}" is not three numbers >= 0`);
+    return scene;
+  }
+
+  // ---- errors -------------------------------------------------------------------------
+  error(element, message) {
+    const key = message;
+    if (this.warned.has(key)) return;
+    this.warned.add(key);
+    this.scene.errors.push({ element, message });
+  }
+
+  // ---- style --------------------------------------------------------------------------
+  style(el) {
+    const inline = inlineStyle(el);
+    if (this.computedStyle) {
+      try {
+        const cs = this.computedStyle(el);
+        return {
+          display: cs.display, visibility: cs.visibility,
+          transform: cs.transform && cs.transform !== 'none' ? cs.transform : inline.transform,
+          material: inline.material,
+          computed: true,
+        };
+      } catch { /* fall through */ }
+    }
+    return inline;
+  }
+
+  // ---- references ---------------------------------------------------------------------
+  // Resolves "#id" or "file.xml#id" or "file.json" relative to `context`. Returns
+  // {element} | {data: Map} | {gltf} | {pending: true} | {error}.
+  resolve(uri, context) {
+    uri = String(uri).trim();
+    const urlMatch = /^url\(\s*['"]?([^'")]*)['"]?\s*\)$/.exec(uri);
+    if (urlMatch) uri = urlMatch[1];
+    const doc = context.ownerDocument || context;
+    if (uri.startsWith('#')) {
+      const id = uri.slice(1);
+      const el = doc.getElementById ? doc.getElementById(id) : null;
+      const found = el || (doc.querySelector && doc.querySelector(`[id="${id.replace(/"/g, '\\"')}"]`));
+      return found ? { element: found } : { error: `reference ${uri} not found` };
+    }
+    if (!this.resources) return { error: `external reference ${uri}: no resource loader` };
+    const base = (this.resources.urlOfDocument && this.resources.urlOfDocument(doc)) || doc.baseURI ||
+      (doc.location && doc.location.href) || 'http://localhost/';
+    let abs;
+    try { abs = new URL(uri, base).href; } catch { return { error: `bad URI ${uri}` }; }
+    const r = this.resources.get(abs);
+    if (r.state === 'loading') { this.scene.pending++; return { pending: true }; }
+    if (r.state === 'error') return { error: r.error };
+    if (r.kind === 'gltf') return { gltf: r.data, url: abs };
+    if (r.kind === 'json') return { data: r.data, url: abs };
+    const frag = abs.includes('#') ? abs.slice(abs.indexOf('#') + 1) : '';
+    const d = r.data;
+    if (!frag) return { element: d.documentElement };
+    const el = (d.getElementById && d.getElementById(frag)) || (d.querySelector && d.querySelector(`[id="${frag}"]`));
+    return el ? { element: el } : { error: `reference ${uri}: no element with id "${frag}"` };
+  }
+
+  // ---- data compositing ---------------------------------------------------------------
+  // name -> {type, value, element}. src is an implicit first child, later siblings win,
+  // outer values win over nested ones.
+  collect(el, seen = new Set()) {
+    if (seen.has(el)) { this.error(el, `cyclic data reference at <${localName(el)} id="${el.id}">`); return new Map(); }
+    seen.add(el);
+    const nested = new Map(), own = new Map();
+    const src = el.getAttribute('src');
+    if (src && localName(el) !== 'model') {
+      const r = this.resolve(src, el);
+      if (r.error) this.error(el, `<${localName(el)}${el.id ? ` id="${el.id}"` : ''}> src: ${r.error}`);
+      else if (r.data) for (const [k, v] of r.data) nested.set(k, v);
+      else if (r.element) for (const [k, v] of this.collect(r.element, seen)) nested.set(k, v);
+    }
+    for (const ch of el.children) {
+      const tag = localName(ch);
+      if (tag === 'data') {
+        for (const [k, v] of this.collect(ch, seen)) nested.set(k, v);
+      } else if (tag === 'texture') {
+        const name = ch.getAttribute('name');
+        if (name) own.set(name, { type: 'texture', value: [this.readTexture(ch)], element: ch });
+      } else if (isValueElement(ch)) {
+        const name = ch.getAttribute('name');
+        if (!name) continue;
+        const v = parseValueElement(ch);
+        if (v.error) this.error(ch, v.error);
+        own.set(name, { type: v.type, value: v.value, element: ch });
+      }
+    }
+    seen.delete(el);
+    for (const [k, v] of own) nested.set(k, v);
+    return this.filter(el, nested);
+  }
+
+  filter(el, map) {
+    const f = el.getAttribute('filter');
+    if (!f || localName(el) === 'texture') return map;
+    const m = /^\s*(keep|remove|rename)\s*\((.*)\)\s*$/.exec(f);
+    if (!m) { this.error(el, `bad filter "${f}"`); return map; }
+    if (m[1] === 'rename') {
+      const out = new Map(map);
+      const body = m[2].trim().replace(/^\{|\}$/g, '');
+      for (const pair of body.split(',')) {
+        const [to, from] = pair.split(':').map((s) => s && s.trim().replace(/^['"]|['"]$/g, ''));
+        if (to && from && map.has(from)) { out.delete(from); out.set(to, map.get(from)); }
+      }
+      return out;
+    }
+    const names = new Set(m[2].split(/[\s,]+/).filter((s) => s));
+    return new Map([...map].filter(([k]) => (m[1] === 'keep') === names.has(k)));
+  }
+
+  readTexture(el) {
+    const img = el.firstElementChild || [...el.children][0];
+    const wrap = (el.getAttribute('wrap') || 'clamp').trim().split(/\s+/);
+    const filter = (el.getAttribute('filter') || 'linear-mipmap-linear linear').trim().split(/\s+/);
+    const mag = filter[1] || filter[0];
+    if (!img) { this.error(el, `<texture name="${el.getAttribute('name')}"> has no <img> child`); return null; }
+    let url = img.getAttribute('src') || '';
+    try {
+      const doc = el.ownerDocument;
+      const base = (this.resources && this.resources.urlOfDocument && this.resources.urlOfDocument(doc)) ||
+        doc.baseURI || 'http://localhost/';
+      if (url) url = new URL(url, base).href;
+    } catch { /* keep as written */ }
+    return {
+      url, image: img,
+      wrapS: wrap[0] === 'repeat' ? 'repeat' : 'clamp',
+      wrapT: (wrap[1] || wrap[0]) === 'repeat' ? 'repeat' : 'clamp',
+      filter: mag === 'nearest' ? 'nearest' : 'linear',
+      flipY: true,   // XML3D uploads with UNPACK_FLIP_Y: texcoord (0,0) is the image's bottom-left
+      srgb: false,
+    };
+  }
+
+  // ---- transforms ---------------------------------------------------------------------
+  localMatrix(el, style) {
+    if (style.transform && style.transform !== 'none') {
+      try {
+        const m = parseCssTransform(style.transform);
+        if (m) return m;
+      } catch (e) { this.error(el, `<${localName(el)}> CSS transform: ${e.message}`); }
+    }
+    const t = el.getAttribute('transform');
+    if (!t) return null;
+    const r = this.resolve(t, el);
+    if (r.pending) return null;
+    if (r.error) { this.error(el, `<${localName(el)}> transform: ${r.error}`); return null; }
+    if (r.element) return this.transformOf(r.element);
+    return null;
+  }
+
+  transformOf(el) {
+    if (localName(el) === 'transform') {
+      const v = (name, def) => {
+        const s = el.getAttribute(name);
+        if (!s) return def;
+        const n = (s.match(/[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?/g) || []).map(Number);
+        if (n.length < def.length) { this.error(el, `<transform ${name}="${s}"> needs ${def.length} numbers`); return def; }
+        return n.slice(0, def.length);
+      };
+      const t = v('translation', [0, 0, 0]), r = v('rotation', [0, 0, 1, 0]), s = v('scale', [1, 1, 1]);
+      const c = v('center', [0, 0, 0]), so = v('scaleOrientation', [0, 0, 1, 0]);
+      // T * C * R * SO * S * -SO * -C
+      return M.multiplyAll(M.translation(...t), M.translation(...c), M.axisAngle(...r), M.axisAngle(...so),
+        M.scaling(...s), M.axisAngle(so[0], so[1], so[2], -so[3]), M.translation(-c[0], -c[1], -c[2]));
+    }
+    const data = this.collect(el);
+    const e = data.get('transform');
+    if (e && e.value && e.value.length >= 16) return new Float32Array(e.value.slice(0, 16));
+    this.error(el, `transform reference to <${localName(el)} id="${el.id}"> holds no float4x4 "transform"`);
+    return null;
+  }
+
+  // ---- scene tree ---------------------------------------------------------------------
+  walk(parent, world, materialRef, inheritVisible, inheritVisibility) {
+    for (const el of parent.children) {
+      const tag = localName(el);
+      if (NON_SCENE.has(tag)) continue;
+      if (tag.includes('-')) continue;  // web components are not expanded
+      const style = this.style(el);
+      const displayed = style.display !== 'none';
+      const visibility = style.visibility || (style.computed ? 'visible' : inheritVisibility);
+      if (!displayed && tag !== 'light') continue;
+      const local = this.localMatrix(el, style);
+      const w = local ? M.multiply(world, local) : world;
+      const visible = inheritVisible && visibility !== 'hidden' && visibility !== 'collapse';
+      const mat = el.getAttribute('material') || style.material || materialRef;
+      switch (tag) {
+        case 'mesh': this.readMesh(el, w, mat, visible); break;
+        case 'model': this.readModel(el, w, mat, visible); break;
+        case 'light': this.readLight(el, w, displayed && visible); break;
+        case 'view': this.views.push({ el, world: w }); break;
+        default: this.walk(el, w, mat, visible, visibility); break;  // group and unknown elements
+      }
+    }
+  }
+
+  // ---- materials ----------------------------------------------------------------------
+  materialParams(ref, context) {
+    if (!ref) return null;
+    const r = this.resolve(ref, context);
+    if (r.pending) return null;
+    if (r.error) { this.error(context, `<${localName(context)}> material: ${r.error}`); return null; }
+    if (r.data) return { model: 'phong', data: r.data };
+    const el = r.element;
+    if (localName(el) !== 'material' && localName(el) !== 'shader') {
+      this.error(context, `material reference ${ref} points at <${localName(el)}>, not <material>`);
+      return null;
+    }
+    const model = urnName(el.getAttribute('model') || el.getAttribute('script'), 'phong');
+    return { model, data: this.collect(el), element: el };
+  }
+
+  buildMaterial(params, overrides, element) {
+    let model = params ? params.model : 'matte';
+    if (model === 'flat') model = 'matte';
+    if (!['matte', 'diffuse', 'phong'].includes(model)) {
+      this.error(element, `material model "${model}" not supported, phong used`);
+      model = 'phong';
+    }
+    const m = params ? { ...MATERIAL_DEFAULTS, model } : defaultMaterial();
+    const apply = (data) => {
+      if (!data) return;
+      for (const [name, e] of data) {
+        const key = name === 'reflection' ? 'reflectionCoefficient' : name === 'refraction' ? 'refractionCoefficient'
+          : name === 'ior' ? 'refractionIndex' : name;
+        if (!MATERIAL_PARAMS.has(key)) continue;
+        if (e.type === 'texture') m[key] = e.value[0];
+        else if (key.endsWith('Color')) m[key] = vec3(e, m[key]);
+        else if (key === 'useVertexColor') m[key] = !!first(e, 0);
+        else m[key] = first(e, m[key]);
+      }
+    };
+    apply(params && params.data);
+    apply(overrides);
+    return m;
+  }
+
+  materialId(desc) {
+    return this.scene.addMaterial(desc, this.ids);
+  }
+
+  // ---- meshes -------------------------------------------------------------------------
+  readMesh(el, world, materialRef, visible) {
+    const data = this.collect(el);
+    const type = (el.getAttribute('type') || 'triangles').trim();
+    const overrides = new Map([...data].filter(([k]) => MATERIAL_PARAMS.has(k)));
+    const params = this.materialParams(materialRef, el);
+    const mat = this.buildMaterial(params, overrides, el);
+    this.addGeometry(el, el, 0, {
+      positions: data.get('position'), normals: data.get('normal'), texcoords: data.get('texcoord'),
+      colors: data.get('color'), indices: data.get('index'), vertexCount: data.get('vertexCount'),
+      type: type === 'derived' ? first(data.get('type'), 'triangles') : type,
+    }, world, mat, visible);
+  }
+
+  // Adds one drawable; `pick` is the element events and picking report.
+  addGeometry(el, pick, subKey, g, world, material, visible) {
+    const what = `<${localName(el)}${el.id ? ` id="${el.id}"` : ''}>`;
+    const val = (e) => (e && e.value !== undefined ? e.value : e);
+    let positions = val(g.positions);
+    if (!positions || positions.length === 0) {
+      if (this.scene.pending === 0) this.error(el, `${what} has no position data`);
+      return;
+    }
+    if (g.type !== 'triangles' && g.type !== 'tristrips') {
+      this.error(el, `${what} type="${g.type}" is not drawn (triangles and tristrips are)`);
+      return;
+    }
+    positions = this.floats(positions);
+    const nv = positions.length / 3;
+    if (positions.length % 3) { this.error(el, `${what} position count is not a multiple of 3`); return; }
+    for (let i = 0; i < positions.length; i++)
+      if (!Number.isFinite(positions[i])) { this.error(el, `${what} positions hold NaN or Infinity`); return; }
+    const check = (arr, comps, name) => {
+      arr = val(arr);
+      if (!arr || arr.length === 0) return null;
+      if (arr.length !== nv * comps) {
+        this.error(el, `${what} has ${arr.length / comps} ${name} values for ${nv} vertices: ${name} ignored`);
+        return null;
+      }
+      return this.floats(arr);
+    };
+    const normals = check(g.normals, 3, 'normal');
+    const texcoords = check(g.texcoords, 2, 'texcoord');
+    const colors = check(g.colors, 3, 'color');
+    let indices = this.indices(val(g.indices), g.type === 'tristrips' || g.strip, val(g.vertexCount), nv);
+    if (indices) {
+      for (let i = 0; i < indices.length; i++)
+        if (indices[i] >= nv) { this.error(el, `${what} index ${indices[i]} out of range (${nv} vertices)`); return; }
+    } else if (nv % 3) {
+      this.error(el, `${what} non-indexed triangles need a multiple of 3 vertices (has ${nv})`);
+      return;
+    }
+    const s = this.scene;
+    const mesh = {
+      id: this.ids.of(el, subKey),
+      element: pick,
+      positions: s.addBuffer(positions, 3, this.ids),
+      normals: normals ? s.addBuffer(normals, 3, this.ids) : 0,
+      texcoords: texcoords ? s.addBuffer(texcoords, 2, this.ids) : 0,
+      colors: colors ? s.addBuffer(colors, 3, this.ids) : 0,
+      indices: indices ? s.addBuffer(indices, 1, this.ids) : 0,
+      material: this.materialId(material),
+      transform: world,
+      visible,
+    };
+    s.meshes.set(mesh.id, mesh);
+  }
+
+  floats(a) {
+    if (a instanceof Float32Array) return a;
+    let d = this.derived.get(a);
+    if (!d) { d = Float32Array.from(a); this.derived.set(a, d); }
+    return d;
+  }
+
+  // XML3D index (int) to uint32 triangles; triangle strips unrolled.
+  indices(index, strip, vertexCount, nv) {
+    const key = index || null;
+    if (!strip) {
+      if (!index || index.length === 0) return null;
+      if (index instanceof Uint32Array) return index;
+      let d = this.derived.get(index);
+      if (!d) { d = Uint32Array.from(index, (x) => (x < 0 ? 0xffffffff : x)); this.derived.set(index, d); }
+      return d;
+    }
+    const src = index && index.length ? index : null;
+    const total = src ? src.length : nv;
+    const counts = vertexCount && vertexCount.length ? Array.from(vertexCount) : [total];
+    const cacheKey = src || vertexCount;
+    if (cacheKey && this.derived.has(cacheKey)) return this.derived.get(cacheKey);
+    const out = [];
+    let base = 0;
+    for (const n of counts) {
+      for (let i = 0; i + 2 < n; i++) {
+        const a = base + i, b = base + i + 1, c = base + i + 2;
+        const ia = src ? src[a] : a, ib = src ? src[b] : b, ic = src ? src[c] : c;
+        if (ia === ib || ib === ic || ia === ic) continue;  // degenerate (strip joins)
+        if (i % 2 === 0) out.push(ia, ib, ic); else out.push(ib, ia, ic);
+      }
+      base += n;
+    }
+    const result = Uint32Array.from(out);
+    if (cacheKey) this.derived.set(cacheKey, result);
+    return result;
+  }
+
+  // ---- models -------------------------------------------------------------------------
+  readModel(el, world, materialRef, visible) {
+    const src = el.getAttribute('src');
+    if (!src) { this.error(el, '<model> has no src'); return; }
+    const r = this.resolve(src, el);
+    if (r.pending) return;
+    if (r.error) { this.error(el, `<model> src: ${r.error}`); return; }
+    // Per-model overrides: <assetmesh name=... material=...> children.
+    const overrides = new Map();
+    for (const ch of el.children)
+      if (localName(ch) === 'assetmesh' && ch.getAttribute('name')) overrides.set(ch.getAttribute('name'), ch);
+    const fallback = this.materialParams(materialRef, el);
+    if (r.gltf) {
+      const g = r.gltf;
+      g.meshes.forEach((p, i) => {
+        const o = overrides.get(p.name);
+        let mat;
+        if (o && o.getAttribute('material')) mat = this.buildMaterial(this.materialParams(o.getAttribute('material'), o), null, o);
+        else if (p.material) mat = { ...MATERIAL_DEFAULTS, ...p.material };
+        else mat = this.buildMaterial(fallback, null, el);
+        const m = M.multiply(world, p.matrix);
+        this.addGeometry(el, el, `gltf:${i}`, { ...p, type: 'triangles' }, m, mat, visible);
+      });
+      g.lights.forEach((l, i) => this.addLight(el, `gltf:${i}`, l.type, M.multiply(world, l.matrix), {
+        color: l.color, attenuation: l.attenuation, cutoff: l.cutoff, softness: l.softness,
+        position: [0, 0, 0], direction: [0, 0, -1], on: visible,
+      }));
+      if (g.camera) this.gltfCamera = { toWorld: M.multiply(world, g.camera.toWorld), fovY: g.camera.fovY };
+      return;
+    }
+    if (r.element && localName(r.element) === 'asset') { this.readAsset(el, r.element, world, fallback, overrides, visible); return; }
+    if (r.element) { this.error(el, `<model> src points at <${localName(r.element)}>, not <asset> or a glTF file`); return; }
+    this.error(el, '<model> src is not an asset');
+  }
+
+  readAsset(model, asset, world, fallback, overrides, visible) {
+    const named = new Map();
+    const meshes = [];
+    const gather = (a, depth) => {
+      if (depth > 8) return;
+      const base = a.getAttribute('src');
+      if (base) {
+        const r = this.resolve(base, a);
+        if (r.element && localName(r.element) === 'asset') gather(r.element, depth + 1);
+      }
+      for (const ch of a.children) {
+        const t = localName(ch);
+        if (t === 'assetdata' && ch.getAttribute('name')) named.set(ch.getAttribute('name'), ch);
+        else if (t === 'assetmesh') meshes.push(ch);
+        else if (t === 'asset') gather(ch, depth + 1);
+      }
+    };
+    gather(asset, 0);
+    const dataOf = (el, seen = new Set()) => {
+      const out = new Map();
+      for (const inc of (el.getAttribute('includes') || '').split(/\s+/).filter((s) => s)) {
+        const d = named.get(inc);
+        if (!d) { this.error(el, `includes "${inc}": no assetdata with that name`); continue; }
+        if (seen.has(d)) continue;
+        seen.add(d);
+        for (const [k, v] of dataOf(d, seen)) out.set(k, v);
+      }
+      for (const [k, v] of this.collect(el)) out.set(k, v);
+      return out;
+    };
+    meshes.forEach((am, i) => {
+      const name = am.getAttribute('name');
+      const o = name && overrides.get(name);
+      const style = this.style(am);
+      if (style.display === 'none') return;
+      const local = this.localMatrix(am, style);
+      const w = local ? M.multiply(world, local) : world;
+      const data = dataOf(am);
+      if (o) for (const [k, v] of this.collect(o)) data.set(k, v);
+      const matRef = (o && o.getAttribute('material')) || am.getAttribute('material');
+      const params = matRef ? this.materialParams(matRef, am) : fallback;
+      const mat = this.buildMaterial(params, new Map([...data].filter(([k]) => MATERIAL_PARAMS.has(k))), am);
+      this.addGeometry(am, model, `asset:${i}`, {
+        positions: data.get('position'), normals: data.get('normal'), texcoords: data.get('texcoord'),
+        colors: data.get('color'), indices: data.get('index'), vertexCount: data.get('vertexCount'),
+        type: (am.getAttribute('type') || 'triangles').trim(),
+      }, w, mat, visible);
+    });
+  }
+
+  // ---- lights -------------------------------------------------------------------------
+  readLight(el, world, on) {
+    const model = urnName(el.getAttribute('model'), 'directional');
+    let type = model;
+    if (!['point', 'directional', 'spot'].includes(model)) {
+      this.error(el, `light model "${model}" unknown, directional used`);
+      type = 'directional';
+    }
+    const d = this.collect(el);
+    this.addLight(el, 0, type, world, {
+      color: vec3(d.get('intensity'), [1, 1, 1]),
+      position: vec3(d.get('position'), [0, 0, 0]),
+      direction: vec3(d.get('direction'), [0, 0, -1]),
+      attenuation: vec3(d.get('attenuation'), [0, 0, 1]),
+      cutoff: first(d.get('cutoffAngle'), Math.PI / 4),
+      softness: first(d.get('softness'), 0),
+      on: on && !!first(d.get('on'), 1),
+    });
+  }
+
+  addLight(el, sub, type, world, p) {
+    const light = {
+      id: this.ids.of(el, `light:${sub}`), element: el, type,
+      color: p.color, intensity: 1,
+      position: M.transformPoint(world, p.position),
+      direction: M.normalize(M.transformDirection(world, p.direction)),
+      attenuation: p.attenuation,
+      cutoff: Math.min(Math.max(p.cutoff, 1e-4), Math.PI),
+      softness: Math.min(Math.max(p.softness, 0), 1),
+      on: p.on,
+    };
+    this.scene.lights.set(light.id, light);
+  }
+
+  // ---- view ---------------------------------------------------------------------------
+  chooseView(xml3d) {
+    let active = null;
+    const sel = xml3d.getAttribute('view');
+    if (sel) {
+      let el = null;
+      try { el = xml3d.querySelector(sel); } catch { /* bad selector */ }
+      if (!el && sel.startsWith('#')) { const r = this.resolve(sel, xml3d); el = r.element || null; }
+      active = this.views.find((v) => v.el === el) || null;
+      if (!active) this.error(xml3d, `xml3d view="${sel}" does not match a <view>`);
+    }
+    if (!active) active = this.views[0] || null;
+    const cam = { element: active ? active.el : null, toWorld: M.identity(), fovY: Math.PI / 4, fovX: null, near: null, far: null };
+    if (active) {
+      cam.toWorld = active.world;
+      const d = this.collect(active.el);
+      cam.fovY = first(d.get('fovVertical'), Math.PI / 4);
+      const fx = d.get('fovHorizontal');
+      if (fx && fx.value.length) cam.fovX = fx.value[0];
+      cam.near = first(d.get('near'), null);
+      cam.far = first(d.get('far'), null);
+    } else if (this.gltfCamera) {
+      cam.toWorld = this.gltfCamera.toWorld;
+      cam.fovY = this.gltfCamera.fovY;
+    }
+    if (!(cam.fovY > 0 && cam.fovY < Math.PI)) { this.error(cam.element, `fovVertical ${cam.fovY} outside (0, pi)`); cam.fovY = Math.PI / 4; }
+    this.scene.camera = cam;
+  }
+}
+
+// Stable numeric ids (from 1) for elements and their sub-parts, and for typed arrays.
+export class IdRegistry {
+  constructor() {
+    this.next = 1;
+    this.byElement = new WeakMap();
+    this.byArray = new WeakMap();
+    this.byKey = new Map();
+  }
+  of(el, sub = 0) {
+    let m = this.byElement.get(el);
+    if (!m) { m = new Map(); this.byElement.set(el, m); }
+    if (!m.has(sub)) m.set(sub, this.next++);
+    return m.get(sub);
+  }
+  ofArray(a) {
+    if (!this.byArray.has(a)) this.byArray.set(a, this.next++);
+    return this.byArray.get(a);
+  }
+  ofKey(k) {
+    if (!this.byKey.has(k)) this.byKey.set(k, this.next++);
+    return this.byKey.get(k);
+  }
+}

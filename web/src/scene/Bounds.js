@@ -1,0 +1,54 @@
+// Bounding boxes of a SceneDescription ({min, max} arrays; empty: min > max).
+import { transformPoint } from '../math/Mat4.js';
+
+const localCache = new WeakMap();
+
+export function emptyBox() {
+  return { min: [Infinity, Infinity, Infinity], max: [-Infinity, -Infinity, -Infinity] };
+}
+
+export function isEmpty(b) {
+  return !(b.min[0] <= b.max[0]);
+}
+
+function localBox(positions) {
+  let b = localCache.get(positions);
+  if (b) return b;
+  b = emptyBox();
+  for (let i = 0; i < positions.length; i += 3)
+    for (let k = 0; k < 3; k++) {
+      const v = positions[i + k];
+      if (v < b.min[k]) b.min[k] = v;
+      if (v > b.max[k]) b.max[k] = v;
+    }
+  localCache.set(positions, b);
+  return b;
+}
+
+export function extend(box, p) {
+  for (let k = 0; k < 3; k++) {
+    if (p[k] < box.min[k]) box.min[k] = p[k];
+    if (p[k] > box.max[k]) box.max[k] = p[k];
+  }
+}
+
+export function meshWorldBox(scene, mesh, box = emptyBox()) {
+  const pos = scene.buffers.get(mesh.positions);
+  if (!pos) return box;
+  const lb = localBox(pos.data);
+  if (isEmpty(lb)) return box;
+  for (let c = 0; c < 8; c++)
+    extend(box, transformPoint(mesh.transform, [c & 1 ? lb.max[0] : lb.min[0], c & 2 ? lb.max[1] : lb.min[1], c & 4 ? lb.max[2] : lb.min[2]]));
+  return box;
+}
+
+// World box of the visible meshes whose pick element is `element` or inside it (all when null).
+export function worldBox(scene, element = null) {
+  const box = emptyBox();
+  for (const m of scene.meshes.values()) {
+    if (!m.visible) continue;
+    if (element && element !== scene.xml3d && !(m.element === element || (element.contains && element.contains(m.element)))) continue;
+    meshWorldBox(scene, m, box);
+  }
+  return box;
+}

@@ -1,0 +1,231 @@
+// One <xml3d> element on the page: reads its markup into a SceneDescription whenever the DOM
+// changes, hands it to a backend (three.js locally, or the Tessera node when the element has
+// a `server` attribute), and provides XML3D's element API and events.
+import { MarkupReader, IdRegistry } from '../reader/MarkupReader.js';
+import { Resources } from '../reader/Resources.js';
+import { setScriptValue, isValueElement } from '../reader/Values.js';
+import { worldBox, isEmpty } from '../scene/Bounds.js';
+import { generateRay, pick } from '../scene/Picker.js';
+import { CameraController } from './CameraController.js';
+
+const STYLE_ID = 'tessera-xml3d-style';
+const CSS = `
+xml3d.tessera-hidden { display: none !important; }
+.tessera-xml3d { position: relative; display: inline-block; overflow: hidden; }
+.tessera-xml3d > canvas, .tessera-xml3d > img.tessera-display { position: absolute; left: 0; top: 0; width: 100%; height: 100%; }
+.tessera-status { position: absolute; left: 4px; bottom: 4px; right: 4px; font: 12px/1.4 sans-serif; color: #fff;
+  pointer-events: none; white-space: pre-wrap; }
+.tessera-status > div { background: rgba(0,0,0,0.6); padding: 2px 6px; margin-top: 2px; border-radius: 3px; display: inline-block; }
+.tessera-status .tessera-error { background: rgba(160,0,0,0.85); }
+`;
+
+function injectStyle(doc) {
+  if (doc.getElementById(STYLE_ID)) return;
+  const s = doc.createElement('style');
+  s.id = STYLE_ID;
+  s.textContent = CSS;
+  doc.head.appendChild(s);
+}
+
+class Box {
+  constructor(b) {
+    this.min = { x: b.min[0], y: b.min[1], z: b.min[2] };
+    this.max = { x: b.max[0], y: b.max[1], z: b.max[2] };
+    this.empty = isEmpty(b);
+  }
+  isEmpty() { return this.empty; }
+  center() { return { x: (this.min.x + this.max.x) / 2, y: (this.min.y + this.max.y) / 2, z: (this.min.z + this.max.z) / 2 }; }
+}
+
+const vec = (a) => (a ? { x: a[0], y: a[1], z: a[2] } : null);
+function fill(out, a) {
+  if (!out) return;
+  const v = a || [NaN, NaN, NaN];
+  if (typeof out.set === 'function') out.set(v[0], v[1], v[2]);
+  else { out.x = v[0]; out.y = v[1]; out.z = v[2]; }
+}
+
+export class XML3DHandler {
+  // createBackend(handler) -> backend {element, inputElement?, update(scene), draw(scene, w, h), dispose()}
+  constructor(xml3d, createBackend) {
+    const doc = xml3d.ownerDocument;
+    injectStyle(doc);
+    this.xml3d = xml3d;
+    this.complete = false;
+    this.scene = null;
+    this.shownErrors = new Set();
+    this.ids = new IdRegistry();
+    this.resources = new Resources({ onLoad: () => this.invalidate() });
+    this.reader = new MarkupReader({ resources: this.resources, ids: this.ids,
+      computedStyle: (el) => doc.defaultView.getComputedStyle(el) });
+
+    // Container in place of the xml3d element; it takes the element's class and style.
+    const c = this.container = doc.createElement('div');
+    c.className = `tessera-xml3d _xml3d ${xml3d.getAttribute('class') || ''}`.trim();
+    c.style.cssText = xml3d.getAttribute('style') || '';
+    if (!c.style.width) c.style.width = `${parseInt(xml3d.getAttribute('width') || '800', 10)}px`;
+    if (!c.style.height) c.style.height = `${parseInt(xml3d.getAttribute('height') || '600', 10)}px`;
+    xml3d.parentNode.insertBefore(c, xml3d);
+    xml3d.classList.add('tessera-hidden');
+
+    this.status = doc.createElement('div');
+    this.status.className = 'tessera-status';
+    this.messages = new Map();  // key -> {text, error}
+    this.backend = createBackend(this);
+    this.inputElement = this.backend.inputElement || this.backend.element;
+    c.appendChild(this.status);  // above the display and input elements
+
+    this.installApi();
+    this.installEvents();
+    this.observer = new MutationObserver((records) => {
+      if (records.some((r) => !(r.type === 'attributes' && r.target === xml3d && r.attributeName === 'class'))) this.invalidate();
+    });
+    this.observer.observe(xml3d, { attributes: true, childList: true, characterData: true, subtree: true });
+    this.onResize = () => this.invalidate();
+    doc.defaultView.addEventListener('resize', this.onResize);
+    const mode = xml3d.getAttribute('controller') || 'examine';
+    if (mode !== 'none') this.controller = new CameraController(this, { mode }).attach();
+    this.invalidate();
+  }
+
+  get width() { return Math.max(1, this.container.clientWidth | 0); }
+  get height() { return Math.max(1, this.container.clientHeight | 0); }
+
+  invalidate() {
+    if (this.frameRequested || this.disposed) return;
+    this.frameRequested = true;
+    this.xml3d.ownerDocument.defaultView.requestAnimationFrame(() => { this.frameRequested = false; this.frame(); });
+  }
+
+  // Sets (or clears, with text null) a status line; errors are shown in red.
+  setStatus(key, text, error = false) {
+    if (text == null) this.messages.delete(key); else this.messages.set(key, { text, error });
+    this.status.replaceChildren(...[...this.messages.values()].map((m) => {
+      const d = this.xml3d.ownerDocument.createElement('div');
+      d.textContent = m.text;
+      if (m.error) d.className = 'tessera-error';
+      return d;
+    }));
+  }
+
+  reportErrors(errors) {
+    for (const e of errors) {
+      if (this.shownErrors.has(e.message)) continue;
+      this.shownErrors.add(e.message);
+      console.warn(`XML3D: ${e.message}`, e.element || '');
+    }
+    this.errors = errors.map((e) => e.message);
+    const n = errors.length;
+    this.setStatus('errors', n ? `⚠ ${n} problem${n > 1 ? 's' : ''} in the scene: ${errors.slice(0, 3).map((e) => e.message).join('; ')}${n > 3 ? ' …' : ''}` : null, true);
+  }
+
+  frame() {
+    const t0 = performance.now();
+    const scene = this.reader.read(this.xml3d);
+    this.scene = scene;
+    this.installElementApi(scene);
+    this.reportErrors(scene.errors);
+    this.setStatus('loading', scene.pending ? `loading ${scene.pending} resource${scene.pending > 1 ? 's' : ''}…` : null);
+    this.backend.update(scene);
+    const detail = this.backend.draw(scene, this.width, this.height);
+    if (detail) this.frameDrawn({ ...detail, timeStart: t0 });
+  }
+
+  // Called by backends when a frame is on screen.
+  frameDrawn(detail) {
+    this.xml3d.dispatchEvent(new CustomEvent('framedrawn', { detail }));
+    if (!this.complete && this.scene && this.scene.pending === 0 && this.resources.pending === 0) {
+      this.complete = true;
+      this.xml3d.dispatchEvent(new Event('load'));
+    }
+  }
+
+  // ---- API on the xml3d element (XML3D 5) ----------------------------------------------
+  installApi() {
+    const x = this.xml3d, h = this;
+    Object.defineProperty(x, 'complete', { configurable: true, get: () => h.complete });
+    x.getElementByPoint = (px, py, hitPoint, hitNormal) => h.getElementByPoint(px, py, hitPoint, hitNormal);
+    x.generateRay = (px, py) => {
+      const r = h.rayAt(px, py);
+      return r && { origin: vec(r.origin), direction: vec(r.direction) };
+    };
+    x.getWorldBoundingBox = () => new Box(h.scene ? worldBox(h.scene) : { min: [Infinity, Infinity, Infinity], max: [-Infinity, -Infinity, -Infinity] });
+    x.getLocalBoundingBox = x.getWorldBoundingBox;
+    x.getRenderInterface = () => ({ handler: h, backend: h.backend });
+    x.tessera = this;
+  }
+
+  installElementApi(scene) {
+    const h = this;
+    const add = (el) => {
+      if (!el || el.getWorldBoundingBox) return;
+      el.getWorldBoundingBox = () => new Box(h.scene ? worldBox(h.scene, el) : { min: [1, 1, 1], max: [0, 0, 0] });
+      el.getLocalBoundingBox = el.getWorldBoundingBox;
+    };
+    for (const m of scene.meshes.values()) {
+      add(m.element);
+      for (let p = m.element.parentElement; p && p !== this.xml3d; p = p.parentElement) add(p);
+    }
+    for (const v of this.xml3d.querySelectorAll('float,float2,float3,float4,float4x4,int,int4,bool,string')) {
+      if (!v.setScriptValue && isValueElement(v)) v.setScriptValue = (value) => setScriptValue(v, value);
+    }
+  }
+
+  // Page coordinates (as xml3d.js) to a world ray through that pixel.
+  rayAt(px, py) {
+    if (!this.scene) return null;
+    const win = this.xml3d.ownerDocument.defaultView;
+    const r = this.container.getBoundingClientRect();
+    const x = px - (r.left + win.scrollX), y = py - (r.top + win.scrollY);
+    return generateRay(this.scene.camera, x, y, this.width, this.height);
+  }
+
+  pickAt(px, py) {
+    const ray = this.rayAt(px, py);
+    return ray ? pick(this.scene, ray) : null;
+  }
+
+  getElementByPoint(px, py, hitPoint, hitNormal) {
+    const hit = this.pickAt(px, py);
+    fill(hitPoint, hit && hit.point);
+    fill(hitNormal, hit && hit.normal);
+    return hit ? hit.element : null;
+  }
+
+  // Mouse events are re-dispatched on the picked mesh or model and bubble up to xml3d.
+  installEvents() {
+    const el = this.inputElement, win = this.xml3d.ownerDocument.defaultView;
+    let hovered = null;
+    const redispatch = (e, type, target, hit) => {
+      const ev = new win.MouseEvent(type, e);
+      if (hit) { ev.position = vec(hit.point); ev.normal = vec(hit.normal); }
+      target.dispatchEvent(ev);
+    };
+    const handle = (e) => {
+      const hit = this.pickAt(e.pageX, e.pageY);
+      const target = hit ? hit.element : this.xml3d;
+      if (e.type === 'mousemove') {
+        if (target !== hovered) {
+          if (hovered) redispatch(e, 'mouseout', hovered, null);
+          hovered = target;
+          redispatch(e, 'mouseover', target, hit);
+        }
+      }
+      redispatch(e, e.type, target, hit);
+    };
+    for (const type of ['click', 'dblclick', 'mousedown', 'mouseup']) el.addEventListener(type, handle);
+    el.addEventListener('mousemove', (e) => {
+      if (this.scene && this.scene.triangleCount() < 300000) handle(e);
+    });
+  }
+
+  dispose() {
+    this.disposed = true;
+    this.observer.disconnect();
+    if (this.controller) this.controller.detach();
+    this.xml3d.ownerDocument.defaultView.removeEventListener('resize', this.onResize);
+    this.backend.dispose();
+    this.container.remove();
+    this.xml3d.classList.remove('tessera-hidden');
+  }
+}

@@ -1,0 +1,67 @@
+// Tessera's XML3D client. Import this module on a page: every <xml3d> element is rendered
+// locally with WebGL (three.js), or, with server="host:port", by a Tessera node.
+//   <script type="module" src="/src/xml3d.js"></script>
+import { XML3DHandler } from './ui/XML3DHandler.js';
+import { WebGLBackend } from './render/WebGLBackend.js';
+import { RemoteBackend } from './net/RemoteBackend.js';
+
+export const version = '0.1.0-tessera';
+const handlers = new Map();
+
+function backendFor(xml3d) {
+  return xml3d.hasAttribute('server') && xml3d.getAttribute('server')
+    ? (h) => new RemoteBackend(h, xml3d.getAttribute('server'))
+    : (h) => new WebGLBackend(h);
+}
+
+export function configure(xml3d) {
+  if (handlers.has(xml3d)) return handlers.get(xml3d);
+  let h;
+  try {
+    h = new XML3DHandler(xml3d, backendFor(xml3d));
+  } catch (e) {
+    console.error('XML3D: could not configure <xml3d>', e);
+    const ev = new Event('unsupported', { cancelable: true });
+    if (xml3d.dispatchEvent(ev)) {
+      const d = xml3d.ownerDocument.createElement('div');
+      d.style.cssText = 'color:#fff;background:#a00;padding:8px;font:14px sans-serif';
+      d.textContent = `This 3D scene cannot be shown: ${e.message}`;
+      xml3d.parentNode.insertBefore(d, xml3d);
+    }
+    return null;
+  }
+  handlers.set(xml3d, h);
+  return h;
+}
+
+// Re-creates the handler (e.g. after the server attribute changed).
+export function reconfigure(xml3d) {
+  const h = handlers.get(xml3d);
+  if (h) { h.dispose(); handlers.delete(xml3d); }
+  return configure(xml3d);
+}
+
+function scan(root) {
+  for (const x of root.querySelectorAll('xml3d')) configure(x);
+}
+
+function start() {
+  scan(document);
+  new MutationObserver((records) => {
+    for (const r of records) {
+      for (const n of r.addedNodes) if (n.nodeType === 1) {
+        if (n.localName === 'xml3d') configure(n); else if (n.querySelectorAll) scan(n);
+      }
+      for (const n of r.removedNodes) if (n.nodeType === 1) {
+        for (const [x, h] of handlers) if (!x.isConnected) { h.dispose(); handlers.delete(x); }
+      }
+      if (r.type === 'attributes' && r.target.localName === 'xml3d' && handlers.has(r.target)) reconfigure(r.target);
+    }
+  }).observe(document.documentElement, { childList: true, subtree: true, attributes: true, attributeFilter: ['server', 'renderer', 'display', 'nodes'] });
+}
+
+if (typeof document !== 'undefined') {
+  if (document.readyState === 'loading') document.addEventListener('DOMContentLoaded', start); else start();
+}
+
+export { XML3DHandler };

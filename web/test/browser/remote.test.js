@@ -1,0 +1,177 @@
+// The server path against a mock Tessera node: a WebSocket server in Node that checks the
+// handshake and every record the page sends against the protocol (decoded with our own
+// decoder, byte-checked against net/protocol.cpp in the unit tests) and answers render
+// requests with a JPEG (or DXT1) frame.
+// TODO(e2e): the same checks against a real node belong in web/test/browser/node-e2e.test.js
+// (start app/tessera-node serving web/ and ../shared/scenes, open /demo/pavilion.html?server=...).
+import { test, before, after } from 'node:test';
+import assert from 'node:assert/strict';
+import zlib from 'node:zlib';
+import { WebSocketServer } from 'ws';
+import { launch, open } from './browser.js';
+import { decodeClient, encodeServer, dxt1Size } from '../../src/net/Protocol.js';
+
+let env, jpeg;
+before(async () => {
+  env = await launch();
+  // A solid green 64x48 JPEG, made by the browser itself.
+  const page = await env.context.newPage();
+  const b64 = await page.evaluate(async () => {
+    const c = new OffscreenCanvas(64, 48);
+    const g = c.getContext('2d');
+    g.fillStyle = 'rgb(0, 200, 0)';
+    g.fillRect(0, 0, 64, 48);
+    const blob = await c.convertToBlob({ type: 'image/jpeg', quality: 0.95 });
+    const bytes = new Uint8Array(await blob.arrayBuffer());
+    return btoa(String.fromCharCode(...bytes));
+  });
+  jpeg = new Uint8Array(Buffer.from(b64, 'base64'));
+  await page.close();
+});
+after(async () => { await env.close(); });
+
+class MockNode {
+  constructor({ encoding = 'jpeg' } = {}) {
+    this.encoding = encoding;
+    this.sessions = [];
+    this.wss = new WebSocketServer({ host: '127.0.0.1', port: 0, path: '/ws' });
+    this.wss.on('connection', (ws, req) => this.session(ws, req));
+    this.waiters = [];
+  }
+  get port() { return this.wss.address().port; }
+  session(ws, req) {
+    const s = { ws, url: req.url, messages: [], records: [], renders: [], problems: [] };
+    this.sessions.push(s);
+    ws.on('message', (data) => {
+      const bytes = new Uint8Array(data);
+      let recs;
+      try { recs = decodeClient(bytes); } catch (e) { s.problems.push(`undecodable message: ${e.message}`); return; }
+      if (s.messages.length === 0) {
+        if (recs.length !== 1 || recs[0].type !== 'handshake') s.problems.push('first message is not exactly one handshake');
+        s.handshake = recs[0];
+        ws.send(encodeServer([{ type: 'handshake_reply', renderer: 'raytracer', display: s.handshake.display, jpegQuality: 85, nodes: 2,
+          width: s.handshake.width, height: s.handshake.height, maxMessageBytes: 1 << 20, maxBufferBytes: 1 << 28, serverVersion: 'mock 1' }]));
+      } else if (recs.some((r) => r.type === 'handshake')) s.problems.push('handshake repeated');
+      s.messages.push(bytes);
+      for (const r of recs) {
+        if (r.type === 'buffer' && r.deflate) {
+          const raw = zlib.inflateSync(Buffer.from(r.payload));  // zlib format, as inflateInit2(15)
+          if (raw.length !== r.values * 4) s.problems.push(`buffer ${r.id}: inflated ${raw.length} bytes, declared ${r.values * 4}`);
+          const ab = raw.buffer.slice(raw.byteOffset, raw.byteOffset + raw.length);
+          r.data = r.bufferType === 'f32' ? new Float32Array(ab) : new Uint32Array(ab);
+        }
+        if (r.type !== 'handshake') s.records.push(r);
+        if (r.type === 'render') {
+          s.renders.push(r.frame);
+          const dxt = this.encoding === 'dxt1';
+          let payload = jpeg;
+          if (dxt) {  // DXT1 blocks: colour0 = colour1 = pure red (RGB565 0xf800), indices 0
+            payload = new Uint8Array(dxt1Size(64, 48));
+            for (let i = 0; i < payload.length; i += 8) { payload[i] = 0x00; payload[i + 1] = 0xf8; payload[i + 2] = 0x00; payload[i + 3] = 0xf8; }
+          }
+          ws.send(encodeServer([{ type: 'frame', frame: r.frame, width: 64, height: 48, encoding: dxt ? 'dxt1' : 'jpeg',
+            timings: { rendering: 5, pipeline: 7 }, payload }]));
+        }
+      }
+      for (const w of this.waiters.splice(0)) w();
+    });
+  }
+  // Resolves when pred() holds after some message.
+  until(pred, ms = 10000) {
+    return new Promise((resolve, reject) => {
+      const t = setTimeout(() => reject(new Error('timed out waiting for the page')), ms);
+      const check = () => { if (pred()) { clearTimeout(t); resolve(); } else this.waiters.push(check); };
+      check();
+    });
+  }
+  close() { for (const s of this.sessions) s.ws.terminate(); this.wss.close(); }
+}
+
+async function displayPixel(page) {
+  return page.evaluate(() => {
+    const src = document.querySelector('.tessera-display');
+    const c = new OffscreenCanvas(src.width, src.height);
+    const g = c.getContext('2d');
+    g.drawImage(src, 0, 0);
+    return [...g.getImageData(32, 24, 1, 1).data];
+  });
+}
+
+test('the page syncs its scene over the protocol and shows the JPEG frame that comes back', async () => {
+  const node = new MockNode();
+  await new Promise((r) => node.wss.on('listening', r));
+  const page = await open(env, `/test/browser/pages/remote.html?server=127.0.0.1:${node.port}`);
+  const s = node.sessions[0];
+  assert.deepEqual(s.problems, []);
+  assert.match(s.url, /^\/ws\?session=\w+/);
+  assert.equal(s.handshake.renderer, 'raytracer');
+  assert.equal(s.handshake.display, 'jpeg');
+  assert.deepEqual([s.handshake.width, s.handshake.height], [64, 48]);
+  const byType = (t) => s.records.filter((r) => r.type === t);
+  const mesh = byType('mesh')[0];
+  const pos = byType('buffer').find((b) => b.id === mesh.positions);
+  assert.equal(pos.deflate, true, 'buffers of 256 bytes or more are deflated');
+  assert.equal(pos.data.length, 36 * 3);
+  assert.deepEqual([...pos.data.slice(0, 6)], [-1, -1, 0, 1, -1, 0]);
+  assert.equal(mesh.transform[14], -5);
+  const mat = byType('material').find((m) => m.id === mesh.material);
+  assert.equal(mat.model, 'matte');
+  assert.deepEqual(mat.diffuseColor, [1, 0, 0]);
+  const light = byType('light')[0];
+  assert.equal(light.lightType, 'point');
+  assert.deepEqual(light.color, [1, 0.5, 0.25]);
+  assert.deepEqual(byType('resolution')[0], { type: 'resolution', width: 64, height: 48 });
+  const envRec = byType('environment')[0];
+  assert.equal(envRec.linear, false);
+  assert.deepEqual(envRec.background, [0, 0, 1]);
+  assert.ok(Math.abs(byType('camera')[0].fovY - Math.PI / 4) < 1e-6);
+  assert.ok(s.renders.length >= 1);
+  // The render request comes after the scene it renders.
+  assert.equal(s.records.findIndex((r) => r.type === 'render') > s.records.findIndex((r) => r.type === 'mesh'), true);
+  const px = await displayPixel(page);
+  assert.ok(px[0] < 30 && px[1] > 170 && px[2] < 30, `display shows the frame: ${px}`);
+
+  // A DOM change sends just that change, then a render request.
+  const before = s.records.length;
+  await page.evaluate(() => document.getElementById('t').setAttribute('translation', '1 0 -5'));
+  await node.until(() => s.records.slice(before).some((r) => r.type === 'render'));
+  const changes = s.records.slice(before).map((r) => r.type);
+  assert.deepEqual(changes, ['mesh', 'render']);
+  assert.equal(s.records[before].transform[12], 1);
+  await page.close();
+  node.close();
+});
+
+test('connection loss is shown and the page reconnects and re-sends the scene', async () => {
+  const node = new MockNode();
+  await new Promise((r) => node.wss.on('listening', r));
+  const page = await open(env, `/test/browser/pages/remote.html?server=127.0.0.1:${node.port}`);
+  node.sessions[0].ws.terminate();
+  await page.waitForFunction(() => document.querySelector('.tessera-xml3d').dataset.connection === 'disconnected');
+  const status = await page.evaluate(() => document.querySelector('.tessera-status').textContent);
+  assert.match(status, /connection to the Tessera node lost/);
+  await node.until(() => node.sessions.length === 2 && node.sessions[1].renders.length > 0);
+  const s2 = node.sessions[1];
+  assert.deepEqual(s2.problems, []);
+  assert.ok(s2.records.some((r) => r.type === 'mesh') && s2.records.some((r) => r.type === 'buffer'), 'scene re-sent');
+  await page.waitForFunction(() => document.querySelector('.tessera-xml3d').dataset.connection === 'ready');
+  await page.close();
+  node.close();
+});
+
+test('display="s3tc" asks for DXT1 frames and draws them with WEBGL_compressed_texture_s3tc', async () => {
+  const node = new MockNode({ encoding: 'dxt1' });
+  await new Promise((r) => node.wss.on('listening', r));
+  const page = await open(env, `/test/browser/pages/remote.html?server=127.0.0.1:${node.port}&display=s3tc`);
+  assert.equal(node.sessions[0].handshake.display, 's3tc');
+  const px = await page.evaluate(() => {
+    const c = document.querySelector('.tessera-display');
+    const gl = c.getContext('webgl2');
+    const out = new Uint8Array(4);
+    gl.readPixels(32, 24, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, out);
+    return [...out];
+  });
+  assert.deepEqual(px, [255, 0, 0, 255]);
+  await page.close();
+  node.close();
+});

@@ -1,0 +1,87 @@
+import { test } from 'node:test';
+import assert from 'node:assert/strict';
+import fs from 'node:fs';
+import { encodeClient, decodeClient, encodeServer, decodeServer, clientRecordSize, ProtocolError } from '../../../src/net/Protocol.js';
+
+// Golden messages encoded by the C++ implementation (net/protocol.cpp), made by
+// web/tools/golden/protocol_golden.cpp: the JS codec must match them byte for byte.
+const golden = JSON.parse(fs.readFileSync(new URL('./golden.json', import.meta.url)));
+const hex = (b) => Buffer.from(b).toString('hex');
+const bytes = (h) => new Uint8Array(Buffer.from(h, 'hex'));
+
+const translate = new Float32Array([1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 1, 2, 3, 1]);
+const scale = new Float32Array([2, 0, 0, 0, 0, 3, 0, 0, 0, 0, 4, 0, 0, 0, 0, 1]);
+const CLIENT = [
+  { type: 'settings', aoSamples: 16, maxDepth: 5 },
+  { type: 'resolution', width: 640, height: 360 },
+  { type: 'camera', toWorld: translate, fovY: 0.5 },
+  { type: 'environment', ambient: [0.1, 0.2, 0.3], background: [0.5, 0.5, 0.5], exposure: 1, linear: false },
+  { type: 'buffer', id: 7, bufferType: 'f32', components: 3, data: new Float32Array([0, 0, 0, 1, 0, 0, 0, 1, 0]) },
+  { type: 'buffer', id: 8, bufferType: 'u32', components: 1, data: new Uint32Array([0, 1, 2]) },
+  { type: 'texture', id: 9, format: 'rgba8', wrapS: 'clamp', wrapT: 'repeat', filter: 'nearest', srgb: false, width: 1, height: 2,
+    bytes: new Uint8Array([255, 0, 0, 255, 0, 255, 0, 128]) },
+  { type: 'material', id: 10, model: 'phong', alphaMask: true, doubleSided: true, diffuseColor: [0.5, 0.25, 1], specularColor: [1, 1, 1],
+    shininess: 0.2, emissiveColor: [0, 0.1, 0], ambientIntensity: 0.3, opacity: 0.75, diffuseTexture: 9, specularTexture: 0,
+    emissiveTexture: 0, reflection: 0.1, refraction: 0.9, ior: 1.5, alphaCutoff: 0.5 },
+  { type: 'mesh', id: 11, positions: 7, normals: 0, texcoords: 0, indices: 8, material: 10, transform: scale, visible: false },
+  { type: 'light', id: 12, lightType: 'spot', on: true, color: [1, 0.5, 0.25], intensity: 1, position: [1, 2, 3], direction: [0, -1, 0],
+    attenuation: [1, 0, 0.1], cutoff: 0.4, softness: 0.5 },
+  { type: 'remove', what: 'mesh', id: 5 },
+  { type: 'render', frame: 42 },
+];
+
+test('client records encode exactly as net/protocol.cpp does', () => {
+  assert.equal(hex(encodeClient([{ type: 'handshake', renderer: 'raytracer', display: 's3tc', jpegQuality: 80, maxNodes: 3, width: 320, height: 240 }])), golden.handshake);
+  assert.equal(hex(encodeClient(CLIENT)), golden.client);
+});
+
+test('client records decode back to what was encoded', () => {
+  const recs = decodeClient(bytes(golden.client));
+  assert.equal(recs.length, CLIENT.length);
+  assert.deepEqual(recs.map((r) => r.type), CLIENT.map((r) => r.type));
+  assert.deepEqual([...recs[4].data], [0, 0, 0, 1, 0, 0, 0, 1, 0]);
+  assert.deepEqual([...recs[5].data], [0, 1, 2]);
+  assert.equal(recs[7].model, 'phong');
+  assert.equal(recs[7].alphaMask, true);
+  assert.ok(Math.abs(recs[7].ior - 1.5) < 1e-6);
+  assert.equal(recs[8].visible, false);
+  assert.equal(recs[9].lightType, 'spot');
+  assert.deepEqual(recs[10], { type: 'remove', what: 'mesh', id: 5 });
+  assert.deepEqual(recs[11], { type: 'render', frame: 42 });
+});
+
+test('record sizes match the encoder', () => {
+  for (const r of CLIENT) assert.equal(clientRecordSize(r), encodeClient([r]).length - 8, r.type);
+});
+
+test('server records match net/protocol.cpp and round-trip', () => {
+  const SERVER = [
+    { type: 'handshake_reply', renderer: 'raytracer', display: 'jpeg', jpegQuality: 85, nodes: 2, width: 320, height: 240,
+      maxMessageBytes: 1000000, maxBufferBytes: 5000000000, serverVersion: 'tessera 0.1.0' },
+    { type: 'frame', frame: 42, width: 4, height: 4, encoding: 'dxt1', timings: { kernel: 1, rendering: 2, sat: 3, tiling: 4, pipeline: 5, encode: 6 },
+      payload: new Uint8Array([1, 2, 3, 4, 5, 6, 7, 8]) },
+    { type: 'error', code: 'bad_mesh', fatal: false, record: 3, message: 'mesh 11: bad' },
+    { type: 'stats', frames: 10, dropped: 1, bytesSent: 12345, sceneBytes: 678, triangles: 1, nodes: 2, fps: 30, meanPipelineMs: 12.5 },
+  ];
+  assert.equal(hex(encodeServer(SERVER)), golden.server);
+  const recs = decodeServer(bytes(golden.server));
+  assert.equal(recs[0].serverVersion, 'tessera 0.1.0');
+  assert.equal(recs[0].maxBufferBytes, 5000000000);
+  assert.equal(recs[1].encoding, 'dxt1');
+  assert.deepEqual([...recs[1].payload], [1, 2, 3, 4, 5, 6, 7, 8]);
+  assert.equal(recs[1].timings.encode, 6);
+  assert.equal(recs[2].codeName, 'bad_mesh');
+  assert.equal(recs[2].message, 'mesh 11: bad');
+  assert.equal(recs[3].meanPipelineMs, 12.5);
+});
+
+test('malformed messages are rejected with a reason', () => {
+  const good = bytes(golden.server);
+  assert.throws(() => decodeServer(good.slice(0, 5)), ProtocolError);
+  const bad = good.slice(); bad[0] = 0x58;
+  assert.throws(() => decodeServer(bad), /magic/);
+  assert.throws(() => decodeServer(bytes(golden.client)), /channel/);
+  assert.throws(() => decodeServer(good.slice(0, good.length - 1)), /truncated/);
+  const v = good.slice(); v[2] = 9;
+  assert.throws(() => decodeServer(v), /version/);
+});

@@ -1,0 +1,54 @@
+import { test } from 'node:test';
+import assert from 'node:assert/strict';
+import { page } from '../dom.js';
+import { MarkupReader } from '../../../src/reader/MarkupReader.js';
+import { SceneSync } from '../../../src/net/SceneSync.js';
+import { encodeClient, decodeClient } from '../../../src/net/Protocol.js';
+
+const PAGE = `<xml3d><defs><material id="m" model="urn:xml3d:material:phong"><float3 name="diffuseColor">0 1 0</float3>
+  <float name="refractionCoefficient">0.5</float><float name="refractionIndex">1.33</float></material></defs>
+  <light model="urn:xml3d:light:point"></light>
+  <mesh id="a" material="#m"><float3 name="position">0 0 0 1 0 0 0 1 0</float3></mesh>
+  <mesh id="b"><float3 name="position">0 0 0 1 0 0 0 1 0</float3><int name="index">0 1 2</int></mesh></xml3d>`;
+const VIEW = { width: 320, height: 240 };
+
+test('the first diff sends every entry, data before the meshes that use it', () => {
+  const doc = page(PAGE);
+  const scene = new MarkupReader().read(doc.querySelector('xml3d'));
+  const recs = new SceneSync().diff(scene, VIEW);
+  const types = recs.map((r) => r.type);
+  assert.deepEqual(types.filter((t, i) => types.indexOf(t) === i), ['buffer', 'material', 'mesh', 'light', 'resolution', 'camera', 'environment']);
+  assert.equal(types.filter((t) => t === 'mesh').length, 2);
+  const mat = recs.find((r) => r.type === 'material' && r.model === 'phong');
+  assert.equal(mat.refraction, 0.5);
+  assert.ok(Math.abs(mat.ior - 1.33) < 1e-6);
+  assert.equal(recs.find((r) => r.type === 'environment').linear, false);
+  // Everything encodes and decodes under the protocol's rules.
+  const wire = recs.filter((r) => r.type !== 'texture');
+  assert.equal(decodeClient(encodeClient(wire)).length, wire.length);
+});
+
+test('an unchanged page sends nothing; a change sends only what changed; removal sends removes', () => {
+  const doc = page(PAGE);
+  const reader = new MarkupReader(), sync = new SceneSync();
+  const x = doc.querySelector('xml3d');
+  sync.diff(reader.read(x), VIEW);
+  assert.deepEqual(sync.diff(reader.read(x), VIEW), []);
+  doc.getElementById('a').setAttribute('style', 'transform: translateX(2px)');
+  let recs = sync.diff(reader.read(x), VIEW);
+  assert.deepEqual(recs.map((r) => r.type), ['mesh']);
+  assert.equal(recs[0].transform[12], 2);
+  doc.getElementById('b').remove();
+  recs = sync.diff(reader.read(x), VIEW);
+  assert.deepEqual(recs.map((r) => `${r.type}:${r.what}`).sort(), ['remove:buffer', 'remove:buffer', 'remove:material', 'remove:mesh'].sort());
+  recs = sync.diff(reader.read(x), { width: 640, height: 480 });
+  assert.deepEqual(recs.map((r) => r.type), ['resolution']);
+});
+
+test('reset re-sends the whole scene (after a reconnect)', () => {
+  const doc = page(PAGE);
+  const reader = new MarkupReader(), sync = new SceneSync();
+  const n = sync.diff(reader.read(doc.querySelector('xml3d')), VIEW).length;
+  sync.reset();
+  assert.equal(sync.diff(reader.read(doc.querySelector('xml3d')), VIEW).length, n);
+});
