@@ -29,6 +29,7 @@ using encode_atom = caf::atom_constant<caf::atom("encode")>;
 using display_atom = caf::atom_constant<caf::atom("display")>;
 using client_atom = caf::atom_constant<caf::atom("client")>;
 using status_atom = caf::atom_constant<caf::atom("status")>;
+using children_atom = caf::atom_constant<caf::atom("children")>;
 
 template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, Rect& x) {

@@ -287,6 +287,11 @@ session_actor::behavior_type session_impl(self_ptr self, std::shared_ptr<ClientS
         s.triangles = st.scene->triangle_count();
         return s;
       },
+      [=](children_atom) -> std::vector<caf::actor> {
+        auto& st = self->state;
+        return {caf::actor_cast<caf::actor>(st.renderer), caf::actor_cast<caf::actor>(st.tiler),
+                caf::actor_cast<caf::actor>(st.encoder), caf::actor_cast<caf::actor>(st.display)};
+      },
   };
 }
 

@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <vector>
 
+#include <caf/actor.hpp>
 #include <caf/typed_actor.hpp>
 #include <caf/replies_to.hpp>
 
@@ -14,6 +15,8 @@
 namespace tessera {
 
 using session_actor = caf::typed_actor<caf::reacts_to<client_atom, std::vector<uint8_t>>,
-                                       caf::replies_to<status_atom>::with<SessionStatus>>;
+                                       caf::replies_to<status_atom>::with<SessionStatus>,
+                                       // renderer, tiler, encoder, display (tests, monitoring)
+                                       caf::replies_to<children_atom>::with<std::vector<caf::actor>>>;
 
 }  // namespace tessera
