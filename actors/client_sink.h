@@ -1,0 +1,25 @@
+#pragma once
+// Where a session's server messages go: the client's WebSocket (and its MJPEG streams).
+// Implemented by the network layer (net/server.cpp) and by tests. Calls come from actor
+// threads; implementations must be thread-safe and must not block.
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace tessera {
+
+class ClientSink {
+ public:
+  virtual ~ClientSink() = default;
+  // One binary WebSocket message (a complete protocol message).
+  virtual void send(std::vector<uint8_t> message) = 0;
+  // One JPEG for the session's MJPEG streams (multipart/x-mixed-replace on HTTP).
+  virtual void send_mjpeg(std::shared_ptr<const std::vector<uint8_t>> jpeg) = 0;
+  // Ends the connection after a fatal protocol error (the session has sent the error).
+  virtual void close(const std::string& reason) = 0;
+  // The session token (names the MJPEG endpoint /mjpeg/<token>); may be empty.
+  virtual std::string token() const = 0;
+};
+
+}  // namespace tessera

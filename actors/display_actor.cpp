@@ -1,0 +1,133 @@
+// Display channel actor: composes tiles, has the encoder encode the frame, sends it.
+#include <chrono>
+#include <cstdio>
+#include <cstring>
+
+#include <caf/all.hpp>
+
+#include "actors/node.h"
+#include "renderer/image.h"
+
+namespace tessera {
+namespace {
+
+using protocol::DisplayKind;
+
+struct display_state {
+  std::shared_ptr<ClientSink> sink;
+  encoder_actor encoder;
+  std::shared_ptr<const NodeSettings> settings;
+  uint64_t session = 0;
+  uint64_t frames = 0, bytes = 0;
+  int64_t t0_ns = 0;
+  static inline const char* name = "tessera.display";
+};
+
+int64_t now_ns() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+
+// Composes the tiles into one RGBA image (a single full-size tile is moved, not copied).
+std::vector<uint8_t> compose(FrameTiles& ft) {
+  const auto& m = ft.meta;
+  if (ft.tiles.size() == 1 && ft.tiles[0].pixels == Rect{0, 0, m.width, m.height})
+    return std::move(ft.tiles[0].rgba);
+  Image img(m.width, m.height);
+  for (auto& t : ft.tiles) {
+    const Rect& r = t.pixels;
+    if (r.empty() || t.rgba.size() != size_t(r.width()) * r.height() * 4) continue;
+    if (!Rect{0, 0, m.width, m.height}.contains(r)) continue;
+    for (int32_t y = 0; y < r.height(); ++y)
+      std::memcpy(img.pixel(r.x0, r.y0 + y), t.rgba.data() + size_t(y) * r.width() * 4, size_t(r.width()) * 4);
+  }
+  return std::move(img.rgba);
+}
+
+display_actor::behavior_type display_impl(display_actor::stateful_pointer<display_state> self,
+                                          std::shared_ptr<ClientSink> sink, encoder_actor encoder,
+                                          std::shared_ptr<const NodeSettings> settings, uint64_t session) {
+  auto& st = self->state;
+  st.sink = std::move(sink);
+  st.encoder = encoder;
+  st.settings = std::move(settings);
+  st.session = session;
+  st.t0_ns = now_ns();
+  return {
+      [=](display_atom, FrameTiles& ft) {
+        EncodeJob job;
+        job.meta = ft.meta;
+        job.rgba = compose(ft);
+        // Replies arrive in request order (one encoder, one requester), so frames go out in order.
+        self->request(self->state.encoder, caf::infinite, encode_atom::value, std::move(job))
+            .then([=](EncodedFrame& ef) {
+              auto& st = self->state;
+              const auto& m = ef.meta;
+              if (!ef.error.empty()) {
+                protocol::ErrorReply e{protocol::ErrorCode::internal, false, protocol::kNoRecord,
+                                       "frame " + std::to_string(m.client_frame) + ": " + ef.error};
+                st.sink->send(protocol::encode(protocol::ServerRecord{e}));
+                node_log(*st.settings, "{\"session\": " + std::to_string(st.session) + ", \"error\": \"encode\"}");
+                return;
+              }
+              const bool mjpeg = DisplayKind(m.display) == DisplayKind::mjpeg;
+              protocol::Frame f;
+              f.frame = m.client_frame;
+              f.width = m.width;
+              f.height = m.height;
+              f.encoding = DisplayKind(m.display) == DisplayKind::s3tc ? protocol::FrameEncoding::dxt1
+                                                                       : protocol::FrameEncoding::jpeg;
+              f.timings.kernel_ms = float(m.kernel_ms);
+              f.timings.rendering_ms = float(m.rendering_ms);
+              f.timings.sat_ms = float(m.sat_ms);
+              f.timings.tiling_ms = float(m.tiling_ms);
+              f.timings.encode_ms = float(ef.encode_ms);
+              const size_t payload = ef.message.size() - ef.header_bytes;
+              const int64_t sent_ns = now_ns();
+              f.timings.pipeline_ms = float(double(sent_ns - m.render_end_ns) / 1e6);
+              std::vector<uint8_t> header;
+              header.reserve(ef.header_bytes);
+              size_t bytes = 0;
+              if (mjpeg) {
+                // The JPEG goes to the MJPEG stream; the WebSocket gets the Frame record
+                // with its timings and an empty payload.
+                auto jpeg = std::make_shared<std::vector<uint8_t>>(ef.message.begin() + ef.header_bytes, ef.message.end());
+                bytes = jpeg->size();
+                st.sink->send_mjpeg(std::move(jpeg));
+                protocol::encode_frame_header(f, 0, header);
+                st.sink->send(std::move(header));
+              } else {
+                protocol::encode_frame_header(f, payload, header);
+                std::memcpy(ef.message.data(), header.data(), ef.header_bytes);
+                bytes = ef.message.size();
+                st.sink->send(std::move(ef.message));
+              }
+              st.frames++;
+              st.bytes += bytes;
+              auto rel = [&](int64_t ns) { return double(ns - st.t0_ns) / 1e6; };
+              char line[768];
+              std::snprintf(line, sizeof line,
+                            "{\"session\": %llu, \"frame\": %u, \"seq\": %u, \"width\": %d, \"height\": %d, "
+                            "\"display\": \"%s\", \"kernel_ms\": %.3f, \"rendering_ms\": %.3f, \"sat_ms\": %.3f, "
+                            "\"tiling_ms\": %.3f, \"encode_ms\": %.3f, \"pipeline_ms\": %.3f, \"bytes\": %zu, "
+                            "\"render_start_ms\": %.3f, \"render_end_ms\": %.3f, \"encode_start_ms\": %.3f, "
+                            "\"encode_end_ms\": %.3f, \"sent_ms\": %.3f}",
+                            (unsigned long long)st.session, m.client_frame, m.seq, m.width, m.height,
+                            mjpeg ? "mjpeg" : (f.encoding == protocol::FrameEncoding::dxt1 ? "s3tc" : "jpeg"),
+                            m.kernel_ms, m.rendering_ms, m.sat_ms, m.tiling_ms, ef.encode_ms, f.timings.pipeline_ms,
+                            bytes, rel(m.render_start_ns), rel(m.render_end_ns), rel(ef.encode_start_ns),
+                            rel(ef.encode_end_ns), rel(sent_ns));
+              node_log(*st.settings, line);
+            });
+      },
+  };
+}
+
+}  // namespace
+
+display_actor spawn_display(caf::actor_system& sys, std::shared_ptr<ClientSink> sink, encoder_actor encoder,
+                            std::shared_ptr<const NodeSettings> settings, uint64_t session_id) {
+  return sys.spawn(display_impl, std::move(sink), encoder, std::move(settings), session_id);
+}
+
+}  // namespace tessera

@@ -1,0 +1,71 @@
+// Encoder actor: JPEG or DXT1 of a composed frame, written after room for the header.
+#include <chrono>
+
+#include <caf/all.hpp>
+
+#include "actors/node.h"
+#include "codecs/dxt1.h"
+#include "codecs/jpeg.h"
+
+namespace tessera {
+namespace {
+
+using protocol::DisplayKind;
+
+struct encoder_state {
+  JpegEncoder jpeg;
+  static inline const char* name = "tessera.encoder";
+};
+
+int64_t now_ns() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+
+// Bytes of the message header + frame record header + frame fields (everything before the payload).
+uint32_t frame_header_bytes() {
+  static const uint32_t n = [] {
+    std::vector<uint8_t> tmp;
+    protocol::encode_frame_header(protocol::Frame{}, 0, tmp);
+    return uint32_t(tmp.size());
+  }();
+  return n;
+}
+
+encoder_actor::behavior_type encoder_impl(encoder_actor::stateful_pointer<encoder_state> self) {
+  return {
+      [=](encode_atom, EncodeJob& job) -> EncodedFrame {
+        EncodedFrame out;
+        out.meta = job.meta;
+        out.header_bytes = frame_header_bytes();
+        out.encode_start_ns = now_ns();
+        const auto& m = job.meta;
+        if (job.rgba.size() != size_t(m.width) * size_t(m.height) * 4) {
+          out.error = "composed image has the wrong size";
+        } else if (DisplayKind(m.display) == DisplayKind::s3tc) {
+          Image img;
+          img.width = m.width;
+          img.height = m.height;
+          img.rgba = std::move(job.rgba);
+          dxt1_encode(img, Dxt1Fit::range, out.message, out.header_bytes);
+        } else {
+          std::string err;
+          if (!self->state.jpeg.encode(job.rgba.data(), m.width, m.height, m.quality, out.message, err,
+                                       out.header_bytes))
+            out.error = "JPEG encoding failed: " + err;
+        }
+        out.encode_end_ns = now_ns();
+        out.encode_ms = double(out.encode_end_ns - out.encode_start_ns) / 1e6;
+        return out;
+      },
+  };
+}
+
+}  // namespace
+
+encoder_actor spawn_encoder(caf::actor_system& sys, bool detached) {
+  if (detached) return sys.spawn<caf::detached>(encoder_impl);
+  return sys.spawn(encoder_impl);
+}
+
+}  // namespace tessera

@@ -1,0 +1,199 @@
+#pragma once
+// Message types and atoms shared by the actor protocols (renderer_protocol.h,
+// tiler_protocol.h, encoder_protocol.h, display_protocol.h, session_protocol.h).
+//
+// Every type has an inspect overload and is registered by register_message_types (node.h),
+// so each message can cross a process boundary: a child node will later be just another
+// remote renderer actor. Pixels and SATs travel as byte vectors (STACK.md: element-wise
+// serialisation of uint32 vectors is 60x slower).
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <caf/atom.hpp>
+#include <caf/meta/type_name.hpp>
+#include <caf/meta/load_callback.hpp>
+#include <caf/error.hpp>
+
+#include "renderer/rect.h"
+#include "renderer/scene.h"
+
+namespace tessera {
+
+// Atoms (at most 10 characters).
+using render_atom = caf::atom_constant<caf::atom("render")>;
+using tasks_atom = caf::atom_constant<caf::atom("tasks")>;
+using sats_atom = caf::atom_constant<caf::atom("sats")>;
+using encode_atom = caf::atom_constant<caf::atom("encode")>;
+using display_atom = caf::atom_constant<caf::atom("display")>;
+using client_atom = caf::atom_constant<caf::atom("client")>;
+using status_atom = caf::atom_constant<caf::atom("status")>;
+using children_atom = caf::atom_constant<caf::atom("children")>;
+
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, Rect& x) {
+  return f(caf::meta::type_name("tessera::rect"), x.x0, x.y0, x.x1, x.y1);
+}
+
+// The scene a renderer renders, as of the start of a frame. In one process it is a shared,
+// read-only pointer (the session changes its scene only between frames, so nothing is
+// copied); serialised it becomes the client protocol's records (net/scene_records.h), so a
+// remote renderer rebuilds the same scene.
+struct SceneSnapshot {
+  std::shared_ptr<const Scene> scene;
+};
+std::vector<uint8_t> scene_snapshot_bytes(const SceneSnapshot& s);
+caf::error scene_snapshot_from_bytes(const std::vector<uint8_t>& bytes, SceneSnapshot& out);
+
+template <class Inspector>
+typename std::enable_if<Inspector::reads_state, typename Inspector::result_type>::type inspect(Inspector& f,
+                                                                                               SceneSnapshot& x) {
+  auto bytes = scene_snapshot_bytes(x);
+  return f(caf::meta::type_name("tessera::scene_snapshot"), bytes);
+}
+template <class Inspector>
+typename std::enable_if<Inspector::writes_state, typename Inspector::result_type>::type inspect(Inspector& f,
+                                                                                                SceneSnapshot& x) {
+  std::vector<uint8_t> bytes;
+  auto load = caf::meta::load_callback([&]() -> caf::error { return scene_snapshot_from_bytes(bytes, x); });
+  return f(caf::meta::type_name("tessera::scene_snapshot"), bytes, load);
+}
+
+// One rendering task: a pixel rectangle of frame `frame` at width x height.
+struct RenderTask {
+  uint32_t frame = 0;  // the session's frame sequence number (not the client's)
+  int32_t width = 0, height = 0;
+  Rect pixels;
+  int32_t ao_samples = 0;
+  int32_t max_depth = 4;
+};
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, RenderTask& x) {
+  return f(caf::meta::type_name("tessera::render_task"), x.frame, x.width, x.height, x.pixels, x.ao_samples,
+           x.max_depth);
+}
+
+// What a rendering node returns for a task: RGBA pixels of the rectangle and the serialised
+// SAT of its cost map (Sat wire format), plus its measurements.
+struct TileResult {
+  uint32_t frame = 0;
+  Rect pixels;
+  std::vector<uint8_t> rgba;  // pixels.width() * pixels.height() * 4
+  std::vector<uint8_t> sat;   // Sat::serialize(); empty when no cost map was measured
+  double kernel_ms = 0, rendering_ms = 0, sat_ms = 0;
+  uint64_t rays = 0;
+  std::string error;          // non-empty: the task failed (pixels are not valid)
+};
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, TileResult& x) {
+  return f(caf::meta::type_name("tessera::tile_result"), x.frame, x.pixels, x.rgba, x.sat, x.kernel_ms,
+           x.rendering_ms, x.sat_ms, x.rays, x.error);
+}
+
+// Tiler: the task list for a frame, and the SATs of the previous one.
+struct TaskRequest {
+  uint32_t frame = 0;
+  int32_t width = 0, height = 0;
+  int32_t packet_w = 4, packet_h = 4;
+};
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, TaskRequest& x) {
+  return f(caf::meta::type_name("tessera::task_request"), x.frame, x.width, x.height, x.packet_w, x.packet_h);
+}
+struct TaskList {
+  uint32_t frame = 0;
+  std::vector<Rect> tasks;  // pixel rectangles, one per rendering node (index = node)
+  double tiling_ms = 0;
+  bool from_sats = false;   // false: even split (first frame, or the size changed)
+};
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, TaskList& x) {
+  return f(caf::meta::type_name("tessera::task_list"), x.frame, x.tasks, x.tiling_ms, x.from_sats);
+}
+struct SatReport {
+  uint32_t frame = 0;
+  int32_t width = 0, height = 0;
+  int32_t packet_w = 4, packet_h = 4;
+  std::vector<std::vector<uint8_t>> sats;  // one serialised SAT per node (empty: missing)
+};
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, SatReport& x) {
+  return f(caf::meta::type_name("tessera::sat_report"), x.frame, x.width, x.height, x.packet_w, x.packet_h, x.sats);
+}
+
+// Timestamps and figures of one frame as it moves down the pipeline. Times are steady-clock
+// nanoseconds of the master node.
+struct FrameMeta {
+  uint32_t seq = 0;           // session frame sequence
+  uint32_t client_frame = 0;  // the client's frame number (echoed in the Frame record)
+  int32_t width = 0, height = 0;
+  uint8_t display = 0;        // protocol::DisplayKind
+  uint8_t quality = 85;
+  double kernel_ms = 0, rendering_ms = 0, sat_ms = 0, tiling_ms = 0;
+  int64_t render_start_ns = 0, render_end_ns = 0;
+  uint32_t nodes = 1;
+};
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, FrameMeta& x) {
+  return f(caf::meta::type_name("tessera::frame_meta"), x.seq, x.client_frame, x.width, x.height, x.display,
+           x.quality, x.kernel_ms, x.rendering_ms, x.sat_ms, x.tiling_ms, x.render_start_ns, x.render_end_ns, x.nodes);
+}
+
+// Session -> display channel: the tiles of one frame.
+struct FrameTiles {
+  FrameMeta meta;
+  std::vector<TileResult> tiles;
+};
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, FrameTiles& x) {
+  return f(caf::meta::type_name("tessera::frame_tiles"), x.meta, x.tiles);
+}
+
+// Display -> encoder: a composed image.
+struct EncodeJob {
+  FrameMeta meta;
+  std::vector<uint8_t> rgba;  // width * height * 4
+};
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, EncodeJob& x) {
+  return f(caf::meta::type_name("tessera::encode_job"), x.meta, x.rgba);
+}
+// Encoder -> display: the encoded frame. `message` starts with header_bytes of room for the
+// protocol header (the display writes it when it knows the pipeline time) followed by the
+// payload (JPEG file or DXT1 blocks).
+struct EncodedFrame {
+  FrameMeta meta;
+  std::vector<uint8_t> message;
+  uint32_t header_bytes = 0;
+  double encode_ms = 0;
+  int64_t encode_start_ns = 0, encode_end_ns = 0;
+  std::string error;
+};
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, EncodedFrame& x) {
+  return f(caf::meta::type_name("tessera::encoded_frame"), x.meta, x.message, x.header_bytes, x.encode_ms,
+           x.encode_start_ns, x.encode_end_ns, x.error);
+}
+
+// A session's state, for tests and monitoring.
+struct SessionStatus {
+  bool handshake_done = false;
+  bool in_flight = false;        // a frame is being rendered (scene updates are cached)
+  bool render_pending = false;   // a render request waits for the frame in flight
+  uint32_t pending_frame = 0;
+  uint32_t cached_updates = 0;
+  uint32_t frames_started = 0;
+  uint32_t dropped = 0;          // render requests merged into a later one
+  uint32_t errors_sent = 0;
+  uint64_t scene_version = 0;
+  uint64_t triangles = 0;
+};
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, SessionStatus& x) {
+  return f(caf::meta::type_name("tessera::session_status"), x.handshake_done, x.in_flight, x.render_pending,
+           x.pending_frame, x.cached_updates, x.frames_started, x.dropped, x.errors_sent, x.scene_version,
+           x.triangles);
+}
+
+}  // namespace tessera

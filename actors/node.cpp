@@ -1,0 +1,54 @@
+#include "actors/node.h"
+
+#include <cstdio>
+
+#include <caf/all.hpp>
+
+#include "net/scene_records.h"
+
+namespace tessera {
+
+std::vector<uint8_t> scene_snapshot_bytes(const SceneSnapshot& s) {
+  if (!s.scene) return {};
+  return protocol::encode(protocol::scene_to_records(*s.scene));
+}
+
+caf::error scene_snapshot_from_bytes(const std::vector<uint8_t>& bytes, SceneSnapshot& out) {
+  auto scene = std::make_shared<Scene>();
+  if (!bytes.empty()) {
+    protocol::Limits limits;  // the master validated the scene against its own limits already
+    limits.max_message_bytes = uint32_t(std::min<size_t>(bytes.size(), 0xffffffffu));
+    auto res = protocol::decode_client(bytes.data(), bytes.size(), limits);
+    if (!res) return caf::make_error(caf::sec::invalid_argument, "scene snapshot: " + res.error().message);
+    for (auto& r : res.value()) {
+      auto st = protocol::apply(*scene, std::move(r), limits);
+      if (!st) return caf::make_error(caf::sec::invalid_argument, "scene snapshot: " + st.error().message);
+    }
+  }
+  out.scene = std::move(scene);
+  return caf::none;
+}
+
+void register_message_types(caf::actor_system_config& cfg) {
+  cfg.add_message_type<std::vector<uint8_t>>("tessera::bytes");
+  cfg.add_message_type<SceneSnapshot>("tessera::scene_snapshot");
+  cfg.add_message_type<RenderTask>("tessera::render_task");
+  cfg.add_message_type<TileResult>("tessera::tile_result");
+  cfg.add_message_type<TaskRequest>("tessera::task_request");
+  cfg.add_message_type<TaskList>("tessera::task_list");
+  cfg.add_message_type<SatReport>("tessera::sat_report");
+  cfg.add_message_type<FrameTiles>("tessera::frame_tiles");
+  cfg.add_message_type<EncodeJob>("tessera::encode_job");
+  cfg.add_message_type<EncodedFrame>("tessera::encoded_frame");
+  cfg.add_message_type<SessionStatus>("tessera::session_status");
+}
+
+void node_log(const NodeSettings& settings, const std::string& line) {
+  if (settings.log) {
+    settings.log(line);
+  } else {
+    std::fprintf(stderr, "%s\n", line.c_str());
+  }
+}
+
+}  // namespace tessera

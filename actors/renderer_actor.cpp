@@ -1,0 +1,75 @@
+// Renderer actor: syncs its ray tracer with the snapshot, renders the task, builds and
+// serialises the SAT of the task's cost map (SAT generation happens on the rendering node,
+// paper 6.2, so only the SAT travels to the tiler).
+#include <chrono>
+#include <exception>
+
+#include <caf/all.hpp>
+
+#include "actors/node.h"
+#include "renderer/raytracer.h"
+#include "renderer/sat.h"
+
+namespace tessera {
+namespace {
+
+struct renderer_state {
+  std::unique_ptr<RayTracer> rt;
+  std::vector<std::string> warnings;
+  static inline const char* name = "tessera.renderer";
+};
+
+double ms_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+
+renderer_actor::behavior_type renderer_impl(renderer_actor::stateful_pointer<renderer_state> self, PacketLayout layout) {
+  return {
+      [=](render_atom, const SceneSnapshot& snap, const RenderTask& task) -> TileResult {
+        TileResult out;
+        out.frame = task.frame;
+        out.pixels = task.pixels;
+        try {
+          auto& st = self->state;
+          if (!st.rt) st.rt = std::make_unique<RayTracer>(layout);
+          if (!snap.scene) throw std::runtime_error("render task without a scene");
+          if (snap.scene->width() != task.width || snap.scene->height() != task.height)
+            throw std::runtime_error("scene resolution does not match the task");
+          st.warnings.clear();
+          st.rt->sync(*snap.scene, st.warnings);
+          RenderSettings s;
+          s.ao_samples = task.ao_samples;
+          s.max_depth = task.max_depth;
+          s.frame = task.frame;
+          s.cost_map = true;
+          TaskResult r;
+          st.rt->render(task.pixels, s, r);
+          out.pixels = r.pixels;
+          out.kernel_ms = r.kernel_ms;
+          out.rendering_ms = r.rendering_ms;
+          out.rays = r.rays.total();
+          out.rgba = std::move(r.image.rgba);
+          if (!r.cost.cost.empty()) {
+            auto t0 = std::chrono::steady_clock::now();
+            Sat sat = Sat::from_cost_map(r.cost);
+            sat.serialize_into(out.sat);
+            out.sat_ms = ms_since(t0);
+          }
+        } catch (const std::exception& e) {
+          out.error = e.what();
+          out.rgba.clear();
+          out.sat.clear();
+        }
+        return out;
+      },
+  };
+}
+
+}  // namespace
+
+renderer_actor spawn_renderer(caf::actor_system& sys, PacketLayout layout, bool detached) {
+  if (detached) return sys.spawn<caf::detached>(renderer_impl, layout);
+  return sys.spawn(renderer_impl, layout);
+}
+
+}  // namespace tessera

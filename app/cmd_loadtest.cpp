@@ -1,0 +1,178 @@
+// tessera loadtest --scene S.gltf --camera-loop L.json [--clients N] [--display jpeg|s3tc]
+//                  [--frames F] [--size W H] [--ao A] [--quality Q] [--host H --port P] [--threads T]
+// Uploads the scene from N simultaneous WebSocket clients, replays the camera loop with two
+// render requests outstanding per client, and prints one JSON line per received frame and a
+// summary (frames per second delivered per client and in total, pipeline/encode/bytes).
+// Without --port it runs a node in this process on a free localhost port.
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <mutex>
+#include <thread>
+
+#include <caf/all.hpp>
+
+#include "app/command.h"
+#include "app/common.h"
+#include "app/node_config.h"
+#include "net/scene_records.h"
+#include "net/server.h"
+
+namespace tessera::app {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+struct FrameRecord {
+  int client = 0;
+  uint32_t frame = 0;
+  protocol::FrameTimings t;
+  size_t bytes = 0;
+  double received_ms = 0;  // since the client's first request
+};
+
+int run(const std::vector<std::string>& argv) {
+  Args args(argv);
+  if (args.flag("--help")) {
+    std::puts("tessera loadtest --scene S.gltf --camera-loop L.json [--clients N] [--display jpeg|s3tc] [--frames F]\n"
+              "                 [--size W H] [--ao A] [--quality Q] [--host H --port P] [--threads T] [--warmup K]");
+    return 0;
+  }
+  int threads = 0;
+  auto limit = limit_threads(args, &threads);
+  SceneSetup setup = load_scene(args, 1280, 720);
+  if (setup.loop.frames.empty()) throw std::invalid_argument("--camera-loop is required");
+  const int clients = int(args.integer("--clients", 1));
+  const std::string display = args.str("--display", "jpeg");
+  const int frames = int(args.integer("--frames", 60));
+  const int warmup = int(args.integer("--warmup", 4));
+  const int ao = int(args.integer("--ao", 0));
+  const int quality = int(args.integer("--quality", 85));
+  std::string host = args.str("--host", "127.0.0.1");
+  long port = args.integer("--port", -1);
+  args.finish();
+  if (clients < 1 || clients > 64 || frames < 1) throw std::invalid_argument("--clients 1..64, --frames >= 1");
+  if (display != "jpeg" && display != "s3tc") throw std::invalid_argument("--display must be jpeg or s3tc");
+  const int W = setup.loaded.scene.width(), H = setup.loaded.scene.height();
+
+  // An in-process node unless --port names one.
+  std::unique_ptr<NodeConfig> cfg;
+  std::unique_ptr<caf::actor_system> sys;
+  std::unique_ptr<Server> server;
+  if (port < 0) {
+    cfg = std::make_unique<NodeConfig>();
+    cfg->log_frames = false;
+    cfg->port = 0;
+    auto settings = cfg->node_settings();
+    settings->log = [](const std::string&) {};
+    ServerOptions o = cfg->server_options();
+    o.max_clients = size_t(clients);
+    sys = std::make_unique<caf::actor_system>(*cfg);
+    server = std::make_unique<Server>(*sys, settings, o);
+    server->start();
+    port = server->port();
+  }
+
+  const auto records = protocol::scene_to_records(setup.loaded.scene, {false, false, false, true});
+  const auto upload = protocol::pack_messages(records, 16u << 20);
+  std::mutex mu;
+  std::vector<FrameRecord> all;
+  std::vector<double> fps(size_t(clients), 0), upload_ms(size_t(clients), 0);
+  std::vector<std::string> errors;
+  auto client_main = [&](int ci) {
+    WsClient ws;
+    std::string err;
+    auto fail = [&](const std::string& e) {
+      std::lock_guard<std::mutex> l(mu);
+      errors.push_back("client " + std::to_string(ci) + ": " + e);
+    };
+    if (!ws.connect(host, uint16_t(port), "/ws", &err)) return fail(err);
+    protocol::Handshake hs;
+    hs.display = display == "s3tc" ? protocol::DisplayKind::s3tc : protocol::DisplayKind::jpeg;
+    hs.jpeg_quality = uint8_t(quality);
+    hs.width = W;
+    hs.height = H;
+    auto t_up = Clock::now();
+    ws.send(protocol::encode(protocol::ClientRecord{hs}));
+    for (auto& m : upload) ws.send(m);
+    ws.send(protocol::encode(protocol::ClientRecord{protocol::Settings{uint32_t(ao), 4}}));
+    const int total = warmup + frames;
+    int sent = 0, got = 0;
+    auto request = [&] {
+      size_t k = size_t(sent) % setup.loop.frames.size();
+      ws.send(protocol::encode(std::vector<protocol::ClientRecord>{protocol::SetCamera{setup.loop.camera(k)},
+                                                                   protocol::RenderRequest{uint32_t(sent)}}));
+      ++sent;
+    };
+    request();
+    request();  // two outstanding: the node renders f+1 while f is encoded and sent
+    Clock::time_point t0;
+    std::vector<FrameRecord> mine;
+    protocol::Limits lim;
+    while (got < total) {
+      auto msg = ws.receive(60000);
+      if (!msg) return fail("timeout or closed after " + std::to_string(got) + " frames");
+      auto recs = protocol::decode_server(msg->data(), msg->size(), lim);
+      if (!recs) return fail("undecodable server message: " + recs.error().message);
+      for (auto& r : recs.value()) {
+        if (auto* e = std::get_if<protocol::ErrorReply>(&r)) return fail("server error: " + e->message);
+        auto* f = std::get_if<protocol::Frame>(&r);
+        if (!f) continue;
+        if (got == 0) upload_ms[size_t(ci)] = std::chrono::duration<double, std::milli>(Clock::now() - t_up).count();
+        if (got == warmup) t0 = Clock::now();
+        if (got >= warmup)
+          mine.push_back({ci, f->frame, f->timings, msg->size(),
+                          std::chrono::duration<double, std::milli>(Clock::now() - t0).count()});
+        ++got;
+        if (sent < total) request();
+      }
+    }
+    double secs = std::chrono::duration<double>(Clock::now() - t0).count();
+    ws.close();
+    std::lock_guard<std::mutex> l(mu);
+    fps[size_t(ci)] = secs > 0 ? double(frames - 1) / secs : 0;
+    all.insert(all.end(), mine.begin(), mine.end());
+  };
+  std::vector<std::thread> ts;
+  for (int c = 0; c < clients; ++c) ts.emplace_back(client_main, c);
+  for (auto& t : ts) t.join();
+  if (server) server->stop();
+  for (auto& e : errors) std::fprintf(stderr, "error: %s\n", e.c_str());
+  std::vector<double> pipeline, encode, rendering, kernel, bytes, sat, tiling;
+  for (auto& f : all) {
+    std::printf("{\"client\": %d, \"frame\": %u, \"kernel_ms\": %.3f, \"rendering_ms\": %.3f, \"sat_ms\": %.3f, "
+                "\"tiling_ms\": %.3f, \"encode_ms\": %.3f, \"pipeline_ms\": %.3f, \"bytes\": %zu, \"received_ms\": %.3f}\n",
+                f.client, f.frame, f.t.kernel_ms, f.t.rendering_ms, f.t.sat_ms, f.t.tiling_ms, f.t.encode_ms,
+                f.t.pipeline_ms, f.bytes, f.received_ms);
+    pipeline.push_back(f.t.pipeline_ms);
+    encode.push_back(f.t.encode_ms);
+    rendering.push_back(f.t.rendering_ms);
+    kernel.push_back(f.t.kernel_ms);
+    sat.push_back(f.t.sat_ms);
+    tiling.push_back(f.t.tiling_ms);
+    bytes.push_back(double(f.bytes));
+  }
+  double total_fps = 0;
+  std::string per;
+  for (size_t i = 0; i < fps.size(); ++i) {
+    total_fps += fps[i];
+    per += (i ? ", " : "") + std::to_string(fps[i]);
+  }
+  std::printf("{\"summary\": true, \"clients\": %d, \"display\": \"%s\", \"quality\": %d, \"width\": %d, \"height\": %d, "
+              "\"ao\": %d, \"frames_per_client\": %d, \"fps_per_client\": [%s], \"fps_total\": %.3f, "
+              "\"median_rendering_ms\": %.3f, \"median_kernel_ms\": %.3f, \"median_sat_ms\": %.3f, "
+              "\"median_tiling_ms\": %.3f, \"median_encode_ms\": %.3f, \"median_pipeline_ms\": %.3f, "
+              "\"median_bytes\": %.0f, \"median_upload_ms\": %.1f, \"errors\": %zu, \"scene\": %s, "
+              "\"triangles\": %zu, \"node\": \"%s\", \"cpu\": %s, \"threads\": %d}\n",
+              clients, display.c_str(), quality, W, H, ao, frames, per.c_str(), total_fps, median(rendering),
+              median(kernel), median(sat), median(tiling), median(encode), median(pipeline), median(bytes),
+              median(upload_ms), errors.size(), json_str(setup.scene_path).c_str(),
+              setup.loaded.scene.triangle_count(), server ? "in-process" : "external", json_str(cpu_model()).c_str(),
+              threads);
+  return errors.empty() ? 0 : 1;
+}
+
+const Command reg("loadtest", "N WebSocket clients against a node: fps, pipeline, encode and bytes per frame", run);
+
+}  // namespace
+}  // namespace tessera::app

@@ -1,0 +1,74 @@
+#include "app/node_config.h"
+
+#include <stdexcept>
+
+#include <caf/all.hpp>
+
+#include "app/common.h"
+#include "renderer/gltf_loader.h"
+
+namespace tessera::app {
+
+NodeConfig::NodeConfig() {
+  register_message_types(*this);
+  // The ray tracer and the DXT1 encoder run on TBB in this process: keep CAF's scheduler small.
+  set("scheduler.max-threads", size_t{2});
+  opt_group{custom_options_, "tessera"}
+      .add(host, "host", "listen address (default 127.0.0.1: local only)")
+      .add(port, "port", "TCP port of HTTP + WebSocket (0: any free port)")
+      .add(web_root, "web-root", "folder served over HTTP (web client, demo pages)")
+      .add(scene, "scene", "glTF scene given to clients that connect with an empty scene")
+      .add(max_clients, "max-clients", "simultaneous WebSocket clients")
+      .add(render_threads, "render-threads", "TBB threads for rendering and encoding (0: all)")
+      .add(logical_cores, "logical-cores", "renderer coefficient: logical cores (0: hardware threads)")
+      .add(single_core_perf, "single-core-perf", "renderer coefficient: single-core performance")
+      .add(max_width, "max-width", "largest frame width")
+      .add(max_height, "max-height", "largest frame height")
+      .add(max_message_bytes, "max-message-bytes", "largest WebSocket message")
+      .add(max_buffer_bytes, "max-buffer-bytes", "largest buffer (inflated)")
+      .add(max_client_bytes, "max-client-bytes", "buffers + textures held per client")
+      .add(max_triangles, "max-triangles", "triangles per client scene")
+      .add(max_texture_size, "max-texture-size", "largest texture width/height")
+      .add(log_frames, "log-frames", "log one JSON line per frame");
+}
+
+std::shared_ptr<NodeSettings> NodeConfig::node_settings() const {
+  auto s = std::make_shared<NodeSettings>();
+  auto positive = [](int64_t v, const char* name) {
+    if (v <= 0) throw std::invalid_argument(std::string("tessera.") + name + " must be > 0");
+    return v;
+  };
+  s->limits.max_width = int32_t(positive(max_width, "max-width"));
+  s->limits.max_height = int32_t(positive(max_height, "max-height"));
+  s->limits.max_message_bytes = uint32_t(std::min<int64_t>(positive(max_message_bytes, "max-message-bytes"), 0xffffffffll));
+  s->limits.max_buffer_bytes = uint64_t(positive(max_buffer_bytes, "max-buffer-bytes"));
+  s->limits.max_client_bytes = uint64_t(positive(max_client_bytes, "max-client-bytes"));
+  s->limits.max_message_payload_bytes = std::max<uint64_t>(s->limits.max_message_payload_bytes, s->limits.max_buffer_bytes);
+  s->limits.max_triangles = uint64_t(positive(max_triangles, "max-triangles"));
+  s->limits.max_texture_size = int32_t(positive(max_texture_size, "max-texture-size"));
+  s->coefficient.logical_cores = logical_cores > 0 ? logical_cores : (render_threads > 0 ? render_threads : hardware_threads());
+  s->coefficient.single_core_perf = single_core_perf;
+  if (!(single_core_perf > 0)) throw std::invalid_argument("tessera.single-core-perf must be > 0");
+  if (!scene.empty()) {
+    LoadedScene loaded = load_gltf(scene);
+    for (auto& w : loaded.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
+    s->preload = std::make_shared<const Scene>(std::move(loaded.scene));
+  }
+  if (!log_frames) s->log = [](const std::string& line) {
+    if (line.find("\"frame\"") == std::string::npos) std::fprintf(stderr, "%s\n", line.c_str());
+  };
+  return s;
+}
+
+ServerOptions NodeConfig::server_options() const {
+  if (port < 0 || port > 65535) throw std::invalid_argument("port must be in 0..65535");
+  if (max_clients < 1) throw std::invalid_argument("tessera.max-clients must be >= 1");
+  ServerOptions o;
+  o.host = host;
+  o.port = uint16_t(port);
+  o.web_root = web_root;
+  o.max_clients = size_t(max_clients);
+  return o;
+}
+
+}  // namespace tessera::app

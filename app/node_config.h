@@ -1,0 +1,39 @@
+#pragma once
+// The node's configuration: CAF's actor_system_config with a [tessera] group, read from an
+// INI file (--config configs/single.ini) and the command line (--tessera.NAME=VALUE), then
+// the plain flags of `tessera serve` (--host, --port, --web-root, --scene, --threads).
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include <caf/actor_system_config.hpp>
+
+#include "actors/node.h"
+#include "net/server.h"
+
+namespace tessera::app {
+
+struct NodeConfig : caf::actor_system_config {
+  std::string host = "127.0.0.1";
+  int port = 8080;
+  std::string web_root = "web";
+  std::string scene;            // preloaded for clients that connect with an empty scene
+  int max_clients = 16;
+  int render_threads = 0;       // TBB threads (0: all hardware threads)
+  int logical_cores = 0;        // renderer coefficient: logical cores (0: hardware threads)
+  double single_core_perf = 1;  //   x single-core performance
+  int max_width = 7680, max_height = 4320;
+  int64_t max_message_bytes = 64ll << 20;
+  int64_t max_buffer_bytes = 256ll << 20;
+  int64_t max_client_bytes = 1ll << 30;
+  int64_t max_triangles = 20'000'000;
+  int max_texture_size = 8192;
+  bool log_frames = true;
+
+  NodeConfig();
+  // Fills NodeSettings and ServerOptions (limits checked; throws std::invalid_argument).
+  std::shared_ptr<NodeSettings> node_settings() const;
+  ServerOptions server_options() const;
+};
+
+}  // namespace tessera::app

@@ -1,0 +1,240 @@
+#include "net/http.h"
+
+#include <arpa/inet.h>
+#include <netdb.h>
+#include <netinet/in.h>
+#include <poll.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include <cctype>
+#include <chrono>
+#include <cstring>
+#include <filesystem>
+
+namespace tessera::http {
+
+namespace fs = std::filesystem;
+
+const char* mime_type(const std::string& path) {
+  static const struct {
+    const char* ext;
+    const char* type;
+  } kTypes[] = {
+      {".html", "text/html; charset=utf-8"}, {".htm", "text/html; charset=utf-8"},
+      {".js", "text/javascript; charset=utf-8"}, {".mjs", "text/javascript; charset=utf-8"},
+      {".css", "text/css; charset=utf-8"}, {".json", "application/json"},
+      {".png", "image/png"}, {".jpg", "image/jpeg"}, {".jpeg", "image/jpeg"}, {".gif", "image/gif"},
+      {".svg", "image/svg+xml"}, {".ico", "image/x-icon"}, {".webp", "image/webp"},
+      {".txt", "text/plain; charset=utf-8"}, {".md", "text/plain; charset=utf-8"},
+      {".xml", "application/xml"}, {".wasm", "application/wasm"}, {".gltf", "model/gltf+json"},
+      {".glb", "model/gltf-binary"}, {".bin", "application/octet-stream"}, {".map", "application/json"},
+  };
+  auto dot = path.rfind('.');
+  if (dot == std::string::npos || path.find('/', dot) != std::string::npos) return "application/octet-stream";
+  std::string ext = path.substr(dot);
+  for (auto& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+  for (const auto& t : kTypes)
+    if (ext == t.ext) return t.type;
+  return "application/octet-stream";
+}
+
+std::string target_path(const std::string& target) {
+  return target.substr(0, target.find_first_of("?#"));
+}
+
+namespace {
+
+int hex(char c) {
+  if (c >= '0' && c <= '9') return c - '0';
+  if (c >= 'a' && c <= 'f') return c - 'a' + 10;
+  if (c >= 'A' && c <= 'F') return c - 'A' + 10;
+  return -1;
+}
+
+std::optional<std::string> percent_decode(const std::string& s) {
+  std::string out;
+  for (size_t i = 0; i < s.size(); ++i) {
+    if (s[i] != '%') { out += s[i]; continue; }
+    if (i + 2 >= s.size()) return std::nullopt;
+    int a = hex(s[i + 1]), b = hex(s[i + 2]);
+    if (a < 0 || b < 0) return std::nullopt;
+    char c = char(a * 16 + b);
+    if (c == '\0') return std::nullopt;
+    out += c;
+    i += 2;
+  }
+  return out;
+}
+
+}  // namespace
+
+std::optional<std::string> resolve_static(const std::string& root, const std::string& target) {
+  if (target.empty() || target[0] != '/') return std::nullopt;
+  auto decoded = percent_decode(target_path(target));
+  if (!decoded) return std::nullopt;
+  std::string rel;
+  size_t i = 1;
+  const std::string& p = *decoded;
+  while (i <= p.size()) {
+    size_t j = p.find('/', i);
+    if (j == std::string::npos) j = p.size();
+    std::string seg = p.substr(i, j - i);
+    if (!seg.empty()) {
+      if (seg[0] == '.' || seg.find('\\') != std::string::npos) return std::nullopt;  // "..", ".", hidden
+      if (!rel.empty()) rel += '/';
+      rel += seg;
+    }
+    i = j + 1;
+  }
+  if (p.back() == '/') rel += rel.empty() ? "index.html" : "/index.html";
+  std::error_code ec;
+  fs::path base = fs::weakly_canonical(fs::path(root), ec);
+  if (ec) return std::nullopt;
+  fs::path full = fs::weakly_canonical(base / rel, ec);
+  if (ec) return std::nullopt;
+  if (fs::is_directory(full, ec)) full /= "index.html";
+  // Must stay inside root after resolving symlinks.
+  auto b = base.string(), f = full.string();
+  if (f.size() <= b.size() || f.compare(0, b.size(), b) != 0 || f[b.size()] != '/') return std::nullopt;
+  if (!fs::is_regular_file(full, ec)) return std::nullopt;
+  return f;
+}
+
+bool valid_token(const std::string& t) {
+  if (t.size() < 8 || t.size() > 64) return false;
+  for (char c : t)
+    if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-')) return false;
+  return true;
+}
+
+std::string query_param(const std::string& target, const std::string& key) {
+  auto q = target.find('?');
+  if (q == std::string::npos) return "";
+  std::string query = target.substr(q + 1, target.find('#', q) == std::string::npos ? std::string::npos
+                                                                                       : target.find('#', q) - q - 1);
+  size_t i = 0;
+  while (i <= query.size()) {
+    size_t j = query.find('&', i);
+    if (j == std::string::npos) j = query.size();
+    std::string kv = query.substr(i, j - i);
+    auto eq = kv.find('=');
+    if (kv.substr(0, eq) == key) return eq == std::string::npos ? "" : kv.substr(eq + 1);
+    i = j + 1;
+  }
+  return "";
+}
+
+// --- Client -----------------------------------------------------------------------------
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+int connect_to(const std::string& host, uint16_t port) {
+  addrinfo hints{}, *res = nullptr;
+  hints.ai_family = AF_UNSPEC;
+  hints.ai_socktype = SOCK_STREAM;
+  if (getaddrinfo(host.c_str(), std::to_string(port).c_str(), &hints, &res) != 0) return -1;
+  int fd = -1;
+  for (addrinfo* a = res; a; a = a->ai_next) {
+    fd = ::socket(a->ai_family, a->ai_socktype, a->ai_protocol);
+    if (fd < 0) continue;
+    if (::connect(fd, a->ai_addr, a->ai_addrlen) == 0) break;
+    ::close(fd);
+    fd = -1;
+  }
+  freeaddrinfo(res);
+  return fd;
+}
+
+// Reads more bytes into buf; false on EOF, error or deadline.
+bool read_some(int fd, std::string& buf, Clock::time_point deadline) {
+  auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()).count();
+  if (left <= 0) return false;
+  pollfd p{fd, POLLIN, 0};
+  if (::poll(&p, 1, int(left)) <= 0) return false;
+  char tmp[65536];
+  ssize_t n = ::recv(fd, tmp, sizeof tmp, 0);
+  if (n <= 0) return false;
+  buf.append(tmp, size_t(n));
+  return true;
+}
+
+bool send_request(int fd, const std::string& host, const std::string& target) {
+  std::string req = "GET " + target + " HTTP/1.1\r\nHost: " + host + "\r\nConnection: close\r\n\r\n";
+  return ::send(fd, req.data(), req.size(), MSG_NOSIGNAL) == ssize_t(req.size());
+}
+
+std::string header_value(const std::string& head, const std::string& name) {
+  std::string lower = head;
+  for (auto& c : lower) c = char(std::tolower(static_cast<unsigned char>(c)));
+  std::string key = "\r\n" + name + ":";
+  auto p = lower.find(key);
+  if (p == std::string::npos) return "";
+  p += key.size();
+  auto e = head.find("\r\n", p);
+  std::string v = head.substr(p, e - p);
+  while (!v.empty() && v.front() == ' ') v.erase(v.begin());
+  return v;
+}
+
+}  // namespace
+
+std::optional<Response> get(const std::string& host, uint16_t port, const std::string& target, int timeout_ms) {
+  int fd = connect_to(host, port);
+  if (fd < 0) return std::nullopt;
+  auto deadline = Clock::now() + std::chrono::milliseconds(timeout_ms);
+  std::string buf;
+  if (!send_request(fd, host, target)) { ::close(fd); return std::nullopt; }
+  while (read_some(fd, buf, deadline)) {}
+  ::close(fd);
+  auto he = buf.find("\r\n\r\n");
+  if (buf.compare(0, 5, "HTTP/") != 0 || he == std::string::npos) return std::nullopt;
+  Response r;
+  r.status = std::atoi(buf.c_str() + buf.find(' ') + 1);
+  std::string head = buf.substr(0, he + 2);
+  r.content_type = header_value(head, "content-type");
+  r.body = buf.substr(he + 4);
+  return r;
+}
+
+bool read_mjpeg(const std::string& host, uint16_t port, const std::string& target, size_t parts,
+                std::vector<std::vector<uint8_t>>& out, std::string* error, int timeout_ms) {
+  auto fail = [&](const std::string& e, int fd) {
+    if (fd >= 0) ::close(fd);
+    if (error) *error = e;
+    return false;
+  };
+  int fd = connect_to(host, port);
+  if (fd < 0) return fail("cannot connect", -1);
+  auto deadline = Clock::now() + std::chrono::milliseconds(timeout_ms);
+  if (!send_request(fd, host, target)) return fail("cannot send the request", fd);
+  std::string buf;
+  size_t he;
+  while ((he = buf.find("\r\n\r\n")) == std::string::npos)
+    if (!read_some(fd, buf, deadline)) return fail("no response header", fd);
+  std::string head = buf.substr(0, he + 2);
+  if (std::atoi(buf.c_str() + buf.find(' ') + 1) != 200) return fail("status: " + head.substr(0, head.find('\r')), fd);
+  std::string ct = header_value(head, "content-type");
+  auto bp = ct.find("boundary=");
+  if (ct.find("multipart/x-mixed-replace") != 0 || bp == std::string::npos) return fail("content type: " + ct, fd);
+  std::string boundary = "--" + ct.substr(bp + 9);
+  buf.erase(0, he + 4);
+  while (out.size() < parts) {
+    size_t b, ph;
+    while ((b = buf.find(boundary)) == std::string::npos || (ph = buf.find("\r\n\r\n", b)) == std::string::npos)
+      if (!read_some(fd, buf, deadline)) return fail("stream ended after " + std::to_string(out.size()) + " parts", fd);
+    std::string part_head = buf.substr(b + boundary.size(), ph + 2 - b - boundary.size());
+    long len = std::atol(header_value(part_head, "content-length").c_str());
+    if (len <= 0) return fail("part without Content-Length", fd);
+    while (buf.size() < ph + 4 + size_t(len))
+      if (!read_some(fd, buf, deadline)) return fail("part truncated", fd);
+    out.emplace_back(buf.begin() + long(ph + 4), buf.begin() + long(ph + 4 + size_t(len)));
+    buf.erase(0, ph + 4 + size_t(len));
+  }
+  ::close(fd);
+  return true;
+}
+
+}  // namespace tessera::http

@@ -1,0 +1,43 @@
+#pragma once
+// HTTP helpers of the node's endpoint (pure code, no websocketpp): static file resolution
+// without path traversal, MIME types, session tokens, and a minimal blocking HTTP client
+// for tests and the load test (POSIX sockets).
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace tessera::http {
+
+// MIME type from the file extension ("application/octet-stream" when unknown).
+const char* mime_type(const std::string& path);
+
+// Maps a request target ("/a/b.js?x=1") to a regular file under root. Rejects (nullopt):
+// targets not starting with '/', bad or NUL percent-encodings, "..", backslashes, hidden
+// segments (".git"), anything resolving outside root (symlinks included), and directories
+// without index.html. A target ending in '/' means its index.html.
+std::optional<std::string> resolve_static(const std::string& root, const std::string& target);
+
+// Session tokens (?session=TOKEN on the WebSocket, /mjpeg/TOKEN): 8..64 of [A-Za-z0-9_-].
+bool valid_token(const std::string& token);
+// The value of `key` in the target's query string ("" when absent).
+std::string query_param(const std::string& target, const std::string& key);
+// The path of a target without query string and fragment.
+std::string target_path(const std::string& target);
+
+// --- Client side (tests, load test) -------------------------------------------------------
+
+struct Response {
+  int status = 0;
+  std::string content_type;
+  std::string body;
+};
+// GET http://host:port/target; nullopt on connection failure or timeout.
+std::optional<Response> get(const std::string& host, uint16_t port, const std::string& target, int timeout_ms = 5000);
+
+// Reads `parts` JPEG parts from a multipart/x-mixed-replace stream (MJPEG), then closes.
+// False and *error on failure or timeout.
+bool read_mjpeg(const std::string& host, uint16_t port, const std::string& target, size_t parts,
+                std::vector<std::vector<uint8_t>>& out, std::string* error, int timeout_ms = 10000);
+
+}  // namespace tessera::http

@@ -1,0 +1,493 @@
+// websocketpp (standalone asio) server and client: the only translation unit that includes
+// websocketpp (it costs ~15 s and 0.5 GB to compile).
+#include "net/server.h"
+
+#include <atomic>
+#include <condition_variable>
+#include <cstdio>
+#include <deque>
+#include <fstream>
+#include <map>
+#include <mutex>
+#include <set>
+#include <sstream>
+#include <thread>
+
+#include <caf/all.hpp>
+
+#include <websocketpp/client.hpp>
+#include <websocketpp/config/asio_no_tls.hpp>
+#include <websocketpp/config/asio_no_tls_client.hpp>
+#include <websocketpp/server.hpp>
+
+#include "net/http.h"
+
+namespace tessera {
+
+using WsServer = websocketpp::server<websocketpp::config::asio>;
+using WsClientEndpoint = websocketpp::client<websocketpp::config::asio_client>;
+using websocketpp::connection_hdl;
+
+namespace {
+
+// One MJPEG viewer: the HTTP connection's response is deferred and its socket written
+// directly; a slow viewer gets the latest frame (older pending ones are replaced).
+struct MjpegStream : std::enable_shared_from_this<MjpegStream> {
+  WsServer::connection_ptr con;
+  bool writing = false, dead = false;
+  std::shared_ptr<const std::vector<uint8_t>> current, pending;
+  std::string part_header;
+  static constexpr const char* kBoundary = "tesseraframe";
+
+  void push(std::shared_ptr<const std::vector<uint8_t>> jpeg) {
+    if (dead) return;
+    pending = std::move(jpeg);
+    if (!writing) write_next();
+  }
+  void write_next() {
+    if (dead || !pending) return;
+    current = std::move(pending);
+    pending.reset();
+    writing = true;
+    part_header = std::string("--") + kBoundary + "\r\nContent-Type: image/jpeg\r\nContent-Length: " +
+                  std::to_string(current->size()) + "\r\n\r\n";
+    static const char crlf[] = "\r\n";
+    std::vector<asio::const_buffer> bufs{asio::buffer(part_header), asio::buffer(*current), asio::buffer(crlf, 2)};
+    auto self = shared_from_this();
+    asio::async_write(con->get_raw_socket(), bufs, [self](const asio::error_code& ec, size_t) {
+      self->writing = false;
+      if (ec) { self->shutdown(); return; }
+      self->write_next();
+    });
+  }
+  void start() {
+    part_header = std::string("HTTP/1.1 200 OK\r\nContent-Type: multipart/x-mixed-replace; boundary=") + kBoundary +
+                  "\r\nCache-Control: no-cache, no-store\r\nPragma: no-cache\r\nConnection: close\r\n\r\n";
+    writing = true;
+    auto self = shared_from_this();
+    asio::async_write(con->get_raw_socket(), asio::buffer(part_header), [self](const asio::error_code& ec, size_t) {
+      self->writing = false;
+      if (ec) { self->shutdown(); return; }
+      self->write_next();
+    });
+  }
+  void shutdown() {
+    if (dead) return;
+    dead = true;
+    asio::error_code ec;
+    con->get_raw_socket().shutdown(asio::ip::tcp::socket::shutdown_both, ec);
+    con->get_raw_socket().close(ec);
+  }
+};
+
+}  // namespace
+
+struct Server::Impl : std::enable_shared_from_this<Server::Impl> {
+  caf::actor_system& sys;
+  std::shared_ptr<const NodeSettings> settings;
+  ServerOptions opts;
+  WsServer ws;
+  std::thread thread;
+  std::atomic<uint16_t> bound_port{0};
+  std::atomic<size_t> count{0};
+  std::atomic<uint64_t> next_id{0};
+  bool running = false;
+
+  struct Conn {
+    session_actor session;
+    std::shared_ptr<struct Sink> sink;
+  };
+  // Touched only on the network thread.
+  std::map<connection_hdl, Conn, std::owner_less<connection_hdl>> conns;
+  std::set<std::string> tokens;
+  std::map<std::string, std::vector<std::shared_ptr<MjpegStream>>> mjpeg;
+  std::set<connection_hdl, std::owner_less<connection_hdl>> pending_opens;  // validated, not yet opened
+
+  Impl(caf::actor_system& s, std::shared_ptr<const NodeSettings> st, ServerOptions o)
+      : sys(s), settings(std::move(st)), opts(std::move(o)) {}
+
+  void log(const std::string& line) { node_log(*settings, line); }
+  void on_open(connection_hdl h);
+  void on_close(connection_hdl h);
+  bool on_validate(connection_hdl h);
+  void on_message(connection_hdl h, WsServer::message_ptr msg);
+  void on_http(connection_hdl h);
+  void end_mjpeg(const std::string& token) {
+    auto it = mjpeg.find(token);
+    if (it == mjpeg.end()) return;
+    for (auto& s : it->second) s->shutdown();
+    mjpeg.erase(it);
+  }
+};
+
+// The session's way back to its client; posts everything onto the network thread.
+struct Sink : ClientSink {
+  std::weak_ptr<Server::Impl> impl;
+  connection_hdl hdl;
+  std::string tok;
+  std::atomic<bool> open{true};
+
+  void post(std::function<void(Server::Impl&)> f) {
+    auto i = impl.lock();
+    if (!i || !open) return;
+    std::weak_ptr<Server::Impl> w = i;
+    i->ws.get_io_service().post([w, f = std::move(f)] {
+      if (auto i = w.lock()) f(*i);
+    });
+  }
+  void send(std::vector<uint8_t> message) override {
+    auto p = std::make_shared<std::vector<uint8_t>>(std::move(message));
+    auto h = hdl;
+    post([h, p](Server::Impl& i) {
+      websocketpp::lib::error_code ec;
+      i.ws.send(h, p->data(), p->size(), websocketpp::frame::opcode::binary, ec);
+    });
+  }
+  void send_mjpeg(std::shared_ptr<const std::vector<uint8_t>> jpeg) override {
+    auto t = tok;
+    post([t, jpeg](Server::Impl& i) {
+      auto it = i.mjpeg.find(t);
+      if (it == i.mjpeg.end()) return;
+      auto& v = it->second;
+      v.erase(std::remove_if(v.begin(), v.end(), [](auto& s) { return s->dead; }), v.end());
+      for (auto& s : v) s->push(jpeg);
+    });
+  }
+  void close(const std::string& reason) override {
+    auto h = hdl;
+    std::string r = reason.substr(0, 120);  // close reasons are limited to 123 bytes
+    post([h, r](Server::Impl& i) {
+      websocketpp::lib::error_code ec;
+      i.ws.close(h, websocketpp::close::status::policy_violation, r, ec);
+    });
+    open = false;
+  }
+  std::string token() const override { return tok; }
+};
+
+bool Server::Impl::on_validate(connection_hdl h) {
+  auto con = ws.get_con_from_hdl(h);
+  const std::string target = con->get_resource();
+  if (http::target_path(target) != "/ws") {
+    con->set_status(websocketpp::http::status_code::not_found);
+    con->set_body("WebSocket endpoint is /ws\n");
+    return false;
+  }
+  if (count + pending_opens.size() >= opts.max_clients) {
+    con->set_status(websocketpp::http::status_code::service_unavailable);
+    con->set_body("server full: " + std::to_string(opts.max_clients) + " clients\n");
+    log("{\"rejected\": \"server full\", \"max_clients\": " + std::to_string(opts.max_clients) + "}");
+    return false;
+  }
+  std::string token = http::query_param(target, "session");
+  if (!token.empty() && (!http::valid_token(token) || tokens.count(token))) {
+    con->set_status(websocketpp::http::status_code::bad_request);
+    con->set_body(tokens.count(token) ? "session token in use\n" : "bad session token (8..64 of A-Z a-z 0-9 _ -)\n");
+    return false;
+  }
+  pending_opens.insert(h);
+  return true;
+}
+
+void Server::Impl::on_open(connection_hdl h) {
+  pending_opens.erase(h);
+  auto con = ws.get_con_from_hdl(h);
+  auto sink = std::make_shared<Sink>();
+  sink->impl = shared_from_this();
+  sink->hdl = h;
+  sink->tok = http::query_param(con->get_resource(), "session");
+  if (!sink->tok.empty()) tokens.insert(sink->tok);
+  uint64_t id = ++next_id;
+  auto session = spawn_session(sys, sink, settings, id);
+  conns[h] = Conn{session, sink};
+  count = conns.size();
+}
+
+void Server::Impl::on_close(connection_hdl h) {
+  pending_opens.erase(h);
+  auto it = conns.find(h);
+  if (it == conns.end()) return;
+  it->second.sink->open = false;
+  caf::anon_send_exit(it->second.session, caf::exit_reason::user_shutdown);
+  if (!it->second.sink->tok.empty()) {
+    tokens.erase(it->second.sink->tok);
+    end_mjpeg(it->second.sink->tok);
+  }
+  conns.erase(it);
+  count = conns.size();
+}
+
+void Server::Impl::on_message(connection_hdl h, WsServer::message_ptr msg) {
+  auto it = conns.find(h);
+  if (it == conns.end()) return;
+  const std::string& p = msg->get_payload();
+  // Text messages go to the decoder too: it answers them with a protocol error (bad magic).
+  caf::anon_send(it->second.session, client_atom::value, std::vector<uint8_t>(p.begin(), p.end()));
+}
+
+void Server::Impl::on_http(connection_hdl h) {
+  auto con = ws.get_con_from_hdl(h);
+  const std::string target = con->get_resource();
+  const std::string path = http::target_path(target);
+  if (con->get_request().get_method() != "GET" && con->get_request().get_method() != "HEAD") {
+    con->set_status(websocketpp::http::status_code::method_not_allowed);
+    return;
+  }
+  if (path.rfind("/mjpeg/", 0) == 0) {
+    std::string token = path.substr(7);
+    if (!tokens.count(token)) {
+      con->set_status(websocketpp::http::status_code::not_found);
+      con->set_body("no session with this token\n");
+      return;
+    }
+    con->defer_http_response();
+    auto s = std::make_shared<MjpegStream>();
+    s->con = con;
+    mjpeg[token].push_back(s);
+    s->start();
+    return;
+  }
+  if (path == "/ws") {
+    con->set_status(websocketpp::http::status_code::upgrade_required);
+    con->set_body("WebSocket endpoint\n");
+    return;
+  }
+  std::optional<std::string> file;
+  if (path == "/") {
+    file = http::resolve_static(opts.web_root, "/index.html");
+    if (!file) file = http::resolve_static(opts.web_root, "/demo/index.html");
+  } else {
+    file = http::resolve_static(opts.web_root, target);
+  }
+  std::ifstream in;
+  if (file) in.open(*file, std::ios::binary);
+  if (!file || !in) {
+    con->set_status(websocketpp::http::status_code::not_found);
+    con->append_header("Content-Type", "text/plain; charset=utf-8");
+    con->set_body("not found\n");
+    return;
+  }
+  std::ostringstream body;
+  body << in.rdbuf();
+  con->set_status(websocketpp::http::status_code::ok);
+  con->append_header("Content-Type", http::mime_type(*file));
+  con->append_header("Cache-Control", "no-cache");
+  con->append_header("X-Content-Type-Options", "nosniff");
+  con->set_body(body.str());
+}
+
+Server::Server(caf::actor_system& sys, std::shared_ptr<const NodeSettings> settings, ServerOptions options)
+    : impl_(std::make_shared<Impl>(sys, std::move(settings), std::move(options))) {}
+
+Server::~Server() { stop(); }
+
+void Server::start() {
+  Impl& i = *impl_;
+  i.ws.clear_access_channels(websocketpp::log::alevel::all);
+  i.ws.clear_error_channels(websocketpp::log::elevel::all);
+  i.ws.init_asio();
+  i.ws.set_reuse_addr(true);
+  i.ws.set_max_message_size(i.settings->limits.max_message_bytes);
+  i.ws.set_max_http_body_size(64 * 1024);
+  i.ws.set_tcp_post_init_handler([&i](connection_hdl h) {
+    asio::error_code ec;
+    i.ws.get_con_from_hdl(h)->get_raw_socket().set_option(asio::ip::tcp::no_delay(true), ec);
+  });
+  i.ws.set_validate_handler([&i](connection_hdl h) { return i.on_validate(h); });
+  i.ws.set_open_handler([&i](connection_hdl h) { i.on_open(h); });
+  i.ws.set_close_handler([&i](connection_hdl h) { i.on_close(h); });
+  i.ws.set_fail_handler([&i](connection_hdl h) { i.on_close(h); });
+  i.ws.set_message_handler([&i](connection_hdl h, WsServer::message_ptr m) { i.on_message(h, m); });
+  i.ws.set_http_handler([&i](connection_hdl h) { i.on_http(h); });
+  asio::error_code ec;
+  auto addr = asio::ip::make_address(i.opts.host, ec);
+  if (ec) throw std::runtime_error("bad listen address '" + i.opts.host + "': " + ec.message());
+  i.ws.listen(asio::ip::tcp::endpoint(addr, i.opts.port), ec);
+  if (ec) throw std::runtime_error("cannot listen on " + i.opts.host + ":" + std::to_string(i.opts.port) + ": " + ec.message());
+  i.ws.start_accept(ec);
+  if (ec) throw std::runtime_error("cannot accept: " + ec.message());
+  i.bound_port = i.ws.get_local_endpoint(ec).port();
+  i.running = true;
+  i.thread = std::thread([&i] {
+    try {
+      i.ws.run();
+    } catch (const std::exception& e) {
+      i.log(std::string("{\"network_thread_error\": \"") + e.what() + "\"}");
+    }
+  });
+}
+
+void Server::stop() {
+  Impl& i = *impl_;
+  if (!i.running) return;
+  i.running = false;
+  std::promise<void> done;
+  i.ws.get_io_service().post([&i, &done] {
+    websocketpp::lib::error_code ec;
+    i.ws.stop_listening(ec);
+    for (auto& [h, c] : i.conns) {
+      c.sink->open = false;
+      caf::anon_send_exit(c.session, caf::exit_reason::user_shutdown);
+      i.ws.close(h, websocketpp::close::status::going_away, "server stopping", ec);
+    }
+    for (auto& [t, v] : i.mjpeg)
+      for (auto& s : v) s->shutdown();
+    i.mjpeg.clear();
+    done.set_value();
+  });
+  done.get_future().wait_for(std::chrono::seconds(2));
+  // Give close handshakes a moment, then stop the loop whatever is left.
+  for (int k = 0; k < 100 && !i.ws.stopped(); ++k) {
+    if (i.count == 0) break;
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  i.ws.stop();
+  if (i.thread.joinable()) i.thread.join();
+  for (auto& [h, c] : i.conns) caf::anon_send_exit(c.session, caf::exit_reason::user_shutdown);
+  i.conns.clear();
+  i.count = 0;
+}
+
+uint16_t Server::port() const { return impl_->bound_port; }
+size_t Server::sessions() const { return impl_->count; }
+
+// --- Client -----------------------------------------------------------------------------
+
+struct WsClient::Impl {
+  WsClientEndpoint ep;
+  std::thread thread;
+  connection_hdl hdl;
+  std::mutex mu;
+  std::condition_variable cv;
+  std::deque<std::vector<uint8_t>> inbox;
+  bool opened = false, failed = false, is_closed = false;
+  std::string fail_reason;
+};
+
+WsClient::WsClient() : impl_(std::make_unique<Impl>()) {}
+
+WsClient::~WsClient() {
+  close();
+  impl_->ep.stop();
+  if (impl_->thread.joinable()) impl_->thread.join();
+}
+
+bool WsClient::connect(const std::string& host, uint16_t port, const std::string& resource, std::string* error,
+                       int timeout_ms) {
+  Impl& i = *impl_;
+  i.ep.clear_access_channels(websocketpp::log::alevel::all);
+  i.ep.clear_error_channels(websocketpp::log::elevel::all);
+  i.ep.init_asio();
+  i.ep.set_max_message_size(256u << 20);
+  i.ep.set_tcp_post_init_handler([&i](connection_hdl h) {
+    asio::error_code ec;
+    i.ep.get_con_from_hdl(h)->get_raw_socket().set_option(asio::ip::tcp::no_delay(true), ec);
+  });
+  i.ep.set_open_handler([&i](connection_hdl) {
+    std::lock_guard<std::mutex> l(i.mu);
+    i.opened = true;
+    i.cv.notify_all();
+  });
+  i.ep.set_fail_handler([&i](connection_hdl h) {
+    std::lock_guard<std::mutex> l(i.mu);
+    i.failed = true;
+    i.is_closed = true;
+    auto con = i.ep.get_con_from_hdl(h);
+    i.fail_reason = "HTTP " + std::to_string(int(con->get_response_code())) + " " + con->get_response_msg() + ": " +
+                    con->get_ec().message();
+    i.cv.notify_all();
+  });
+  i.ep.set_close_handler([&i](connection_hdl) {
+    std::lock_guard<std::mutex> l(i.mu);
+    i.is_closed = true;
+    i.cv.notify_all();
+  });
+  i.ep.set_message_handler([&i](connection_hdl, WsClientEndpoint::message_ptr m) {
+    const std::string& p = m->get_payload();
+    std::lock_guard<std::mutex> l(i.mu);
+    i.inbox.emplace_back(p.begin(), p.end());
+    i.cv.notify_all();
+  });
+  websocketpp::lib::error_code ec;
+  auto con = i.ep.get_connection("ws://" + host + ":" + std::to_string(port) + resource, ec);
+  if (ec) {
+    if (error) *error = ec.message();
+    return false;
+  }
+  i.hdl = con->get_handle();
+  i.ep.connect(con);
+  i.thread = std::thread([&i] {
+    try {
+      i.ep.run();
+    } catch (...) {
+    }
+  });
+  std::unique_lock<std::mutex> l(i.mu);
+  i.cv.wait_for(l, std::chrono::milliseconds(timeout_ms), [&] { return i.opened || i.failed; });
+  if (!i.opened) {
+    if (error) *error = i.failed ? i.fail_reason : "timeout";
+    return false;
+  }
+  return true;
+}
+
+bool WsClient::send(const std::vector<uint8_t>& message) {
+  websocketpp::lib::error_code ec;
+  impl_->ep.send(impl_->hdl, message.data(), message.size(), websocketpp::frame::opcode::binary, ec);
+  return !ec;
+}
+
+bool WsClient::send_text(const std::string& text) {
+  websocketpp::lib::error_code ec;
+  impl_->ep.send(impl_->hdl, text, websocketpp::frame::opcode::text, ec);
+  return !ec;
+}
+
+std::optional<std::vector<uint8_t>> WsClient::receive(int timeout_ms) {
+  Impl& i = *impl_;
+  std::unique_lock<std::mutex> l(i.mu);
+  i.cv.wait_for(l, std::chrono::milliseconds(timeout_ms), [&] { return !i.inbox.empty() || i.is_closed; });
+  if (i.inbox.empty()) return std::nullopt;
+  auto m = std::move(i.inbox.front());
+  i.inbox.pop_front();
+  return m;
+}
+
+bool WsClient::closed() const {
+  std::lock_guard<std::mutex> l(impl_->mu);
+  return impl_->is_closed;
+}
+
+void WsClient::close() {
+  Impl& i = *impl_;
+  {
+    std::lock_guard<std::mutex> l(i.mu);
+    if (!i.opened || i.is_closed) return;
+  }
+  websocketpp::lib::error_code ec;
+  i.ep.close(i.hdl, websocketpp::close::status::normal, "bye", ec);
+  std::unique_lock<std::mutex> l(i.mu);
+  i.cv.wait_for(l, std::chrono::seconds(2), [&] { return i.is_closed; });
+}
+
+void WsClient::abort() {
+  Impl& i = *impl_;
+  std::promise<void> done;
+  i.ep.get_io_service().post([&i, &done] {
+    websocketpp::lib::error_code ec;
+    auto con = i.ep.get_con_from_hdl(i.hdl, ec);
+    if (!ec) {
+      asio::error_code aec;
+      con->get_raw_socket().shutdown(asio::ip::tcp::socket::shutdown_both, aec);
+      con->get_raw_socket().close(aec);
+    }
+    done.set_value();
+  });
+  done.get_future().wait_for(std::chrono::seconds(2));
+  i.ep.stop();
+  if (i.thread.joinable()) i.thread.join();
+  std::lock_guard<std::mutex> l(i.mu);
+  i.is_closed = true;
+}
+
+}  // namespace tessera

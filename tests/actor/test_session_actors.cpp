@@ -1,0 +1,252 @@
+// Deterministic tests of the session pipeline (session -> tiler -> renderer -> display ->
+// encoder) with CAF's test coordinator: every message is delivered by the test, one at a
+// time, on one thread. The renderer and encoder are real (not detached) and render a tiny
+// scene, so the pixels, SATs and encodings are the production code's.
+#define CAF_SUITE session_actors
+#include <caf/test/dsl.hpp>
+#include <caf/test/unit_test_impl.hpp>
+
+#include <mutex>
+
+#include "actors/node.h"
+#include "net/protocol.h"
+
+using namespace tessera;
+using namespace tessera::protocol;
+
+namespace {
+
+struct TestConfig : caf::actor_system_config {
+  TestConfig() { register_message_types(*this); }
+};
+
+// Records what the session sends to its client.
+struct RecordingSink : ClientSink {
+  std::mutex mu;
+  std::vector<ServerRecord> records;
+  int closes = 0;
+  size_t mjpeg = 0;
+  void send(std::vector<uint8_t> message) override {
+    auto r = decode_server(message.data(), message.size(), Limits{});
+    CAF_REQUIRE(r.ok());
+    std::lock_guard<std::mutex> l(mu);
+    for (auto& x : r.value()) records.push_back(std::move(x));
+  }
+  void send_mjpeg(std::shared_ptr<const std::vector<uint8_t>>) override { ++mjpeg; }
+  void close(const std::string&) override { ++closes; }
+  std::string token() const override { return "testtoken"; }
+  template <class T>
+  std::vector<T> all() {
+    std::vector<T> out;
+    for (auto& r : records)
+      if (auto* t = std::get_if<T>(&r)) out.push_back(*t);
+    return out;
+  }
+};
+
+// A quad in front of the camera, one light: 16x16 pixels render in well under a millisecond.
+std::vector<ClientRecord> tiny_scene() {
+  SetBuffer pos;
+  pos.id = 1;
+  pos.buffer.type = Buffer::Type::f32;
+  pos.buffer.components = 3;
+  pos.buffer.f = {-1, -1, 0, 1, -1, 0, 1, 1, 0, -1, 1, 0};
+  SetBuffer idx;
+  idx.id = 2;
+  idx.buffer.type = Buffer::Type::u32;
+  idx.buffer.components = 1;
+  idx.buffer.u = {0, 1, 2, 0, 2, 3};
+  SetMesh mesh;
+  mesh.id = 3;
+  mesh.mesh.positions = 1;
+  mesh.mesh.indices = 2;
+  SetLight light;
+  light.id = 4;
+  light.light.type = Light::Type::directional;
+  light.light.direction = {0, 0, -1};
+  return {pos, idx, mesh, light};
+}
+
+Camera camera_at(float z) {
+  Camera c;
+  c.to_world = Mat4::look_at({0, 0, z}, {0, 0, 0}, {0, 1, 0});
+  return c;
+}
+
+struct fixture : test_coordinator_fixture<TestConfig> {
+  std::shared_ptr<RecordingSink> sink = std::make_shared<RecordingSink>();
+  std::shared_ptr<NodeSettings> settings = std::make_shared<NodeSettings>();
+  size_t baseline = 0;
+  session_actor session;
+  caf::actor renderer, tiler, encoder, display;
+
+  fixture() {
+    settings->detached = false;  // everything on the test coordinator
+    settings->packet_layout = {4, 4};
+    settings->log = [](const std::string&) {};
+    run();
+    baseline = sys.registry().running();
+    session = spawn_session(sys, sink, settings, 1);
+    run();
+    auto rh = self->request(session, caf::infinite, children_atom::value);
+    run();
+    rh.receive([&](std::vector<caf::actor>& c) { renderer = c[0], tiler = c[1], encoder = c[2], display = c[3]; },
+               [&](caf::error& e) { CAF_FAIL(sys.render(e)); });
+    Handshake hs;
+    hs.width = 16;
+    hs.height = 16;
+    client({hs});
+    client(tiny_scene());
+    run();
+  }
+  ~fixture() override {
+    self->send_exit(session, caf::exit_reason::user_shutdown);
+    run();
+  }
+  void client(const std::vector<ClientRecord>& recs) { self->send(session, client_atom::value, encode(recs)); }
+  // Delivers the next client message to the session (and nothing else).
+  void deliver_client() { expect((client_atom, std::vector<uint8_t>), from(self).to(session)); }
+  SessionStatus status() {
+    auto rh = self->request(session, caf::infinite, status_atom::value);
+    expect((status_atom), from(self).to(session));
+    SessionStatus s;
+    rh.receive([&](SessionStatus& x) { s = x; }, [&](caf::error& e) { CAF_FAIL(sys.render(e)); });
+    return s;
+  }
+  std::vector<uint32_t> frames_sent() {
+    std::vector<uint32_t> out;
+    for (auto& f : sink->all<Frame>()) out.push_back(f.frame);
+    return out;
+  }
+};
+
+}  // namespace
+
+CAF_TEST_FIXTURE_SCOPE(session_tests, fixture)
+
+CAF_TEST(scene updates are applied at once between frames and cached while a frame renders) {
+  CAF_CHECK_EQUAL(sink->all<HandshakeReply>().size(), 1u);
+  auto idle = status();
+  CAF_CHECK(idle.handshake_done);
+  CAF_CHECK(!idle.in_flight);
+  CAF_CHECK_EQUAL(idle.cached_updates, 0u);
+  CAF_CHECK_EQUAL(idle.triangles, 2u);  // applied at once: no frame in flight
+  client({SetCamera{camera_at(3)}, RenderRequest{1}});
+  deliver_client();
+  auto rendering = status();
+  CAF_CHECK(rendering.in_flight);
+  // While the frame renders, a camera move and a light change wait in the cache.
+  SetLight brighter;
+  brighter.id = 4;
+  brighter.light.intensity = 2;
+  client({SetCamera{camera_at(4)}, brighter});
+  deliver_client();
+  auto cached = status();
+  CAF_CHECK(cached.in_flight);
+  CAF_CHECK_EQUAL(cached.cached_updates, 2u);
+  CAF_CHECK_EQUAL(cached.scene_version, rendering.scene_version);  // the rendered scene is untouched
+  run();
+  auto after = status();
+  CAF_CHECK(!after.in_flight);
+  CAF_CHECK_EQUAL(after.cached_updates, 0u);
+  CAF_CHECK_GREATER(after.scene_version, rendering.scene_version);
+  CAF_CHECK_EQUAL(frames_sent(), std::vector<uint32_t>{1});
+  CAF_CHECK_EQUAL(sink->all<ErrorReply>().size(), 0u);
+}
+
+CAF_TEST(render requests during a frame are remembered once and never queued twice) {
+  client({SetCamera{camera_at(3)}, RenderRequest{1}});
+  deliver_client();
+  client({RenderRequest{2}});
+  deliver_client();
+  auto one = status();
+  CAF_CHECK(one.render_pending);
+  CAF_CHECK_EQUAL(one.pending_frame, 2u);
+  CAF_CHECK_EQUAL(one.dropped, 0u);
+  client({RenderRequest{3}});
+  deliver_client();
+  auto two = status();
+  CAF_CHECK(two.render_pending);
+  CAF_CHECK_EQUAL(two.pending_frame, 3u);  // the latest request wins
+  CAF_CHECK_EQUAL(two.dropped, 1u);        // request 2 merged into 3
+  run();
+  CAF_CHECK_EQUAL(frames_sent(), (std::vector<uint32_t>{1, 3}));
+  auto done = status();
+  CAF_CHECK_EQUAL(done.frames_started, 2u);
+  CAF_CHECK(!done.render_pending);
+  // Idle again: the next request starts a frame at once.
+  client({RenderRequest{4}});
+  run();
+  CAF_CHECK_EQUAL(frames_sent(), (std::vector<uint32_t>{1, 3, 4}));
+}
+
+CAF_TEST(the encoder encodes frame f while the renderer renders frame f plus 1) {
+  client({SetCamera{camera_at(3)}, RenderRequest{1}, RenderRequest{2}});
+  deliver_client();
+  expect((tasks_atom, TaskRequest), from(session).to(tiler));
+  expect((TaskList), from(tiler).to(session));
+  expect((render_atom, SceneSnapshot, RenderTask), from(session).to(renderer));
+  expect((TileResult), from(renderer).to(session));
+  // Frame 1 is rendered: its SATs go to the tiler, its pixels to the display channel, and
+  // frame 2 starts at once.
+  expect((sats_atom, SatReport), from(session).to(tiler));
+  expect((tasks_atom, TaskRequest), from(session).to(tiler));
+  expect((TaskList), from(tiler).to(session));
+  expect((display_atom, FrameTiles), from(session).to(display));
+  // Now the encoder holds frame 1 and the renderer frame 2, at the same time: with detached
+  // actors these run in parallel.
+  expect((encode_atom, EncodeJob), from(display).to(encoder));
+  expect((render_atom, SceneSnapshot, RenderTask), from(session).to(renderer));
+  expect((EncodedFrame), from(encoder).to(display));
+  CAF_CHECK_EQUAL(frames_sent(), std::vector<uint32_t>{1});
+  run();
+  CAF_CHECK_EQUAL(frames_sent(), (std::vector<uint32_t>{1, 2}));
+  // Frame 2 was tiled from frame 1's SATs and carries every measurement.
+  auto frames = sink->all<Frame>();
+  CAF_CHECK_GREATER(frames[1].timings.rendering_ms, 0.f);
+  CAF_CHECK_GREATER(frames[1].timings.encode_ms, 0.f);
+  CAF_CHECK_GREATER_OR_EQUAL(frames[1].timings.pipeline_ms, frames[1].timings.encode_ms);
+  CAF_CHECK_EQUAL(frames[1].width, 16);
+  CAF_CHECK(!frames[1].payload.empty());
+}
+
+CAF_TEST(a session that ends mid frame takes all its actors with it) {
+  client({SetCamera{camera_at(3)}, RenderRequest{1}});
+  deliver_client();
+  expect((tasks_atom, TaskRequest), from(session).to(tiler));
+  expect((TaskList), from(tiler).to(session));
+  // The render task is in the renderer's mailbox when the client goes away.
+  self->send_exit(session, caf::exit_reason::user_shutdown);
+  run();
+  CAF_CHECK_EQUAL(sys.registry().running(), baseline);
+  CAF_CHECK(frames_sent().empty());
+}
+
+CAF_TEST(a fatal protocol error closes only this session and ends its actors) {
+  client({Handshake{}});  // a second handshake
+  run();
+  auto errors = sink->all<ErrorReply>();
+  CAF_REQUIRE_EQUAL(errors.size(), 1u);
+  CAF_CHECK(errors[0].fatal);
+  CAF_CHECK_EQUAL(errors[0].code, ErrorCode::bad_handshake);
+  CAF_CHECK_EQUAL(sink->closes, 1);
+  CAF_CHECK_EQUAL(sys.registry().running(), baseline);
+}
+
+CAF_TEST(malformed and inconsistent messages get errors and the session keeps rendering) {
+  self->send(session, client_atom::value, std::vector<uint8_t>{'T', 'S', 1, 0, 1, 0, 0, 0, 0x10});
+  SetMesh bad;
+  bad.id = 9;
+  bad.mesh.positions = 2;  // the u32 index buffer as positions
+  client({bad});
+  client({SetCamera{camera_at(3)}, RenderRequest{5}});
+  run();
+  auto errors = sink->all<ErrorReply>();
+  CAF_REQUIRE_EQUAL(errors.size(), 2u);
+  CAF_CHECK(!errors[0].fatal);
+  CAF_CHECK_EQUAL(errors[1].code, ErrorCode::bad_mesh);
+  CAF_CHECK_EQUAL(errors[1].record, 0u);
+  CAF_CHECK_EQUAL(frames_sent(), std::vector<uint32_t>{5});
+}
+
+CAF_TEST_FIXTURE_SCOPE_END()

@@ -1,0 +1,120 @@
+#pragma once
+// An in-process node on a free localhost port, and a protocol client for the e2e tests.
+#include <chrono>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <caf/all.hpp>
+
+#include "actors/node.h"
+#include "net/protocol.h"
+#include "net/scene_records.h"
+#include "net/server.h"
+#include "renderer/gltf_loader.h"
+
+namespace tessera::test {
+
+struct TestConfig : caf::actor_system_config {
+  TestConfig() {
+    register_message_types(*this);
+    set("scheduler.max-threads", size_t{2});
+    set("logger.verbosity", caf::atom("quiet"));
+  }
+};
+
+struct TestNode {
+  TestConfig cfg;
+  caf::actor_system sys{cfg};
+  std::shared_ptr<NodeSettings> settings = std::make_shared<NodeSettings>();
+  std::unique_ptr<Server> server;
+  std::mutex mu;
+  std::vector<std::string> log;
+
+  explicit TestNode(size_t max_clients = 8) {
+    settings->log = [this](const std::string& line) {
+      std::lock_guard<std::mutex> l(mu);
+      log.push_back(line);
+    };
+    ServerOptions o;
+    o.host = "127.0.0.1";
+    o.port = 0;
+    o.web_root = "web";
+    o.max_clients = max_clients;
+    server = std::make_unique<Server>(sys, settings, o);
+    server->start();
+  }
+  ~TestNode() { server->stop(); }
+  uint16_t port() const { return server->port(); }
+  size_t log_count(const std::string& needle) {
+    std::lock_guard<std::mutex> l(mu);
+    size_t n = 0;
+    for (auto& s : log) n += s.find(needle) != std::string::npos;
+    return n;
+  }
+};
+
+// A protocol client over WsClient.
+struct ProtoClient {
+  WsClient ws;
+  protocol::Limits limits;
+
+  bool connect(uint16_t port, const std::string& resource = "/ws", std::string* error = nullptr) {
+    return ws.connect("127.0.0.1", port, resource, error);
+  }
+  bool send(const std::vector<protocol::ClientRecord>& recs) { return ws.send(protocol::encode(recs)); }
+  // Next server record of type T, skipping others (Stats); nullopt on timeout or close.
+  template <class T>
+  std::optional<T> next(int timeout_ms = 20000, std::vector<protocol::ErrorReply>* errors = nullptr) {
+    auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
+    while (true) {
+      auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+      if (left.count() <= 0) return std::nullopt;
+      auto msg = ws.receive(int(left.count()));
+      if (!msg) return std::nullopt;
+      auto recs = protocol::decode_server(msg->data(), msg->size(), limits);
+      if (!recs) return std::nullopt;
+      for (auto& r : recs.value()) {
+        if (auto* t = std::get_if<T>(&r)) return std::move(*t);
+        if (errors)
+          if (auto* e = std::get_if<protocol::ErrorReply>(&r)) errors->push_back(*e);
+      }
+    }
+  }
+  std::optional<protocol::HandshakeReply> handshake(protocol::DisplayKind display, int w, int h, uint8_t quality = 90,
+                                                     protocol::RendererKind renderer = protocol::RendererKind::raytracer) {
+    protocol::Handshake hs;
+    hs.renderer = renderer;
+    hs.display = display;
+    hs.jpeg_quality = quality;
+    hs.width = w;
+    hs.height = h;
+    if (!send({hs})) return std::nullopt;
+    return next<protocol::HandshakeReply>();
+  }
+  bool upload(const Scene& scene) {
+    protocol::SceneRecordOptions o;
+    o.resolution = false;  // the handshake chose it
+    for (auto& m : protocol::pack_messages(protocol::scene_to_records(scene, o), 8u << 20))
+      if (!ws.send(m)) return false;
+    return true;
+  }
+  std::optional<protocol::Frame> render(const Camera& cam, uint32_t frame) {
+    if (!send({protocol::SetCamera{cam}, protocol::RenderRequest{frame}})) return std::nullopt;
+    return next<protocol::Frame>();
+  }
+};
+
+inline const LoadedScene& pavilion() {
+  static LoadedScene s = load_gltf("../shared/scenes/pavilion/scene.gltf");
+  return s;
+}
+inline const CameraLoop& pavilion_loop() {
+  static CameraLoop l = load_camera_loop("../shared/scenes/pavilion/camera-loop.json");
+  return l;
+}
+
+}  // namespace tessera::test

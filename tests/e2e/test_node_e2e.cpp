@@ -1,0 +1,252 @@
+// End to end: a real node (in-process, free localhost port) and real WebSocket/HTTP
+// clients. The pavilion scene is uploaded through the client protocol, frames requested
+// along its camera loop at 320x180 are decoded and compared with the ray tracer's direct
+// render of the same camera (JPEG q90 >= 30 dB, DXT1 >= 28 dB, MJPEG >= 30 dB).
+#include <catch2/catch.hpp>
+
+#include <atomic>
+#include <future>
+
+#include "codecs/dxt1.h"
+#include "codecs/jpeg.h"
+#include "net/http.h"
+#include "renderer/raytracer.h"
+#include "tests/e2e/node_fixture.h"
+
+using namespace tessera;
+using namespace tessera::test;
+using protocol::DisplayKind;
+
+namespace {
+
+constexpr int W = 320, H = 180;
+
+// The ray tracer's direct render of loop frame k (AO seeded as the session seeds frame `seq`).
+Image direct_render(size_t k, int ao, uint32_t seq) {
+  Scene scene = pavilion().scene;
+  scene.set_resolution(W, H);
+  scene.set_camera(pavilion_loop().camera(k));
+  RayTracer rt;
+  std::vector<std::string> warnings;
+  rt.sync(scene, warnings);
+  RenderSettings s;
+  s.ao_samples = ao;
+  s.frame = seq;
+  TaskResult r;
+  rt.render({0, 0, W, H}, s, r);
+  return std::move(r.image);
+}
+
+Image decode_jpeg(const std::vector<uint8_t>& bytes) {
+  Image img;
+  std::string err;
+  REQUIRE(jpeg_decode(bytes.data(), bytes.size(), img, err));
+  return img;
+}
+
+bool wait_for(const std::function<bool()>& pred, int timeout_ms = 5000) {
+  auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
+  while (std::chrono::steady_clock::now() < deadline) {
+    if (pred()) return true;
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  return pred();
+}
+
+}  // namespace
+
+TEST_CASE("A client uploads the pavilion and receives JPEG and S3TC frames that match the ray tracer", "[e2e]") {
+  TestNode node;
+  const size_t baseline = node.sys.registry().running();
+  for (DisplayKind display : {DisplayKind::jpeg, DisplayKind::s3tc}) {
+    ProtoClient c;
+    REQUIRE(c.connect(node.port()));
+    auto hs = c.handshake(display, W, H, 90);
+    REQUIRE(hs);
+    CHECK(hs->display == display);
+    CHECK(hs->width == W);
+    CHECK(hs->nodes == 1);
+    REQUIRE(c.upload(pavilion().scene));
+    const int ao = display == DisplayKind::jpeg ? 2 : 0;
+    REQUIRE(c.send({protocol::Settings{uint32_t(ao), 4}}));
+    for (uint32_t i = 0; i < 3; ++i) {
+      const size_t k = i * 40;  // along the camera loop
+      auto f = c.render(pavilion_loop().camera(k), 100 + i);
+      REQUIRE(f);
+      CHECK(f->frame == 100 + i);
+      CHECK(f->width == W);
+      CHECK(f->height == H);
+      CHECK(f->timings.rendering_ms > 0);
+      CHECK(f->timings.kernel_ms > 0);
+      CHECK(f->timings.encode_ms > 0);
+      CHECK(f->timings.pipeline_ms >= f->timings.encode_ms);
+      Image got;
+      if (display == DisplayKind::jpeg) {
+        CHECK(f->encoding == protocol::FrameEncoding::jpeg);
+        got = decode_jpeg(f->payload);
+      } else {
+        CHECK(f->encoding == protocol::FrameEncoding::dxt1);
+        REQUIRE(f->payload.size() == dxt1_size(W, H));
+        got = dxt1_decode(f->payload.data(), W, H);
+      }
+      Image want = direct_render(k, ao, i + 1);  // the session's frame sequence starts at 1
+      double psnr = compare(got, want).psnr;
+      INFO("display " << int(display) << " frame " << k << " PSNR " << psnr);
+      CHECK(psnr >= (display == DisplayKind::jpeg ? 30.0 : 28.0));
+    }
+    c.ws.close();
+  }
+  // Every session's actors are gone once its client has left.
+  CHECK(wait_for([&] { return node.sys.registry().running() == baseline && node.server->sessions() == 0; }));
+  CHECK(node.log_count("\"kernel_ms\"") >= 6);
+}
+
+TEST_CASE("MJPEG frames stream over HTTP and match the ray tracer", "[e2e]") {
+  TestNode node;
+  ProtoClient c;
+  const std::string token = "mjpegtest01";
+  REQUIRE(c.connect(node.port(), "/ws?session=" + token));
+  REQUIRE(c.handshake(DisplayKind::mjpeg, W, H, 90));
+  REQUIRE(c.upload(pavilion().scene));
+  std::vector<std::vector<uint8_t>> parts;
+  std::string err;
+  auto reader = std::async(std::launch::async, [&] {
+    return http::read_mjpeg("127.0.0.1", node.port(), "/mjpeg/" + token, 2, parts, &err, 30000);
+  });
+  // Request frames until the stream has two parts (it may open after the first frames).
+  uint32_t n = 0;
+  while (reader.wait_for(std::chrono::milliseconds(0)) != std::future_status::ready && n < 40) {
+    auto f = c.render(pavilion_loop().camera(0), n++);
+    REQUIRE(f);
+    CHECK(f->payload.empty());  // the image went to the MJPEG stream
+    CHECK(f->timings.encode_ms > 0);
+  }
+  REQUIRE(reader.get());
+  REQUIRE(parts.size() == 2);
+  Image want = direct_render(0, 0, 1);
+  for (auto& p : parts) CHECK(compare(decode_jpeg(p), want).psnr >= 30.0);
+  auto missing = http::get("127.0.0.1", node.port(), "/mjpeg/nosuchsession");
+  REQUIRE(missing);
+  CHECK(missing->status == 404);
+}
+
+TEST_CASE("Malformed messages get errors and neither that session nor another one breaks", "[e2e][fault]") {
+  TestNode node;
+  ProtoClient a, b;
+  REQUIRE(a.connect(node.port()));
+  REQUIRE(b.connect(node.port()));
+  REQUIRE(a.handshake(DisplayKind::jpeg, W, H));
+  REQUIRE(b.handshake(DisplayKind::jpeg, W, H));
+  REQUIRE(a.upload(pavilion().scene));
+  REQUIRE(b.upload(pavilion().scene));
+  // Garbage, a text message, a truncated record and a mesh naming buffers of the wrong type.
+  std::vector<protocol::ErrorReply> errors;
+  REQUIRE(a.ws.send({1, 2, 3, 4, 5, 6, 7, 8, 9}));
+  REQUIRE(a.ws.send_text("hello, is this the tessera node?"));
+  auto good = protocol::encode(protocol::ClientRecord{protocol::RenderRequest{1}});
+  good.resize(good.size() - 2);
+  REQUIRE(a.ws.send(good));
+  protocol::SetMesh bad_mesh;
+  bad_mesh.id = 999999;
+  bad_mesh.mesh.positions = pavilion().scene.meshes().begin()->second.value.indices;  // u32 buffer as positions
+  REQUIRE(a.send({bad_mesh}));
+  for (int i = 0; i < 4; ++i) {
+    auto e = a.next<protocol::ErrorReply>();
+    REQUIRE(e);
+    CHECK_FALSE(e->fatal);
+    CHECK_FALSE(e->message.empty());
+    errors.push_back(*e);
+  }
+  CHECK(errors[0].code == protocol::ErrorCode::bad_magic);
+  CHECK(errors[1].code == protocol::ErrorCode::bad_magic);
+  CHECK(errors[2].code == protocol::ErrorCode::truncated);
+  CHECK(errors[3].code == protocol::ErrorCode::bad_mesh);
+  // Both sessions still render.
+  auto fa = a.render(pavilion_loop().camera(5), 7);
+  auto fb = b.render(pavilion_loop().camera(5), 8);
+  REQUIRE(fa);
+  REQUIRE(fb);
+  CHECK(compare(decode_jpeg(fa->payload), decode_jpeg(fb->payload)).psnr > 40);
+  // A second handshake is fatal: that client is disconnected, the other keeps working.
+  REQUIRE(a.send({protocol::Handshake{}}));
+  auto fatal = a.next<protocol::ErrorReply>();
+  REQUIRE(fatal);
+  CHECK(fatal->fatal);
+  CHECK(fatal->code == protocol::ErrorCode::bad_handshake);
+  CHECK(wait_for([&] { return a.ws.closed(); }));
+  CHECK(b.render(pavilion_loop().camera(6), 9));
+  CHECK(node.log_count("\"error\"") >= 5);
+}
+
+TEST_CASE("The rasterizer is refused with a clear fatal error", "[e2e]") {
+  TestNode node;
+  ProtoClient c;
+  REQUIRE(c.connect(node.port()));
+  protocol::Handshake hs;
+  hs.renderer = protocol::RendererKind::rasterizer;
+  REQUIRE(c.send({hs}));
+  auto e = c.next<protocol::ErrorReply>();
+  REQUIRE(e);
+  CHECK(e->fatal);
+  CHECK(e->code == protocol::ErrorCode::bad_handshake);
+  CHECK(e->message.find("rasterizer") != std::string::npos);
+  CHECK(wait_for([&] { return c.ws.closed(); }));
+}
+
+TEST_CASE("Clients that vanish mid-upload or mid-frame leave no session behind", "[e2e][fault]") {
+  TestNode node(3);
+  const size_t baseline = node.sys.registry().running();
+  ProtoClient keeper;
+  REQUIRE(keeper.connect(node.port()));
+  REQUIRE(keeper.handshake(DisplayKind::jpeg, W, H));
+  REQUIRE(keeper.upload(pavilion().scene));
+  REQUIRE(keeper.render(pavilion_loop().camera(0), 1));
+  const size_t with_keeper = node.sys.registry().running();
+  {
+    // Mid-upload: half of the scene's messages, then the TCP connection drops.
+    ProtoClient c;
+    REQUIRE(c.connect(node.port()));
+    REQUIRE(c.handshake(DisplayKind::s3tc, W, H));
+    auto msgs = protocol::pack_messages(protocol::scene_to_records(pavilion().scene), 1u << 20);
+    for (size_t i = 0; i < msgs.size() / 2; ++i) REQUIRE(c.ws.send(msgs[i]));
+    c.ws.abort();
+  }
+  {
+    // Mid-frame: a render request, then gone.
+    ProtoClient c;
+    REQUIRE(c.connect(node.port()));
+    REQUIRE(c.handshake(DisplayKind::jpeg, W, H));
+    REQUIRE(c.upload(pavilion().scene));
+    REQUIRE(c.send({protocol::SetCamera{pavilion_loop().camera(3)}, protocol::RenderRequest{1},
+                    protocol::RenderRequest{2}}));
+    c.ws.abort();
+  }
+  CHECK(wait_for([&] { return node.server->sessions() == 1 && node.sys.registry().running() == with_keeper; }, 10000));
+  // The node still serves the remaining client and accepts new ones up to its limit.
+  CHECK(keeper.render(pavilion_loop().camera(10), 2));
+  ProtoClient x, y, z;
+  REQUIRE(x.connect(node.port()));
+  REQUIRE(y.connect(node.port()));
+  std::string err;
+  CHECK_FALSE(z.connect(node.port(), "/ws", &err));
+  CHECK(err.find("503") != std::string::npos);
+  keeper.ws.close();
+  x.ws.close();
+  y.ws.close();
+  CHECK(wait_for([&] { return node.sys.registry().running() == baseline; }, 10000));
+}
+
+TEST_CASE("The node serves the web folder with MIME types and without path traversal", "[e2e]") {
+  TestNode node;
+  auto root = http::get("127.0.0.1", node.port(), "/");
+  REQUIRE(root);
+  CHECK(root->status == 200);
+  CHECK(root->content_type.find("text/html") == 0);
+  for (const char* bad : {"/../CMakeLists.txt", "/%2e%2e/CMakeLists.txt", "/demo/../../CMakeLists.txt",
+                          "/%2E%2E%2FCMakeLists.txt", "/.git/config", "/demo/index.html%00.png"}) {
+    auto r = http::get("127.0.0.1", node.port(), bad);
+    REQUIRE(r);
+    INFO(bad);
+    CHECK(r->status == 404);
+  }
+}
