@@ -14,7 +14,8 @@ namespace tessera::app {
 namespace {
 
 const char* kHelp =
-    "tessera serve [--config FILE.ini] [--host H] [--port P] [--web-root DIR] [--scene S.gltf] [--threads T]\n"
+    "tessera serve [--config FILE.ini] [--host H] [--port P] [--web-root DIR] [--scenes-root DIR]\n"
+    "              [--scene S.gltf] [--threads T]   (DIR of --scenes-root is served at /scenes/)\n"
     "              [--tessera.NAME=VALUE ...] [--scheduler.max-threads=N]\n"
     "Runs one node: the web client and demo pages over HTTP at http://H:P/, the client protocol on the\n"
     "WebSocket ws://H:P/ws, MJPEG streams at /mjpeg/<session token>. Defaults: 127.0.0.1:8080, web/.\n"
@@ -28,6 +29,7 @@ int run(const std::vector<std::string>& argv) {
   if (args.flag("--help")) { std::fputs(kHelp, stdout); return 0; }
   std::string config = args.str("--config");
   std::string host = args.str("--host"), web_root = args.str("--web-root"), scene = args.str("--scene");
+  std::string scenes_root = args.str("--scenes-root");
   long port = args.integer("--port", -1);
   long threads = args.integer("--threads", 0);
   // Everything else of the form --group.name=value goes to CAF's parser.
@@ -64,6 +66,7 @@ int run(const std::vector<std::string>& argv) {
     limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, size_t(cfg.render_threads));
   auto settings = cfg.node_settings();
   ServerOptions opts = cfg.server_options();
+  if (!scenes_root.empty()) opts.scenes_root = scenes_root;
   caf::actor_system sys{cfg};
   Server server(sys, settings, opts);
   server.start();

@@ -256,6 +256,8 @@ void Server::Impl::on_http(connection_hdl h) {
   if (path == "/") {
     file = http::resolve_static(opts.web_root, "/index.html");
     if (!file) file = http::resolve_static(opts.web_root, "/demo/index.html");
+  } else if (target.rfind("/scenes/", 0) == 0) {
+    file = http::resolve_static(opts.scenes_root, target.substr(7));
   } else {
     file = http::resolve_static(opts.web_root, target);
   }

@@ -1,14 +1,14 @@
 #!/usr/bin/env bash
-# Command one: installs what is missing, builds in Release and runs Tessera on a real scene.
-# For now it renders the pavilion's camera loop (frame times as JSON lines) and writes one
-# frame to out/pavilion.png.
+# Command one: installs what is missing, builds in Release and starts a Tessera node that serves
+# the demo pages and ray-traces the pavilion for every browser that connects.
+#   open http://127.0.0.1:${PORT:-8080}/demo/pavilion.html?server=127.0.0.1:${PORT:-8080}
+# (without ?server= the same page renders locally with WebGL; the page has a switch).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-scripts/install-deps.sh
+scripts/install-deps.sh --web
 scripts/build.sh
-S=../shared/scenes/pavilion
-mkdir -p out
+PORT=${PORT:-8080}
 T=${TESSERA_BUILD_DIR:-build}/app/tessera
-"$T" bench --scene $S/scene.gltf --camera-loop $S/camera-loop.json --size 1280 720 --ao 4 --frames ${FRAMES:-24} --step 10
-"$T" render --scene $S/scene.gltf --camera-loop $S/camera-loop.json --frame 0 --size 1280 720 --ao 8 --out out/pavilion.png
-echo "wrote out/pavilion.png"
+echo "Tessera node: open http://127.0.0.1:$PORT/demo/pavilion.html?server=127.0.0.1:$PORT"
+echo "(living room and kitchen: /demo/living-room.html, /demo/kitchen.html; Ctrl-C stops the node)"
+exec "$T" serve --port "$PORT" --scene ../shared/scenes/pavilion/scene.gltf

@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
 # Installs what Tessera needs on a Debian 12 machine, and nothing that is already there.
-# Usage: scripts/install-deps.sh [--browser]   (--browser adds chromium + npm packages)
+# Usage: scripts/install-deps.sh [--web|--browser]
+#   --web      adds Node.js/npm and the web client's npm packages (three.js), for serving demo pages
+#   --browser  --web plus Debian's chromium, for the browser tests
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -8,7 +10,9 @@ pkgs=(build-essential cmake ninja-build pkg-config
       libcaf-dev libembree-dev libtbb-dev libturbojpeg0-dev libjpeg62-turbo-dev
       libsquish-dev libwebsocketpp-dev libasio-dev zlib1g-dev catch2
       libtinygltf-dev nlohmann-json3-dev libstb-dev clang libclang-rt-14-dev)
-if [[ "${1:-}" == "--browser" ]]; then pkgs+=(chromium nodejs npm); fi
+mode=${1:-}
+if [[ "$mode" == "--browser" ]]; then pkgs+=(chromium nodejs npm); fi
+if [[ "$mode" == "--web" ]]; then pkgs+=(nodejs npm); fi
 
 missing=()
 for p in "${pkgs[@]}"; do
@@ -26,6 +30,6 @@ if (( ${#missing[@]} )); then
   DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${missing[@]}"
 fi
 
-if [[ "${1:-}" == "--browser" && -f web/package.json ]]; then
+if [[ ( "$mode" == "--browser" || "$mode" == "--web" ) && -f web/package.json ]]; then
   (cd web && { [[ -d node_modules ]] || npm ci --no-audit --no-fund || npm install --no-audit --no-fund; })
 fi
