@@ -29,18 +29,6 @@ const char* kHelp =
     "so costs share one unit and SATs get performance coefficient 1; --coefficients (renderer\n"
     "coefficients, e.g. 1,1,0.5) set each node's share as a slower or faster node would.\n";
 
-std::vector<double> parse_numbers(const std::string& s) {
-  std::vector<double> v;
-  size_t p = 0;
-  while (p < s.size()) {
-    size_t q = s.find(',', p);
-    if (q == std::string::npos) q = s.size();
-    v.push_back(std::stod(s.substr(p, q - p)));
-    p = q + 1;
-  }
-  return v;
-}
-
 double ms_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
 }
@@ -62,7 +50,7 @@ int run(const std::vector<std::string>& argv) {
   args.finish();
   if (nodes < 1 || nodes > 4096) throw std::invalid_argument("--nodes must be in 1..4096");
   if (step < 1 || frames < 2) throw std::invalid_argument("--step >= 1 and --frames >= 2 are needed");
-  std::vector<double> coeff = coeff_arg.empty() ? std::vector<double>(size_t(nodes), 1.0) : parse_numbers(coeff_arg);
+  std::vector<double> coeff = coeff_arg.empty() ? std::vector<double>(size_t(nodes), 1.0) : parse_number_list("--coefficients", coeff_arg);
   if (coeff.size() != size_t(nodes)) throw std::invalid_argument("--coefficients needs one value per node");
   for (double c : coeff)
     if (!(c > 0) || !std::isfinite(c)) throw std::invalid_argument("coefficients must be finite and > 0");

@@ -17,18 +17,6 @@ const char* kHelp =
     "AO series: depth --ao-depth, reference --ao-ref rays per hit. Depth series: AO off, reference\n"
     "depth --depth-ref.\n";
 
-std::vector<int> parse_list(const std::string& s) {
-  std::vector<int> v;
-  size_t p = 0;
-  while (p < s.size()) {
-    size_t q = s.find(',', p);
-    if (q == std::string::npos) q = s.size();
-    v.push_back(std::stoi(s.substr(p, q - p)));
-    p = q + 1;
-  }
-  return v;
-}
-
 int run(const std::vector<std::string>& argv) {
   Args args(argv);
   if (args.flag("--help")) { std::fputs(kHelp, stdout); return 0; }
@@ -37,7 +25,8 @@ int run(const std::vector<std::string>& argv) {
   SceneSetup setup = load_scene(args, 640, 360);
   long frame = args.integer("--frame", 0);
   long reps = args.integer("--reps", 3);
-  std::vector<int> ao_list = parse_list(args.str("--ao-list", "1,2,4,8,16,32"));
+  std::vector<int> ao_list;
+  for (double v : parse_number_list("--ao-list", args.str("--ao-list", "1,2,4,8,16,32"))) ao_list.push_back(int(v));
   int ao_ref = int(args.integer("--ao-ref", 256));
   int depth_max = int(args.integer("--depth-max", 6));
   int depth_ref = int(args.integer("--depth-ref", 12));

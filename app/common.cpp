@@ -1,6 +1,7 @@
 #include "app/common.h"
 
 #include <algorithm>
+#include <cstdlib>
 #include <fstream>
 #include <thread>
 
@@ -64,6 +65,22 @@ SceneSetup load_scene(Args& args, int default_w, int default_h) {
   s.loaded.scene.set_resolution(int32_t(w), int32_t(h));
   if (!loop.empty()) s.loop = load_camera_loop(loop);
   return s;
+}
+
+std::vector<double> parse_number_list(const std::string& option, const std::string& text) {
+  std::vector<double> v;
+  size_t p = 0;
+  while (p < text.size()) {
+    size_t q = text.find(',', p);
+    if (q == std::string::npos) q = text.size();
+    std::string item = text.substr(p, q - p);
+    char* end = nullptr;
+    double x = std::strtod(item.c_str(), &end);
+    if (item.empty() || !end || *end) throw std::invalid_argument(option + ": '" + item + "' is not a number");
+    v.push_back(x);
+    p = q + 1;
+  }
+  return v;
 }
 
 std::string json_str(const std::string& s) {

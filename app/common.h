@@ -2,6 +2,7 @@
 // Helpers shared by the render, bench and balance subcommands.
 #include <memory>
 #include <string>
+#include <vector>
 
 #include <tbb/global_control.h>
 
@@ -28,6 +29,9 @@ struct SceneSetup {
   void set_frame(size_t k);  // camera of loop frame k (no-op without a loop)
 };
 SceneSetup load_scene(Args& args, int default_w = 1280, int default_h = 720);
+
+// "1,2,4" -> {1, 2, 4}; throws std::invalid_argument naming the option on a bad number.
+std::vector<double> parse_number_list(const std::string& option, const std::string& text);
 
 // JSON string escaping for the figures we print.
 std::string json_str(const std::string& s);
