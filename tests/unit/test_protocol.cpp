@@ -823,6 +823,12 @@ TEST_CASE("Meshes whose buffers are missing are accepted; inconsistent ones are 
   CHECK(st.code() == ErrorCode::bad_mesh);
   CHECK(mentions(st.error().message, "index 3 out of range"));
   CHECK(scene.meshes().count(2) == 0);
+  // Buffers are never rejected for consistency: a buffer that makes a complete mesh invalid
+  // is stored, and the mesh fails validate_mesh until the client fixes it.
+  CHECK(apply(scene, index_buffer(11, {0, 1, 5}), lim).ok());
+  CHECK_FALSE(scene.validate_mesh(scene.meshes().at(1).value).empty());
+  CHECK(apply(scene, index_buffer(11, {2, 1, 0}), lim).ok());
+  CHECK(scene.validate_mesh(scene.meshes().at(1).value).empty());
   // Wrong component count of the position buffer.
   SetBuffer b2 = positions_buffer(13, 1);
   b2.buffer.components = 1;
