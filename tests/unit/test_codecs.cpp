@@ -64,22 +64,22 @@ double dxt1_psnr(const Image& img, Dxt1Fit fit) {
 
 }  // namespace
 
-TEST_CASE("JPEG round trip of a smooth 1280x720 image keeps PSNR above 38 dB at q85", "[codecs][jpeg]") {
+TEST_CASE("JPEG round trip of a smooth 1280x720 image keeps PSNR above 45 dB at q85", "[codecs][jpeg]") {
   Image img = smooth_image(1280, 720);
   size_t bytes = 0;
-  CHECK(jpeg_psnr(img, 85, &bytes) > 38.0);
+  CHECK(jpeg_psnr(img, 85, &bytes) > 45.0);  // measured 49.3
   CHECK(bytes < 200000);
   CHECK(jpeg_psnr(img, 95) > jpeg_psnr(img, 50));
 }
 
 TEST_CASE("JPEG round trip of a noisy image keeps PSNR above 20 dB at q85", "[codecs][jpeg]") {
-  CHECK(jpeg_psnr(noisy_image(640, 360), 85) > 20.0);
+  CHECK(jpeg_psnr(noisy_image(640, 360), 85) > 20.0);  // measured 22.5
 }
 
 TEST_CASE("JPEG encodes odd sizes 1x1, 5x3 and 1281x721", "[codecs][jpeg]") {
   CHECK(jpeg_psnr(smooth_image(1, 1), 90) > 30.0);
   CHECK(jpeg_psnr(smooth_image(5, 3), 90) > 25.0);
-  CHECK(jpeg_psnr(smooth_image(1281, 721), 85) > 38.0);
+  CHECK(jpeg_psnr(smooth_image(1281, 721), 85) > 45.0);
   CHECK(jpeg_psnr(noisy_image(5, 3), 90) > 20.0);
 }
 
@@ -123,25 +123,25 @@ TEST_CASE("DXT1 sizes are ceil(w/4)*ceil(h/4)*8", "[codecs][dxt1]") {
   CHECK(dxt1_size(0, 5) == 0);
 }
 
-TEST_CASE("DXT1 round trip keeps PSNR above 30 dB (range) and 32 dB (cluster) on a smooth image",
+TEST_CASE("DXT1 round trip keeps PSNR above 40 dB (range) and 42 dB (cluster) on a smooth image",
           "[codecs][dxt1]") {
   Image img = smooth_image(1280, 720);
   double range = dxt1_psnr(img, Dxt1Fit::range), cluster = dxt1_psnr(img, Dxt1Fit::cluster);
-  CHECK(range > 30.0);
-  CHECK(cluster > 32.0);
+  CHECK(range > 40.0);  // measured 43.8
+  CHECK(cluster > 42.0);  // measured 45.2
   CHECK(cluster >= range - 0.1);
 }
 
 TEST_CASE("DXT1 round trip of a noisy image keeps PSNR above 22 dB", "[codecs][dxt1]") {
   Image img = noisy_image(320, 180);
-  CHECK(dxt1_psnr(img, Dxt1Fit::range) > 22.0);
+  CHECK(dxt1_psnr(img, Dxt1Fit::range) > 22.0);  // measured 23.8
   CHECK(dxt1_psnr(img, Dxt1Fit::cluster) > 22.0);
 }
 
 TEST_CASE("DXT1 encodes odd sizes 1x1, 5x3 and 1281x721", "[codecs][dxt1]") {
   CHECK(dxt1_psnr(smooth_image(1, 1), Dxt1Fit::range) > 40.0);
   CHECK(dxt1_psnr(smooth_image(5, 3), Dxt1Fit::range) > 30.0);
-  CHECK(dxt1_psnr(smooth_image(1281, 721), Dxt1Fit::range) > 30.0);
+  CHECK(dxt1_psnr(smooth_image(1281, 721), Dxt1Fit::range) > 40.0);
   CHECK(dxt1_psnr(noisy_image(5, 3), Dxt1Fit::cluster) > 18.0);
 }
 

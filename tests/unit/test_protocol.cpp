@@ -823,6 +823,12 @@ TEST_CASE("Meshes whose buffers are missing are accepted; inconsistent ones are 
   CHECK(st.code() == ErrorCode::bad_mesh);
   CHECK(mentions(st.error().message, "index 3 out of range"));
   CHECK(scene.meshes().count(2) == 0);
+  // Buffers are never rejected for consistency: a buffer that makes a complete mesh invalid
+  // is stored, and the mesh fails validate_mesh until the client fixes it.
+  CHECK(apply(scene, index_buffer(11, {0, 1, 5}), lim).ok());
+  CHECK_FALSE(scene.validate_mesh(scene.meshes().at(1).value).empty());
+  CHECK(apply(scene, index_buffer(11, {2, 1, 0}), lim).ok());
+  CHECK(scene.validate_mesh(scene.meshes().at(1).value).empty());
   // Wrong component count of the position buffer.
   SetBuffer b2 = positions_buffer(13, 1);
   b2.buffer.components = 1;
@@ -924,4 +930,53 @@ TEST_CASE("The checked-in fuzz corpus holds valid messages", "[protocol]") {
     ++n;
   }
   CHECK(n >= 15);
+}
+
+TEST_CASE("Server-side rules: handshake reply, frame and stats fields", "[protocol]") {
+  auto server_fails = [](std::vector<uint8_t> m, ErrorCode code) {
+    auto r = decode_server(m.data(), m.size(), Limits{});
+    REQUIRE_FALSE(r.ok());
+    INFO(r.error().message);
+    CHECK(r.error().code == code);
+  };
+  HandshakeReply h;
+  h.server_version = "v";
+  auto good = encode(ServerRecord{h});
+  auto m = good;
+  m[kBody] = 2;
+  server_fails(m, ErrorCode::bad_enum);
+  m = good;
+  m[kBody + 2] = 0;
+  server_fails(m, ErrorCode::out_of_range);
+  m = good;
+  m[kBody + 3] = 2;  // version string longer than the body
+  server_fails(m, ErrorCode::bad_length);
+  m = good;
+  patch<uint32_t>(m, kBody + 8, 0);
+  server_fails(m, ErrorCode::out_of_range);
+  Frame f;
+  f.width = 4;
+  f.height = 4;
+  f.payload = {1, 2, 3};
+  good = encode(ServerRecord{f});
+  REQUIRE(decode_server(good.data(), good.size(), Limits{}).ok());
+  m = good;
+  m[kBody + 12] = 2;
+  server_fails(m, ErrorCode::bad_enum);
+  m = good;
+  m[kBody + 13] = 1;
+  server_fails(m, ErrorCode::bad_reserved);
+  m = good;
+  m[9] = 1;  // server records have op 0
+  server_fails(m, ErrorCode::bad_op);
+  m = encode(ServerRecord{ErrorReply{ErrorCode::internal, true, 0, "x"}});
+  m[kBody + 2] = 2;
+  server_fails(m, ErrorCode::bad_enum);
+  m = encode(ServerRecord{Stats{}});
+  m.push_back(0);
+  patch<uint32_t>(m, 12, 45);
+  server_fails(m, ErrorCode::bad_length);
+  m = encode(ServerRecord{Stats{}});
+  m[8] = uint8_t(RecordType::camera);  // a client record from the server
+  server_fails(m, ErrorCode::unknown_record);
 }
