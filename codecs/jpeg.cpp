@@ -74,7 +74,7 @@ bool jpeg_decode(const uint8_t* data, size_t size, Image& out, std::string& erro
   bool ok = tjDecompressHeader3(h, data, static_cast<unsigned long>(size), &w, &hgt, &subsamp, &colorspace) == 0;
   if (ok) {
     out = Image(w, hgt);
-    ok = tjDecompress2(h, data, static_cast<unsigned long>(size), out.rgba.data(), w, 0, hgt, TJPF_RGBA, 0) == 0;
+    ok = tjDecompress2(h, data, static_cast<unsigned long>(size), out.rgba.data(), w, 0, hgt, TJPF_RGBA, TJFLAG_LIMITSCANS) == 0;
   }
   if (!ok) error = std::string("jpeg: ") + tjGetErrorStr2(h);
   tjDestroy(h);
