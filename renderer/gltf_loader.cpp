@@ -126,7 +126,7 @@ double number_or(const tinygltf::Value& obj, const char* key, double fallback) {
 }
 
 Material convert_material(const tinygltf::Material& gm, const std::map<int, Id>& texture_ids,
-                          const tinygltf::Model& model, std::vector<std::string>& warnings, const std::string& file) {
+                          std::vector<std::string>& warnings, const std::string& file) {
   Material mat;
   mat.model = Material::Model::phong;
   const auto& pbr = gm.pbrMetallicRoughness;
@@ -176,7 +176,6 @@ Material convert_material(const tinygltf::Material& gm, const std::map<int, Id>&
     mat.opacity = alpha;  // see-through weighted by 1 - opacity
   }
   mat.double_sided = gm.doubleSided;
-  (void)model;
   return mat;
 }
 
@@ -241,7 +240,7 @@ LoadedScene load_gltf(const std::string& path) {
   std::vector<Id> material_ids(model.materials.size(), kNoId);
   for (size_t mi = 0; mi < model.materials.size(); ++mi) {
     material_ids[mi] = next_id++;
-    scene.set_material(material_ids[mi], convert_material(model.materials[mi], texture_ids, model, out.warnings, path));
+    scene.set_material(material_ids[mi], convert_material(model.materials[mi], texture_ids, out.warnings, path));
   }
 
   // Geometry: one set of buffers per primitive, shared by every node that instances the mesh.
@@ -266,25 +265,19 @@ LoadedScene load_gltf(const std::string& path) {
       size_t nv = prim.pos.size() / 3;
       for (float v : prim.pos)
         if (!std::isfinite(v)) throw LoadError(what + ": POSITION holds NaN or Inf");
-      Buffer pb;
-      pb.components = 3;
-      pb.f = prim.pos;
-      prim.positions = next_id++;
-      scene.set_buffer(prim.positions, std::move(pb));
-      if (auto it = p.attributes.find("NORMAL"); it != p.attributes.end()) {
-        Buffer nb;
-        nb.components = 3;
-        nb.f = read_floats(model, it->second, 3, what + " NORMAL");
-        prim.normals = next_id++;
-        scene.set_buffer(prim.normals, std::move(nb));
-      }
-      if (auto it = p.attributes.find("TEXCOORD_0"); it != p.attributes.end()) {
-        Buffer tb;
-        tb.components = 2;
-        tb.f = read_floats(model, it->second, 2, what + " TEXCOORD_0");
-        prim.texcoords = next_id++;
-        scene.set_buffer(prim.texcoords, std::move(tb));
-      }
+      auto add_floats = [&](std::vector<float> values, uint8_t components) {
+        Buffer b;
+        b.components = components;
+        b.f = std::move(values);
+        Id id = next_id++;
+        scene.set_buffer(id, std::move(b));
+        return id;
+      };
+      prim.positions = add_floats(prim.pos, 3);
+      if (auto it = p.attributes.find("NORMAL"); it != p.attributes.end())
+        prim.normals = add_floats(read_floats(model, it->second, 3, what + " NORMAL"), 3);
+      if (auto it = p.attributes.find("TEXCOORD_0"); it != p.attributes.end())
+        prim.texcoords = add_floats(read_floats(model, it->second, 2, what + " TEXCOORD_0"), 2);
       if (p.indices >= 0) {
         Buffer ib;
         ib.type = Buffer::Type::u32;
@@ -309,7 +302,6 @@ LoadedScene load_gltf(const std::string& path) {
   const tinygltf::Value* lights_ext = nullptr;
   if (auto it = model.extensions.find("KHR_lights_punctual"); it != model.extensions.end()) lights_ext = &it->second;
 
-  std::vector<int> depth_guard;
   std::function<void(int, const Mat4&, int)> visit = [&](int ni, const Mat4& parent, int depth) {
     if (ni < 0 || size_t(ni) >= model.nodes.size()) throw LoadError(path + ": node index " + std::to_string(ni) + " out of range");
     if (depth > 256) throw LoadError(path + ": node hierarchy deeper than 256 (a cycle?)");

@@ -540,9 +540,41 @@ namespace {
 
 template <int N>
 struct alignas(64) Lanes {
-  alignas(64) int valid[N];  // Embree needs the mask aligned to the packet width
+  int valid[N];  // first member of an alignas(64) struct: aligned as Embree needs
   float ox[N], oy[N], oz[N], dx[N], dy[N], dz[N];
   float weight[N];  // throughput of this path (for culling)
+
+  void set(int i, const Vec3& o, const Vec3& d, float w) {
+    valid[i] = -1;
+    ox[i] = o.x; oy[i] = o.y; oz[i] = o.z;
+    dx[i] = d.x; dy[i] = d.y; dz[i] = d.z;
+    weight[i] = w;
+  }
+};
+
+// Primary rays of a pinhole camera through pixel centres (shared by the shading kernel and
+// the bare-kernel benchmark, so both trace exactly the same rays). Directions are not
+// normalised: Embree does not need it, and hit positions are o + t d either way.
+struct PrimaryCamera {
+  Vec3 origin, cx, cy, cz;
+  float sx_scale = 1, sy_scale = 1;
+  int32_t width = 1, height = 1;
+
+  PrimaryCamera(const Camera& camera, const Vec3& rebase, int32_t w, int32_t h) : width(w), height(h) {
+    // Vertical field of view clamped away from 0 and 180 degrees.
+    float tan_half = std::tan(std::fmin(std::fmax(camera.fov_y, 1e-6f), kPi - 1e-4f) * 0.5f);
+    origin = camera.to_world.transform_point({0, 0, 0}) - rebase;
+    cx = camera.to_world.transform_vector({1, 0, 0});
+    cy = camera.to_world.transform_vector({0, 1, 0});
+    cz = camera.to_world.transform_vector({0, 0, -1});
+    sx_scale = tan_half * (float(w) / float(h));
+    sy_scale = tan_half;
+  }
+  Vec3 direction(int x, int y) const {
+    float sx = (2.0f * (x + 0.5f) / float(width) - 1.0f) * sx_scale;
+    float sy = (1.0f - 2.0f * (y + 0.5f) / float(height)) * sy_scale;
+    return cz + cx * sx + cy * sy;
+  }
 };
 
 template <int N>
@@ -554,7 +586,6 @@ struct Colors {
 struct Hit {
   Vec3 p, n, ng, v;  // position, shading normal, geometric normal (both facing the viewer), to viewer
   bool entering;     // the ray hit the geometric front side
-  float u = 0, w = 0;
   int material = 0;
   float uv[2] = {0, 0};
   bool has_uv = false;
@@ -770,11 +801,8 @@ struct Kernel {
         // At the depth limit, see-through surfaces show the background.
         for (int i = 0; i < N; ++i)
           if (hit_mask[i]) {
-            const Material& m = s.materials[hits[i].material];
-            float kt = m.refraction;
-            float keep = 1.0f - kt;
-            color[i] = color[i] * (opacity[i] * keep) + env.background * (1 - opacity[i] * keep);
-            (void)m;
+            float keep = opacity[i] * (1.0f - s.materials[hits[i].material].refraction);
+            color[i] = color[i] * keep + env.background * (1 - keep);
           }
       }
     } else {
@@ -873,23 +901,17 @@ struct Kernel {
       if (wr * base > 1e-3f) {
         Vec3 rd = normalize(reflect(d, h.n));
         if (dot(rd, h.ng) < 0) rd = normalize(reflect(d, h.ng));
-        Vec3 o = h.p + h.ng * eps(h.p);
-        refl.valid[i] = -1; refl.ox[i] = o.x; refl.oy[i] = o.y; refl.oz[i] = o.z;
-        refl.dx[i] = rd.x; refl.dy[i] = rd.y; refl.dz[i] = rd.z; refl.weight[i] = base * wr;
+        refl.set(i, h.p + h.ng * eps(h.p), rd, base * wr);
         w_refl[i] = wr;
         any_refl = true;
       }
       if (wt * base > 1e-3f) {
-        Vec3 o = h.p - h.ng * eps(h.p);
-        refr.valid[i] = -1; refr.ox[i] = o.x; refr.oy[i] = o.y; refr.oz[i] = o.z;
-        refr.dx[i] = tdir.x; refr.dy[i] = tdir.y; refr.dz[i] = tdir.z; refr.weight[i] = base * wt;
+        refr.set(i, h.p - h.ng * eps(h.p), tdir, base * wt);
         w_refr[i] = wt;
         any_refr = true;
       }
       if (wthru * base > 1e-3f) {
-        Vec3 o = h.p - h.ng * eps(h.p);
-        thru.valid[i] = -1; thru.ox[i] = o.x; thru.oy[i] = o.y; thru.oz[i] = o.z;
-        thru.dx[i] = d.x; thru.dy[i] = d.y; thru.dz[i] = d.z; thru.weight[i] = base * wthru;
+        thru.set(i, h.p - h.ng * eps(h.p), d, base * wthru);
         w_thru[i] = wthru;
         any_thru = true;
       }
@@ -926,13 +948,7 @@ void RayTracer::Impl::render_task(const Rect& requested, const RenderSettings& c
   out.cost.packets = packets;
   out.cost.cost.assign(size_t(packets.area()), 0);
 
-  // Camera: pinhole, pixel centres, vertical field of view clamped away from 0 and 180 degrees.
-  float fov = std::fmin(std::fmax(camera.fov_y, 1e-6f), kPi - 1e-4f);
-  float tan_half = std::tan(fov * 0.5f);
-  float aspect = float(width) / float(height);
-  Vec3 cam_o = camera.to_world.transform_point({0, 0, 0}) - origin;
-  Vec3 cx = camera.to_world.transform_vector({1, 0, 0}), cy = camera.to_world.transform_vector({0, 1, 0}),
-       cz = camera.to_world.transform_vector({0, 0, -1});
+  const PrimaryCamera cam(camera, origin, width, height);
   float ao_dist = cfg.ao_distance > 0 ? cfg.ao_distance : 0.1f * extent;
   const double ns_per_tick = 1e6 / tsc_khz();
   const float exposure = env.exposure;
@@ -953,13 +969,8 @@ void RayTracer::Impl::render_task(const Rect& requested, const RenderSettings& c
             for (int i = 0; i < N; ++i) {
               int x = px * pw + i % pw, y = py * ph + i / pw;
               xs[i] = x; ys[i] = y;
+              lanes.set(i, cam.origin, cam.direction(x, y), 1.0f);
               lanes.valid[i] = pixels.contains(x, y) ? -1 : 0;
-              float sx = (2.0f * (x + 0.5f) / float(width) - 1.0f) * tan_half * aspect;
-              float sy = (1.0f - 2.0f * (y + 0.5f) / float(height)) * tan_half;
-              Vec3 d = cz + cx * sx + cy * sy;  // not normalised: Embree does not need it
-              lanes.ox[i] = cam_o.x; lanes.oy[i] = cam_o.y; lanes.oz[i] = cam_o.z;
-              lanes.dx[i] = d.x; lanes.dy[i] = d.y; lanes.dz[i] = d.z;
-              lanes.weight[i] = 1.0f;
             }
             Colors<N> c;
             k.trace(lanes, 0, c, true);
@@ -992,11 +1003,7 @@ double RayTracer::Impl::trace_primary(const Rect& requested, uint64_t* rays) {
   if (pixels.empty()) return 0;
   const int pw = layout.w, ph = layout.h;
   Rect packets{pixels.x0 / pw, pixels.y0 / ph, (pixels.x1 + pw - 1) / pw, (pixels.y1 + ph - 1) / ph};
-  float tan_half = std::tan(std::fmin(std::fmax(camera.fov_y, 1e-6f), kPi - 1e-4f) * 0.5f);
-  float aspect = float(width) / float(height);
-  Vec3 cam_o = camera.to_world.transform_point({0, 0, 0}) - origin;
-  Vec3 cx = camera.to_world.transform_vector({1, 0, 0}), cy = camera.to_world.transform_vector({0, 1, 0}),
-       cz = camera.to_world.transform_vector({0, 0, -1});
+  const PrimaryCamera cam(camera, origin, width, height);
   tbb::combinable<uint64_t> count;
   auto t0 = std::chrono::steady_clock::now();
   tbb::parallel_for(tbb::blocked_range2d<int>(packets.y0, packets.y1, 1, packets.x0, packets.x1, 8),
@@ -1009,10 +1016,8 @@ double RayTracer::Impl::trace_primary(const Rect& requested, uint64_t* rays) {
                           for (int i = 0; i < N; ++i) {
                             int x = px * pw + i % pw, y = py * ph + i / pw;
                             valid[i] = pixels.contains(x, y) ? -1 : 0;
-                            float sx = (2.0f * (x + 0.5f) / float(width) - 1.0f) * tan_half * aspect;
-                            float sy = (1.0f - 2.0f * (y + 0.5f) / float(height)) * tan_half;
-                            Vec3 d = cz + cx * sx + cy * sy;
-                            rh.ray.org_x[i] = cam_o.x; rh.ray.org_y[i] = cam_o.y; rh.ray.org_z[i] = cam_o.z;
+                            Vec3 d = cam.direction(x, y);
+                            rh.ray.org_x[i] = cam.origin.x; rh.ray.org_y[i] = cam.origin.y; rh.ray.org_z[i] = cam.origin.z;
                             rh.ray.dir_x[i] = d.x; rh.ray.dir_y[i] = d.y; rh.ray.dir_z[i] = d.z;
                             rh.ray.tnear[i] = 0; rh.ray.tfar[i] = std::numeric_limits<float>::infinity();
                             rh.ray.time[i] = 0; rh.ray.mask[i] = 0xFFFFFFFFu; rh.ray.id[i] = 0; rh.ray.flags[i] = 0;
@@ -1049,31 +1054,29 @@ SceneFeatures RayTracer::features() const { return impl_->features; }
 float RayTracer::scene_extent() const { return impl_->extent; }
 RayTracer::SyncStats RayTracer::last_sync() const { return impl_->stats; }
 
-void RayTracer::render(const Rect& pixels, const RenderSettings& settings, TaskResult& out) {
-  switch (impl_->layout.size()) {
-    case 16: impl_->render_task<16, kAll>(pixels, settings, out); break;
-    case 8: impl_->render_task<8, kAll>(pixels, settings, out); break;
-    default: impl_->render_task<4, kAll>(pixels, settings, out); break;
+// Calls f with the packet width as a compile-time constant.
+template <class F>
+static decltype(auto) dispatch_width(int rays_per_packet, F&& f) {
+  switch (rays_per_packet) {
+    case 16: return f(std::integral_constant<int, 16>{});
+    case 8: return f(std::integral_constant<int, 8>{});
+    default: return f(std::integral_constant<int, 4>{});
   }
+}
+
+void RayTracer::render(const Rect& pixels, const RenderSettings& settings, TaskResult& out) {
+  dispatch_width(impl_->layout.size(), [&](auto n) { impl_->render_task<decltype(n)::value, kAll>(pixels, settings, out); });
 }
 
 void RayTracer::render_specialised(const Rect& pixels, const RenderSettings& settings, TaskResult& out) {
   const SceneFeatures& f = impl_->features;
   if (f.secondary || f.textures || f.alpha_masks || settings.ao_samples > 0)
     throw std::invalid_argument("the specialised kernel renders only scenes without AO, secondary rays, textures and alpha masks");
-  switch (impl_->layout.size()) {
-    case 16: impl_->render_task<16, kNone>(pixels, settings, out); break;
-    case 8: impl_->render_task<8, kNone>(pixels, settings, out); break;
-    default: impl_->render_task<4, kNone>(pixels, settings, out); break;
-  }
+  dispatch_width(impl_->layout.size(), [&](auto n) { impl_->render_task<decltype(n)::value, kNone>(pixels, settings, out); });
 }
 
 double RayTracer::trace_primary_only(const Rect& pixels, uint64_t* rays) {
-  switch (impl_->layout.size()) {
-    case 16: return impl_->trace_primary<16>(pixels, rays);
-    case 8: return impl_->trace_primary<8>(pixels, rays);
-    default: return impl_->trace_primary<4>(pixels, rays);
-  }
+  return dispatch_width(impl_->layout.size(), [&](auto n) { return impl_->trace_primary<decltype(n)::value>(pixels, rays); });
 }
 
 }  // namespace tessera
