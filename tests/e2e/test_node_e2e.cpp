@@ -250,3 +250,19 @@ TEST_CASE("The node serves the web folder with MIME types and without path trave
     CHECK(r->status == 404);
   }
 }
+
+TEST_CASE("The node serves the shared scenes at /scenes/ and nothing outside them", "[e2e]") {
+  TestNode node;
+  auto gltf = http::get("127.0.0.1", node.port(), "/scenes/pavilion/scene.gltf");
+  REQUIRE(gltf);
+  CHECK(gltf->status == 200);
+  // Escapes from the scenes folder into the repository (../shared/scenes/../../main) or beyond.
+  for (const char* bad : {"/scenes/../../main/CMakeLists.txt", "/scenes/%2e%2e/%2e%2e/main/CMakeLists.txt",
+                          "/scenes/pavilion/../../README.md", "/scenes/%2E%2E%2FREADME.md", "/scenes/.hidden",
+                          "/scenes/pavilion/scene.gltf%00.png", "/scenes/no-such-scene/scene.gltf"}) {
+    auto r = http::get("127.0.0.1", node.port(), bad);
+    REQUIRE(r);
+    INFO(bad);
+    CHECK(r->status == 404);
+  }
+}
