@@ -47,7 +47,11 @@ struct TestNode {
     server = std::make_unique<Server>(sys, settings, o);
     server->start();
   }
-  ~TestNode() { server->stop(); }
+  // The sessions log into `log` until they have exited: wait for them before the members go.
+  ~TestNode() {
+    server->stop();
+    sys.await_all_actors_done();
+  }
   uint16_t port() const { return server->port(); }
   size_t log_count(const std::string& needle) {
     std::lock_guard<std::mutex> l(mu);
