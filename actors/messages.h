@@ -14,6 +14,7 @@
 #include <caf/atom.hpp>
 #include <caf/meta/type_name.hpp>
 #include <caf/meta/load_callback.hpp>
+#include <caf/actor.hpp>
 #include <caf/error.hpp>
 
 #include "renderer/rect.h"
@@ -30,6 +31,11 @@ using display_atom = caf::atom_constant<caf::atom("display")>;
 using client_atom = caf::atom_constant<caf::atom("client")>;
 using status_atom = caf::atom_constant<caf::atom("status")>;
 using children_atom = caf::atom_constant<caf::atom("children")>;
+using open_atom = caf::atom_constant<caf::atom("open")>;
+using update_atom = caf::atom_constant<caf::atom("update")>;
+using nodes_atom = caf::atom_constant<caf::atom("nodes")>;
+using links_atom = caf::atom_constant<caf::atom("links")>;
+using tick_atom = caf::atom_constant<caf::atom("tick")>;
 
 template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, Rect& x) {
@@ -116,10 +122,12 @@ struct SatReport {
   int32_t width = 0, height = 0;
   int32_t packet_w = 4, packet_h = 4;
   std::vector<std::vector<uint8_t>> sats;  // one serialised SAT per node (empty: missing)
+  std::vector<double> perf;                // single-core performance of the node behind each SAT
 };
 template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, SatReport& x) {
-  return f(caf::meta::type_name("tessera::sat_report"), x.frame, x.width, x.height, x.packet_w, x.packet_h, x.sats);
+  return f(caf::meta::type_name("tessera::sat_report"), x.frame, x.width, x.height, x.packet_w, x.packet_h, x.sats,
+           x.perf);
 }
 
 // Timestamps and figures of one frame as it moves down the pipeline. Times are steady-clock
@@ -174,6 +182,73 @@ template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, EncodedFrame& x) {
   return f(caf::meta::type_name("tessera::encoded_frame"), x.meta, x.message, x.header_bytes, x.encode_ms,
            x.encode_start_ns, x.encode_end_ns, x.error);
+}
+
+// --- Cluster (cluster_protocol.h) --------------------------------------------------------
+
+// One rendering node of a sub-tree, as its parent sees it (paper 5.2: the master gets the
+// flattened list of its sub-trees' rendering nodes).
+struct NodeInfo {
+  std::string name;            // "host:port" of its cluster endpoint, or "local"
+  int32_t logical_cores = 1;   // renderer coefficient = logical_cores x single_core_perf
+  double single_core_perf = 1;
+};
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, NodeInfo& x) {
+  return f(caf::meta::type_name("tessera::node_info"), x.name, x.logical_cores, x.single_core_perf);
+}
+
+// The tasks of one frame for a sub-tree: tasks[i] is the pixel rectangle of entry i of the
+// receiver's flattened node list (as last returned by its nodes query); empty: nothing.
+struct RenderBatch {
+  uint32_t frame = 0;
+  int32_t width = 0, height = 0;
+  int32_t ao_samples = 0, max_depth = 4;
+  uint32_t timeout_ms = 5000;  // the sender gives up on this batch after this long
+  std::vector<Rect> tasks;
+};
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, RenderBatch& x) {
+  return f(caf::meta::type_name("tessera::render_batch"), x.frame, x.width, x.height, x.ao_samples, x.max_depth,
+           x.timeout_ms, x.tasks);
+}
+// tiles[i] answers tasks[i] (error set when that node failed); changed: the sub-tree lost or
+// gained nodes, so its parent should ask for the node list again before the next frame.
+struct BatchReply {
+  std::vector<TileResult> tiles;
+  bool changed = false;
+};
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, BatchReply& x) {
+  return f(caf::meta::type_name("tessera::batch_reply"), x.tiles, x.changed);
+}
+
+// Parent -> node: open a worker for one session on this node's sub-tree.
+struct OpenRequest {
+  uint64_t session = 0;
+  std::string master;        // for log lines
+  int32_t packet_w = 4, packet_h = 4;  // the master's packet layout (one packet space per cluster)
+};
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, OpenRequest& x) {
+  return f(caf::meta::type_name("tessera::open_request"), x.session, x.master, x.packet_w, x.packet_h);
+}
+struct OpenReply {
+  caf::actor worker;            // a worker_actor
+  std::vector<NodeInfo> nodes;  // its flattened list
+};
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, OpenReply& x) {
+  return f(caf::meta::type_name("tessera::open_reply"), x.worker, x.nodes);
+}
+// A node's live children, for its own workers.
+struct ChildLink {
+  std::string name;
+  caf::actor node;  // a node_actor
+};
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, ChildLink& x) {
+  return f(caf::meta::type_name("tessera::child_link"), x.name, x.node);
 }
 
 // A session's state, for tests and monitoring.

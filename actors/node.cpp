@@ -41,6 +41,15 @@ void register_message_types(caf::actor_system_config& cfg) {
   cfg.add_message_type<EncodeJob>("tessera::encode_job");
   cfg.add_message_type<EncodedFrame>("tessera::encoded_frame");
   cfg.add_message_type<SessionStatus>("tessera::session_status");
+  cfg.add_message_type<NodeInfo>("tessera::node_info");
+  cfg.add_message_type<std::vector<NodeInfo>>("tessera::node_infos");
+  cfg.add_message_type<RenderBatch>("tessera::render_batch");
+  cfg.add_message_type<BatchReply>("tessera::batch_reply");
+  cfg.add_message_type<OpenRequest>("tessera::open_request");
+  cfg.add_message_type<OpenReply>("tessera::open_reply");
+  cfg.add_message_type<ChildLink>("tessera::child_link");
+  cfg.add_message_type<std::vector<ChildLink>>("tessera::child_links");
+  cfg.add_message_type<std::vector<double>>("tessera::doubles");
 }
 
 void node_log(const NodeSettings& settings, const std::string& line) {

@@ -5,11 +5,16 @@
 #include <functional>
 #include <memory>
 #include <string>
+#include <vector>
+
+#include <caf/weak_intrusive_ptr.hpp>
+#include <caf/actor_control_block.hpp>
 
 #include <caf/actor_system.hpp>
 #include <caf/actor_system_config.hpp>
 
 #include "actors/client_sink.h"
+#include "actors/cluster_protocol.h"
 #include "actors/display_protocol.h"
 #include "actors/encoder_protocol.h"
 #include "actors/renderer_protocol.h"
@@ -29,6 +34,15 @@ struct NodeSettings {
   std::string server_version = "tessera 0.1.0";
   // One line per event (JSON for per-frame figures); default: stderr. Called from actor threads.
   std::function<void(const std::string&)> log;
+  // --- Cluster (cluster_protocol.h, docs/operations.md) ---
+  bool render = true;                 // false: a hub or a dedicated master (renders only lost tiles)
+  std::string name = "local";         // this node in node lists and log lines (host:cluster-port)
+  std::vector<std::string> children;  // "host:port" of the child nodes' cluster endpoints
+  uint32_t task_timeout_ms = 5000;    // a sub-tree that has not answered a frame's tasks by then is
+                                      // failed (at least 3x the last frame's rendering time)
+  uint32_t reconnect_ms = 1000;       // retry period for lost children
+  caf::weak_actor_ptr node;           // this process's node actor (none: a single node)
+  NodeInfo info() const { return NodeInfo{name, coefficient.logical_cores, coefficient.single_core_perf}; }
 };
 
 // Registers every message type of actors/messages.h (both sides of a remote link need it).
@@ -42,6 +56,16 @@ tiler_actor spawn_tiler(caf::actor_system& sys, std::vector<double> coefficients
 encoder_actor spawn_encoder(caf::actor_system& sys, bool detached);
 display_actor spawn_display(caf::actor_system& sys, std::shared_ptr<ClientSink> sink, encoder_actor encoder,
                             std::shared_ptr<const NodeSettings> settings, uint64_t session_id);
+// The node actor of this process (cluster_protocol.h): connects to settings->children over
+// CAF's middleman (when loaded), reconnects lost ones, and opens workers for sessions.
+node_actor spawn_node(caf::actor_system& sys, std::shared_ptr<const NodeSettings> settings);
+// A worker of one session on this node's sub-tree; it ends when `parent` goes down.
+worker_actor spawn_worker(caf::actor_system& sys, std::shared_ptr<const NodeSettings> settings, node_actor node,
+                          OpenRequest request, caf::strong_actor_ptr parent);
+// Applies encoded client records (a forwarded update or a snapshot) to a scene; validates
+// them against this node's limits. Returns an error message, empty on success.
+std::string apply_records(Scene& scene, const std::vector<uint8_t>& bytes, const protocol::Limits& limits);
+
 // A session with its own renderer, tiler, encoder and display actors, all linked to it:
 // when the session ends (client gone, fatal error, exit message), they end too.
 session_actor spawn_session(caf::actor_system& sys, std::shared_ptr<ClientSink> sink,

@@ -5,6 +5,8 @@
 #include <caf/all.hpp>
 
 #include "actors/node.h"
+#include "actors/router.h"
+#include "net/scene_records.h"
 #include "renderer/raytracer.h"
 
 namespace tessera {
@@ -33,8 +35,15 @@ struct session_state {
   std::optional<uint32_t> pending;   // the latest render request that arrived while rendering
   uint32_t seq = 0, dropped = 0, errors = 0;
   FrameMeta meta;
-  size_t expected = 0;
-  std::vector<TileResult> tiles;
+  // The client's tree (actors/router.h): this node's renderer and its children's workers.
+  node_actor node;
+  Router router;
+  std::vector<NodeInfo> nodes;  // committed flattened list
+  std::vector<size_t> used;     // the entries of `nodes` this client renders on
+  bool committed = false;
+  double last_rendering_ms = 0;
+  uint32_t recovered = 0;       // tasks of lost nodes rendered here in this frame
+  std::vector<uint8_t> forward; // accepted scene records not yet sent down the tree
   static inline const char* name = "tessera.session";
 };
 
@@ -78,12 +87,24 @@ void fail(self_ptr self, const Error& e) {
 
 void apply_update(self_ptr self, ClientRecord&& rec, uint32_t index) {
   auto& st = self->state;
+  // Children get exactly the records this node accepted (encoded before apply moves them).
+  std::vector<uint8_t> one;
+  const bool down = st.router.alive_children() > 0;
+  if (down) one = encode(rec);
   Status s = apply(*st.scene, std::move(rec), st.settings->limits);
+  if (s && down) append_message(st.forward, std::move(one));
   if (!s) {
     Error e = s.error();
     e.record = index;
     fail(self, e);
   }
+}
+
+void flush_forward(self_ptr self) {
+  auto& st = self->state;
+  if (st.forward.empty()) return;
+  st.router.forward(self, st.forward, false);
+  st.forward.clear();
 }
 
 void apply_cached(self_ptr self) {
@@ -94,6 +115,7 @@ void apply_cached(self_ptr self) {
     if (st.closed) return;
     apply_update(self, std::move(r), kNoRecord);  // deferred: the record index is no longer meaningful
   }
+  flush_forward(self);
 }
 
 void maybe_preload(self_ptr self) {
@@ -107,10 +129,34 @@ void maybe_preload(self_ptr self) {
   *st.scene = pre;
   st.scene->set_resolution(w, h);
   if (own_camera) st.scene->set_camera(cam);
+  if (st.router.alive_children() > 0) st.router.forward(self, scene_snapshot_bytes(SceneSnapshot{st.scene}), true);
   log(self, "\"preloaded_scene\": true, \"triangles\": " + std::to_string(st.scene->triangle_count()));
 }
 
-void on_tile(self_ptr self, TileResult&& t);
+void render_batch(self_ptr self);
+void recover(self_ptr self, BatchReply&& r, std::vector<Rect> tasks);
+void finish_frame(self_ptr self, std::vector<TileResult>&& tiles, std::vector<double>&& perf);
+
+// The committed node list changed: pick the nodes this client may use (the strongest first,
+// at most the handshake's max_nodes) and give their coefficients to the tiler.
+void on_nodes(self_ptr self, std::vector<NodeInfo> nodes) {
+  auto& st = self->state;
+  std::vector<size_t> order(nodes.size());
+  for (size_t i = 0; i < order.size(); ++i) order[i] = i;
+  auto coef = [&](size_t i) { return double(nodes[i].logical_cores) * nodes[i].single_core_perf; };
+  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return coef(a) > coef(b); });
+  if (st.hs.max_nodes > 0 && order.size() > st.hs.max_nodes) order.resize(st.hs.max_nodes);
+  std::sort(order.begin(), order.end());  // keep list order (depth first) for the tiling
+  std::vector<double> coefficients;
+  for (size_t i : order) coefficients.push_back(std::max(1e-6, coef(i)));
+  const bool same = nodes.size() == st.nodes.size() && order == st.used;
+  st.nodes = std::move(nodes);
+  st.used = std::move(order);
+  st.committed = true;
+  if (!coefficients.empty()) self->send(st.tiler, nodes_atom::value, std::move(coefficients));
+  if (!same || st.seq <= 1)
+    log(self, "\"nodes\": " + nodes_json(st.nodes) + ", \"used\": " + std::to_string(st.used.size()));
+}
 
 void start_frame(self_ptr self, uint32_t client_frame) {
   auto& st = self->state;
@@ -127,54 +173,171 @@ void start_frame(self_ptr self, uint32_t client_frame) {
   st.meta.display = uint8_t(st.hs.display);
   st.meta.quality = st.hs.jpeg_quality;
   st.meta.render_start_ns = now_ns();
-  st.tiles.clear();
-  TaskRequest req{st.seq, st.meta.width, st.meta.height, st.layout.w, st.layout.h};
-  RenderTask base;
-  base.frame = st.seq;
-  base.width = st.meta.width;
-  base.height = st.meta.height;
-  base.ao_samples = int32_t(st.render.ao_samples);
-  base.max_depth = int32_t(st.render.max_depth);
+  st.recovered = 0;
+  // Membership changes (lost nodes, nodes that joined) are committed between frames only.
+  if (!st.committed || st.router.changed || st.router.busy()) {
+    st.router.commit(self, st.settings->task_timeout_ms, [self](std::vector<NodeInfo> nodes) {
+      on_nodes(self, std::move(nodes));
+      render_batch(self);
+    });
+    return;
+  }
+  render_batch(self);
+}
+
+// Renders a task on this node's own renderer (also the fallback for tasks of lost nodes).
+void render_local(self_ptr self, const RenderTask& t, std::function<void(TileResult&&)> cb) {
+  auto& st = self->state;
+  if (!st.renderer) {
+    st.renderer = spawn_renderer(self->system(), st.layout, st.settings->detached);
+    self->link_to(st.renderer);
+  }
   SceneSnapshot snap{st.scene};  // read-only until the frame is rendered: updates are cached meanwhile
+  self->request(st.renderer, caf::infinite, render_atom::value, snap, t)
+      .then([cb](TileResult& r) { cb(std::move(r)); },
+            [cb, t](caf::error& e) {
+              TileResult r;
+              r.frame = t.frame;
+              r.pixels = t.pixels;
+              r.error = "renderer: " + to_string(e);
+              cb(std::move(r));
+            });
+}
+
+void render_batch(self_ptr self) {
+  auto& st = self->state;
+  RenderBatch batch;
+  batch.frame = st.seq;
+  batch.width = st.meta.width;
+  batch.height = st.meta.height;
+  batch.ao_samples = int32_t(st.render.ao_samples);
+  batch.max_depth = int32_t(st.render.max_depth);
+  // Bounded delay for lost nodes: the configured timeout, or 3x the last frame if longer.
+  batch.timeout_ms = std::max<uint32_t>(st.settings->task_timeout_ms, uint32_t(3 * st.last_rendering_ms + 200));
+  batch.tasks.assign(st.nodes.size(), Rect{});
+  const uint32_t seq = st.seq;
+  if (st.used.empty()) {
+    // No rendering node at all (a dedicated master whose children are all gone): render the
+    // whole frame here rather than show nothing.
+    TileResult lost;
+    lost.frame = seq;
+    lost.pixels = {0, 0, st.meta.width, st.meta.height};
+    lost.error = "no rendering node";
+    BatchReply r;
+    r.tiles.push_back(lost);
+    const Rect whole = r.tiles[0].pixels;
+    recover(self, std::move(r), {whole});
+    return;
+  }
+  TaskRequest req{st.seq, st.meta.width, st.meta.height, st.layout.w, st.layout.h};
   self->request(st.tiler, caf::infinite, tasks_atom::value, req).then([=](TaskList& tl) {
     auto& st = self->state;
+    if (!st.in_flight || st.seq != seq) return;
     st.meta.tiling_ms = tl.tiling_ms;
-    st.meta.nodes = uint32_t(tl.tasks.size());
-    st.expected = tl.tasks.size();
-    for (const Rect& r : tl.tasks) {
-      RenderTask t = base;
-      t.pixels = r;
-      self->request(st.renderer, caf::infinite, render_atom::value, snap, t).then([=](TileResult& tr) {
-        on_tile(self, std::move(tr));
-      });
-    }
+    RenderBatch b = batch;
+    for (size_t k = 0; k < tl.tasks.size() && k < st.used.size(); ++k) b.tasks[st.used[k]] = tl.tasks[k];
+    st.meta.nodes = uint32_t(st.used.size());
+    auto local = [self](const RenderTask& t, std::function<void(TileResult&&)> cb) { render_local(self, t, cb); };
+    std::vector<Rect> tasks = b.tasks;
+    st.router.dispatch(self, b, local, [self, seq, tasks](BatchReply&& r) {
+      auto& st = self->state;
+      if (!st.in_flight || st.seq != seq) return;
+      recover(self, std::move(r), tasks);
+    });
   });
 }
 
-void on_tile(self_ptr self, TileResult&& t) {
+// Tasks whose node failed (down, too late, impossible tiles) are rendered here, so the frame
+// still completes; the node list is committed again before the next frame.
+void recover(self_ptr self, BatchReply&& r, std::vector<Rect> tasks) {
   auto& st = self->state;
-  if (!st.in_flight || t.frame != st.seq) return;
-  st.tiles.push_back(std::move(t));
-  if (st.tiles.size() < st.expected) return;
+  if (r.changed) st.router.changed = true;
+  std::vector<size_t> lost;
+  for (size_t i = 0; i < r.tiles.size(); ++i)
+    if (!r.tiles[i].error.empty() && !tasks[i].empty()) lost.push_back(i);
+  std::vector<double> perf(r.tiles.size(), 1.0);
+  for (size_t i = 0; i < r.tiles.size() && i < st.nodes.size(); ++i) perf[i] = st.nodes[i].single_core_perf;
+  if (lost.empty()) {
+    finish_frame(self, std::move(r.tiles), std::move(perf));
+    return;
+  }
+  std::string names;
+  for (size_t i : lost) {
+    names += (names.empty() ? "" : ", ") + std::string("\"") + json_escape(r.tiles[i].error) + "\"";
+  }
+  log(self, "\"recovering\": " + std::to_string(lost.size()) + ", \"frame\": " + std::to_string(st.meta.client_frame) +
+                ", \"errors\": [" + names + "]");
+  st.recovered = uint32_t(lost.size());
+  auto tiles = std::make_shared<std::vector<TileResult>>(std::move(r.tiles));
+  auto perfs = std::make_shared<std::vector<double>>(std::move(perf));
+  auto left = std::make_shared<size_t>(lost.size());
+  const uint32_t seq = st.seq;
+  for (size_t i : lost) {
+    RenderTask t;
+    t.frame = seq;
+    t.width = st.meta.width;
+    t.height = st.meta.height;
+    t.pixels = tasks[i];
+    t.ao_samples = int32_t(st.render.ao_samples);
+    t.max_depth = int32_t(st.render.max_depth);
+    (*perfs)[i] = st.settings->coefficient.single_core_perf;
+    render_local(self, t, [self, seq, i, tiles, perfs, left](TileResult&& res) {
+      (*tiles)[i] = std::move(res);
+      if (--*left > 0) return;
+      auto& st = self->state;
+      if (!st.in_flight || st.seq != seq) return;
+      finish_frame(self, std::move(*tiles), std::move(*perfs));
+    });
+  }
+}
+
+void finish_frame(self_ptr self, std::vector<TileResult>&& tiles, std::vector<double>&& perf) {
+  auto& st = self->state;
   // The frame is rendered: measurements, SATs to the tiler, pixels to the display channel.
   st.meta.render_end_ns = now_ns();
   std::string error;
-  SatReport rep{st.seq, st.meta.width, st.meta.height, st.layout.w, st.layout.h, {}};
-  for (auto& tile : st.tiles) {
+  SatReport rep{st.seq, st.meta.width, st.meta.height, st.layout.w, st.layout.h, {}, {}};
+  std::vector<TileResult> shown;
+  std::string per_node;
+  double max_norm = 0, sum_norm = 0;
+  size_t rendered = 0;
+  for (size_t i = 0; i < tiles.size(); ++i) {
+    auto& tile = tiles[i];
+    if (tile.pixels.empty() && tile.error.empty()) continue;  // a node without a task this frame
     st.meta.kernel_ms += tile.kernel_ms;
     st.meta.rendering_ms = std::max(st.meta.rendering_ms, tile.rendering_ms);
     st.meta.sat_ms = std::max(st.meta.sat_ms, tile.sat_ms);
     if (!tile.error.empty()) error = tile.error;
+    if (i < st.nodes.size() && st.nodes.size() > 1) {
+      const NodeInfo& n = st.nodes[i];
+      const double norm = tile.kernel_ms * n.single_core_perf / std::max(1e-9, double(n.logical_cores) * n.single_core_perf);
+      max_norm = std::max(max_norm, norm);
+      sum_norm += norm;
+      ++rendered;
+      char buf[200];
+      std::snprintf(buf, sizeof buf, "{\"node\": %zu, \"kernel_ms\": %.3f, \"rendering_ms\": %.3f, \"pixels\": %lld}", i,
+                    tile.kernel_ms, tile.rendering_ms, static_cast<long long>(tile.pixels.area()));
+      per_node += (per_node.empty() ? "" : ", ") + std::string(buf);
+    }
     rep.sats.push_back(std::move(tile.sat));
+    rep.perf.push_back(i < perf.size() ? perf[i] : 1.0);
+    shown.push_back(std::move(tile));
   }
   self->send(st.tiler, sats_atom::value, std::move(rep));
   st.in_flight = false;
+  st.last_rendering_ms = st.meta.rendering_ms;
+  if (!per_node.empty()) {
+    char buf[160];
+    std::snprintf(buf, sizeof buf, "\"cluster_frame\": %u, \"balance\": %.4f, \"recovered\": %u, \"per_node\": [",
+                  st.meta.client_frame, rendered && sum_norm > 0 ? max_norm / (sum_norm / double(rendered)) : 1.0,
+                  st.recovered);
+    log(self, buf + per_node + "]");
+  }
   if (error.empty()) {
-    self->send(st.display, display_atom::value, FrameTiles{st.meta, std::move(st.tiles)});
+    self->send(st.display, display_atom::value, FrameTiles{st.meta, std::move(shown)});
   } else {
     fail(self, Error{ErrorCode::internal, "frame " + std::to_string(st.meta.client_frame) + ": " + error, kNoRecord});
   }
-  st.tiles.clear();
   if (st.closed) return;
   // Between frames: apply what was cached, then start the remembered render request (the
   // encoder meanwhile encodes the frame just rendered).
@@ -203,21 +366,28 @@ void on_handshake(self_ptr self, const Handshake& h) {
   st.hs = h;
   st.handshake_done = true;
   st.scene->set_resolution(h.width, h.height);
-  HandshakeReply r;
-  r.renderer = h.renderer;
-  r.display = h.display;
-  r.jpeg_quality = h.jpeg_quality;
-  r.nodes = 1;  // single node: this node renders every frame
-  r.width = h.width;
-  r.height = h.height;
-  r.max_message_bytes = st.settings->limits.max_message_bytes;
-  r.max_buffer_bytes = st.settings->limits.max_buffer_bytes;
-  r.server_version = st.settings->server_version;
-  st.sink->send(encode(ServerRecord{r}));
-  static const char* displays[] = {"jpeg", "s3tc", "mjpeg"};
-  log(self, std::string("\"handshake\": {\"display\": \"") + displays[int(h.display)] + "\", \"quality\": " +
-                std::to_string(h.jpeg_quality) + ", \"width\": " + std::to_string(h.width) +
-                ", \"height\": " + std::to_string(h.height) + "}");
+  // The reply names the nodes this client gets: commit the tree first (children that are
+  // still being opened are waited for, within the task timeout).
+  st.router.commit(self, st.settings->task_timeout_ms, [self, h](std::vector<NodeInfo> nodes) {
+    on_nodes(self, std::move(nodes));
+    auto& st = self->state;
+    if (st.closed) return;
+    HandshakeReply r;
+    r.renderer = h.renderer;
+    r.display = h.display;
+    r.jpeg_quality = h.jpeg_quality;
+    r.nodes = uint32_t(std::max<size_t>(1, st.used.size()));  // with none, this node renders
+    r.width = h.width;
+    r.height = h.height;
+    r.max_message_bytes = st.settings->limits.max_message_bytes;
+    r.max_buffer_bytes = st.settings->limits.max_buffer_bytes;
+    r.server_version = st.settings->server_version;
+    st.sink->send(encode(ServerRecord{r}));
+    static const char* displays[] = {"jpeg", "s3tc", "mjpeg"};
+    log(self, std::string("\"handshake\": {\"display\": \"") + displays[int(h.display)] + "\", \"quality\": " +
+                  std::to_string(h.jpeg_quality) + ", \"width\": " + std::to_string(h.width) +
+                  ", \"height\": " + std::to_string(h.height) + ", \"nodes\": " + std::to_string(r.nodes) + "}");
+  });
 }
 
 void on_client(self_ptr self, std::vector<uint8_t>& bytes) {
@@ -247,6 +417,17 @@ void on_client(self_ptr self, std::vector<uint8_t>& bytes) {
       apply_update(self, std::move(rec), i);
     }
   }
+  flush_forward(self);
+}
+
+void join_children(self_ptr self) {
+  auto& st = self->state;
+  OpenRequest req{st.id, st.settings->name, st.layout.w, st.layout.h};
+  st.router.join_children(self, st.node, req, st.settings->task_timeout_ms, [self] {
+    std::vector<std::pair<std::vector<uint8_t>, bool>> out;
+    out.emplace_back(scene_snapshot_bytes(SceneSnapshot{self->state.scene}), true);
+    return out;
+  });
 }
 
 session_actor::behavior_type session_impl(self_ptr self, std::shared_ptr<ClientSink> sink,
@@ -257,11 +438,14 @@ session_actor::behavior_type session_impl(self_ptr self, std::shared_ptr<ClientS
   st.id = id;
   st.layout = st.settings->packet_layout.w > 0 ? st.settings->packet_layout : detect_packet_layout();
   auto& sys = self->system();
-  st.renderer = spawn_renderer(sys, st.layout, st.settings->detached);
+  if (st.settings->render) {
+    st.renderer = spawn_renderer(sys, st.layout, st.settings->detached);
+    self->link_to(st.renderer);
+    st.router.self_node = st.settings->info();
+  }
   st.tiler = spawn_tiler(sys, {st.settings->coefficient.renderer()});
   st.encoder = spawn_encoder(sys, st.settings->detached);
   st.display = spawn_display(sys, st.sink, st.encoder, st.settings, id);
-  self->link_to(st.renderer);
   self->link_to(st.tiler);
   self->link_to(st.encoder);
   self->link_to(st.display);
@@ -270,6 +454,16 @@ session_actor::behavior_type session_impl(self_ptr self, std::shared_ptr<ClientS
     node_log(*settings, "{\"session\": " + std::to_string(id) + ", \"closed\": true}");
   });
   log(self, "\"opened\": true, \"token\": \"" + json_escape(st.sink->token()) + "\"");
+  // The client's tree: workers on the children this node is connected to (and, every
+  // reconnect period, on children that came back).
+  st.router.layout = st.layout;
+  st.router.log = [self](const std::string& line) { log(self, line); };
+  st.node = caf::actor_cast<node_actor>(st.settings->node.lock());
+  self->set_down_handler([=](caf::down_msg& m) { self->state.router.child_failed(m.source, to_string(m.reason)); });
+  if (st.node) {
+    join_children(self);
+    self->delayed_send(self, std::chrono::milliseconds(st.settings->reconnect_ms), tick_atom::value);
+  }
   return {
       [=](client_atom, std::vector<uint8_t>& bytes) { on_client(self, bytes); },
       [=](status_atom) -> SessionStatus {
@@ -289,8 +483,18 @@ session_actor::behavior_type session_impl(self_ptr self, std::shared_ptr<ClientS
       },
       [=](children_atom) -> std::vector<caf::actor> {
         auto& st = self->state;
-        return {caf::actor_cast<caf::actor>(st.renderer), caf::actor_cast<caf::actor>(st.tiler),
-                caf::actor_cast<caf::actor>(st.encoder), caf::actor_cast<caf::actor>(st.display)};
+        std::vector<caf::actor> out;
+        if (st.renderer) out.push_back(caf::actor_cast<caf::actor>(st.renderer));
+        out.push_back(caf::actor_cast<caf::actor>(st.tiler));
+        out.push_back(caf::actor_cast<caf::actor>(st.encoder));
+        out.push_back(caf::actor_cast<caf::actor>(st.display));
+        for (auto& c : st.router.children)
+          if (c.alive) out.push_back(caf::actor_cast<caf::actor>(c.worker));
+        return out;
+      },
+      [=](tick_atom) {
+        join_children(self);
+        self->delayed_send(self, std::chrono::milliseconds(self->state.settings->reconnect_ms), tick_atom::value);
       },
   };
 }

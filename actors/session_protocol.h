@@ -16,7 +16,8 @@ namespace tessera {
 
 using session_actor = caf::typed_actor<caf::reacts_to<client_atom, std::vector<uint8_t>>,
                                        caf::replies_to<status_atom>::with<SessionStatus>,
-                                       // renderer, tiler, encoder, display (tests, monitoring)
-                                       caf::replies_to<children_atom>::with<std::vector<caf::actor>>>;
+                                       // renderer, tiler, encoder, display, workers (tests, monitoring)
+                                       caf::replies_to<children_atom>::with<std::vector<caf::actor>>,
+                                       caf::reacts_to<tick_atom>>;  // look for children that came back
 
 }  // namespace tessera

@@ -1,5 +1,6 @@
 // Tiler actor: the SAT array of the last frame -> the tasks of the next (renderer/tiler.h).
 #include <chrono>
+#include <cmath>
 #include <optional>
 
 #include <caf/all.hpp>
@@ -35,7 +36,7 @@ tiler_actor::behavior_type tiler_impl(tiler_actor::stateful_pointer<tiler_state>
             std::string err;
             auto sat = Sat::try_deserialize(r.sats[i].data(), r.sats[i].size(), &err);
             if (!sat) continue;
-            double perf = 1.0;
+            double perf = i < r.perf.size() && r.perf[i] > 0 ? r.perf[i] : 1.0;
             arr.add(std::move(*sat), perf);
           }
           arr.finalize();
@@ -43,6 +44,11 @@ tiler_actor::behavior_type tiler_impl(tiler_actor::stateful_pointer<tiler_state>
         } catch (const std::exception&) {
           st.sats.reset();  // inconsistent SATs: the next frame is split by area
         }
+      },
+      [=](nodes_atom, std::vector<double>& coefficients) {
+        bool ok = !coefficients.empty();
+        for (double c : coefficients) ok &= std::isfinite(c) && c > 0;
+        if (ok) self->state.coefficients = std::move(coefficients);
       },
       [=](tasks_atom, const TaskRequest& req) -> TaskList {
         auto& st = self->state;

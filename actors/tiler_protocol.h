@@ -9,7 +9,10 @@
 
 namespace tessera {
 
+// nodes: the renderer coefficients of the rendering nodes from the next task request on
+// (the cluster's membership changed); the SATs already received stay valid.
 using tiler_actor =
-    caf::typed_actor<caf::reacts_to<sats_atom, SatReport>, caf::replies_to<tasks_atom, TaskRequest>::with<TaskList>>;
+    caf::typed_actor<caf::reacts_to<sats_atom, SatReport>, caf::replies_to<tasks_atom, TaskRequest>::with<TaskList>,
+                     caf::reacts_to<nodes_atom, std::vector<double>>>;
 
 }  // namespace tessera

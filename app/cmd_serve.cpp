@@ -5,6 +5,7 @@
 #include <thread>
 
 #include <caf/all.hpp>
+#include <caf/io/all.hpp>
 
 #include "app/command.h"
 #include "app/common.h"
@@ -22,7 +23,11 @@ const char* kHelp =
     "--scene preloads a glTF scene for clients that connect with an empty scene. Settings (INI group\n"
     "[tessera], see configs/single.ini): host, port, web-root, scene, max-clients, render-threads,\n"
     "logical-cores, single-core-perf, max-width, max-height, max-message-bytes, max-buffer-bytes,\n"
-    "max-client-bytes, max-triangles, max-texture-size, log-frames. Stops on SIGINT/SIGTERM.\n";
+    "max-client-bytes, max-triangles, max-texture-size, log-frames.\n"
+    "Cluster (docs/operations.md): [--cluster-port P] publishes this node to parents; [--children H:P,H:P]\n"
+    "names its children; [--no-render] makes it a hub or dedicated master; [--no-http] serves no clients.\n"
+    "INI: cluster-port, cluster-host, children, render, http, name, task-timeout-ms, reconnect-ms.\n"
+    "Stops on SIGINT/SIGTERM.\n";
 
 int run(const std::vector<std::string>& argv) {
   Args args(argv);
@@ -32,6 +37,9 @@ int run(const std::vector<std::string>& argv) {
   std::string scenes_root = args.str("--scenes-root");
   long port = args.integer("--port", -1);
   long threads = args.integer("--threads", 0);
+  long cluster_port = args.integer("--cluster-port", -2);
+  std::string children = args.str("--children");
+  bool no_render = args.flag("--no-render"), no_http = args.flag("--no-http");
   // Everything else of the form --group.name=value goes to CAF's parser.
   caf::actor_system_config::string_list caf_args;
   for (const auto& a : argv)
@@ -61,6 +69,19 @@ int run(const std::vector<std::string>& argv) {
   if (!web_root.empty()) cfg.web_root = web_root;
   if (!scene.empty()) cfg.scene = scene;
   if (threads > 0) cfg.render_threads = int(threads);
+  if (cluster_port >= -1) cfg.cluster_port = int(cluster_port);
+  if (!children.empty()) {
+    cfg.children.clear();
+    for (size_t at = 0; at <= children.size();) {
+      size_t comma = children.find(',', at);
+      if (comma == std::string::npos) comma = children.size();
+      if (comma > at) cfg.children.push_back(children.substr(at, comma - at));
+      at = comma + 1;
+    }
+  }
+  if (no_render) cfg.renders = false;
+  if (no_http) cfg.http = false;
+  if (cfg.cluster()) cfg.load<caf::io::middleman>();
   std::unique_ptr<tbb::global_control> limit;
   if (cfg.render_threads > 0)
     limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, size_t(cfg.render_threads));
@@ -68,18 +89,43 @@ int run(const std::vector<std::string>& argv) {
   ServerOptions opts = cfg.server_options();
   if (!scenes_root.empty()) opts.scenes_root = scenes_root;
   caf::actor_system sys{cfg};
-  Server server(sys, settings, opts);
-  server.start();
-  std::printf("{\"listening\": \"http://%s:%u/\", \"websocket\": \"ws://%s:%u/ws\", \"web_root\": %s, "
-              "\"scene\": %s, \"max_clients\": %d, \"render_threads\": %d, \"cpu\": %s}\n",
-              opts.host.c_str(), server.port(), opts.host.c_str(), server.port(), json_str(opts.web_root).c_str(),
-              json_str(cfg.scene).c_str(), cfg.max_clients,
+  node_actor node;
+  int published = -1;
+  if (cfg.cluster()) {
+    node = spawn_node(sys, settings);
+    settings->node = caf::actor_cast<caf::weak_actor_ptr>(node);
+    if (cfg.cluster_port >= 0) {
+      auto p = sys.middleman().publish(node, uint16_t(cfg.cluster_port), cfg.cluster_host.c_str(), true);
+      if (!p) {
+        caf::anon_send_exit(node, caf::exit_reason::user_shutdown);
+        throw std::invalid_argument("cannot publish the node on " + cfg.cluster_host + ":" +
+                                    std::to_string(cfg.cluster_port) + ": " + sys.render(p.error()));
+      }
+      published = *p;
+    }
+  }
+  std::unique_ptr<Server> server;
+  if (cfg.http) {
+    server = std::make_unique<Server>(sys, settings, opts);
+    server->start();
+  }
+  std::string kids;
+  for (auto& c : cfg.children) kids += (kids.empty() ? "" : ", ") + json_str(c);
+  std::printf("{\"listening\": %s, \"websocket\": %s, \"cluster\": %s, \"name\": %s, \"children\": [%s], "
+              "\"render\": %s, \"web_root\": %s, \"scene\": %s, \"max_clients\": %d, \"render_threads\": %d, "
+              "\"cpu\": %s}\n",
+              server ? json_str("http://" + opts.host + ":" + std::to_string(server->port()) + "/").c_str() : "null",
+              server ? json_str("ws://" + opts.host + ":" + std::to_string(server->port()) + "/ws").c_str() : "null",
+              published >= 0 ? json_str(cfg.cluster_host + ":" + std::to_string(published)).c_str() : "null",
+              json_str(settings->name).c_str(), kids.c_str(), cfg.renders ? "true" : "false",
+              json_str(opts.web_root).c_str(), json_str(cfg.scene).c_str(), cfg.max_clients,
               cfg.render_threads > 0 ? cfg.render_threads : hardware_threads(), json_str(cpu_model()).c_str());
   std::fflush(stdout);
   int sig = 0;
   sigwait(&sigs, &sig);
   std::fprintf(stderr, "{\"stopping\": true, \"signal\": %d}\n", sig);
-  server.stop();
+  if (server) server->stop();
+  if (node) caf::anon_send_exit(node, caf::exit_reason::user_shutdown);
   sys.await_all_actors_done();
   return 0;
 }

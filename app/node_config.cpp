@@ -29,7 +29,15 @@ NodeConfig::NodeConfig() {
       .add(max_client_bytes, "max-client-bytes", "buffers + textures held per client")
       .add(max_triangles, "max-triangles", "triangles per client scene")
       .add(max_texture_size, "max-texture-size", "largest texture width/height")
-      .add(log_frames, "log-frames", "log one JSON line per frame");
+      .add(log_frames, "log-frames", "log one JSON line per frame")
+      .add(cluster_port, "cluster-port", "publish this node to parent nodes on this port (-1: off, 0: any)")
+      .add(cluster_host, "cluster-host", "address of the cluster port (0.0.0.0: all interfaces)")
+      .add(children, "children", "child nodes as [\"host:port\", ...]")
+      .add(renders, "render", "render tasks here (false: hub or dedicated master)")
+      .add(http, "http", "serve HTTP and WebSocket clients (false: worker or hub only)")
+      .add(name, "name", "this node's name in node lists and logs (default host:cluster-port)")
+      .add(task_timeout_ms, "task-timeout-ms", "fail a sub-tree that has not returned its tiles after this long")
+      .add(reconnect_ms, "reconnect-ms", "retry period for lost child nodes");
 }
 
 std::shared_ptr<NodeSettings> NodeConfig::node_settings() const {
@@ -54,6 +62,16 @@ std::shared_ptr<NodeSettings> NodeConfig::node_settings() const {
     for (auto& w : loaded.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
     s->preload = std::make_shared<const Scene>(std::move(loaded.scene));
   }
+  if (task_timeout_ms < 50) throw std::invalid_argument("tessera.task-timeout-ms must be >= 50");
+  if (reconnect_ms < 10) throw std::invalid_argument("tessera.reconnect-ms must be >= 10");
+  if (cluster_port < -1 || cluster_port > 65535) throw std::invalid_argument("tessera.cluster-port must be in -1..65535");
+  s->render = renders;
+  s->children = children;
+  s->task_timeout_ms = uint32_t(task_timeout_ms);
+  s->reconnect_ms = uint32_t(reconnect_ms);
+  s->name = !name.empty() ? name
+            : cluster_port > 0 ? cluster_host + ":" + std::to_string(cluster_port)
+                               : "local";
   if (!log_frames) s->log = [](const std::string& line) {
     if (line.find("\"frame\"") == std::string::npos) std::fprintf(stderr, "%s\n", line.c_str());
   };

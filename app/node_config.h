@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include <caf/actor_system_config.hpp>
 
@@ -29,6 +30,16 @@ struct NodeConfig : caf::actor_system_config {
   int64_t max_triangles = 20'000'000;
   int max_texture_size = 8192;
   bool log_frames = true;
+  // Cluster (docs/operations.md): this node's CAF endpoint and its children.
+  int cluster_port = -1;          // publish the node actor here (-1: not a child of anyone; 0: any port)
+  std::string cluster_host = "127.0.0.1";  // address the cluster port binds to
+  std::vector<std::string> children;       // "host:port" of child nodes
+  bool renders = true;            // false: hub or dedicated master
+  bool http = true;               // false: no HTTP/WebSocket endpoint (a worker or hub only)
+  std::string name;               // in node lists and logs (default host:cluster-port)
+  int task_timeout_ms = 5000;
+  int reconnect_ms = 1000;
+  bool cluster() const { return cluster_port >= 0 || !children.empty(); }
 
   NodeConfig();
   // Fills NodeSettings and ServerOptions (limits checked; throws std::invalid_argument).

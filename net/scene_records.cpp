@@ -48,4 +48,19 @@ std::vector<std::vector<uint8_t>> pack_messages(const std::vector<ClientRecord>&
   return out;
 }
 
+void append_message(std::vector<uint8_t>& message, std::vector<uint8_t>&& more) {
+  if (more.size() < kMessageHeaderSize) return;
+  if (message.empty()) {
+    message = std::move(more);
+    return;
+  }
+  // The record count is the header's last field (u32, little endian).
+  auto count = [](const std::vector<uint8_t>& m) {
+    return uint32_t(m[4]) | uint32_t(m[5]) << 8 | uint32_t(m[6]) << 16 | uint32_t(m[7]) << 24;
+  };
+  const uint32_t n = count(message) + count(more);
+  message.insert(message.end(), more.begin() + long(kMessageHeaderSize), more.end());
+  for (int i = 0; i < 4; ++i) message[size_t(4 + i)] = uint8_t(n >> (8 * i));
+}
+
 }  // namespace tessera::protocol

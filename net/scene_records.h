@@ -25,4 +25,8 @@ std::vector<ClientRecord> scene_to_records(const Scene& scene, const SceneRecord
 // that travels alone in its own message, where the server will reject it as too large).
 std::vector<std::vector<uint8_t>> pack_messages(const std::vector<ClientRecord>& records, size_t max_message_bytes);
 
+// Appends the records of client message `more` to client message `message` (empty: becomes
+// `more`), so a node can forward exactly the records it accepted, in one message.
+void append_message(std::vector<uint8_t>& message, std::vector<uint8_t>&& more);
+
 }  // namespace tessera::protocol

@@ -1,0 +1,325 @@
+// Node and worker actors of the cluster (cluster_protocol.h) and the tile checks of the
+// router (router.h).
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+
+#include <caf/all.hpp>
+#include <caf/io/middleman.hpp>
+#include <caf/io/middleman_actor.hpp>
+
+#include "actors/node.h"
+#include "actors/router.h"
+#include "renderer/sat.h"
+
+namespace tessera {
+
+std::string check_tile(const TileResult& t, uint32_t frame, const Rect& expected, PacketLayout layout, int32_t width,
+                       int32_t height) {
+  auto str = [](const Rect& r) {
+    return "[" + std::to_string(r.x0) + "," + std::to_string(r.y0) + "," + std::to_string(r.x1) + "," +
+           std::to_string(r.y1) + "]";
+  };
+  if (t.frame != frame) return "tile of frame " + std::to_string(t.frame) + " in frame " + std::to_string(frame);
+  if (!(t.pixels == expected)) return "tile " + str(t.pixels) + " for task " + str(expected);
+  if (t.rgba.size() != size_t(expected.area()) * 4)
+    return "tile " + str(expected) + " with " + std::to_string(t.rgba.size()) + " bytes of pixels, expected " +
+           std::to_string(size_t(expected.area()) * 4);
+  if (!std::isfinite(t.kernel_ms) || t.kernel_ms < 0 || !std::isfinite(t.rendering_ms) || t.rendering_ms < 0 ||
+      !std::isfinite(t.sat_ms) || t.sat_ms < 0)
+    return "impossible timings";
+  if (!t.sat.empty()) {
+    std::string err;
+    auto sat = Sat::try_deserialize(t.sat.data(), t.sat.size(), &err);
+    if (!sat) return "cost SAT: " + err;
+    // The packets the task covers (its pixel rectangle, rounded out to packets).
+    Rect want{expected.x0 / layout.w, expected.y0 / layout.h, (expected.x1 + layout.w - 1) / layout.w,
+              (expected.y1 + layout.h - 1) / layout.h};
+    if (!(sat->packets() == want) || !packet_space(width, height, layout).contains(sat->packets()))
+      return "cost SAT over packets " + str(sat->packets()) + " for task packets " + str(want);
+  }
+  return {};
+}
+
+std::string nodes_json(const std::vector<NodeInfo>& nodes) {
+  std::string s = "[";
+  for (size_t i = 0; i < nodes.size(); ++i) {
+    char buf[64];
+    std::snprintf(buf, sizeof buf, "\", \"cores\": %d, \"perf\": %.3g}", nodes[i].logical_cores,
+                  nodes[i].single_core_perf);
+    s += (i ? ", " : "") + std::string("{\"name\": \"") + nodes[i].name + buf;
+  }
+  return s + "]";
+}
+
+std::string apply_records(Scene& scene, const std::vector<uint8_t>& bytes, const protocol::Limits& node_limits) {
+  if (bytes.empty()) return {};
+  // The scene-level limits are this node's own; a forwarded message may be bigger than a
+  // client's (a whole scene when a node joins), so the message-level ones are lifted.
+  protocol::Limits lim = node_limits;
+  lim.max_message_bytes = std::max<uint32_t>(lim.max_message_bytes, uint32_t(std::min<size_t>(bytes.size(), 0xffffffffu)));
+  lim.max_records = 0xffffffffu;
+  lim.max_message_payload_bytes = std::max<uint64_t>(lim.max_message_payload_bytes, lim.max_client_bytes);
+  auto res = protocol::decode_client(bytes.data(), bytes.size(), lim);
+  if (!res) return res.error().message;
+  std::string first;
+  for (auto& r : res.value()) {
+    auto st = protocol::apply(scene, std::move(r), lim);
+    if (!st && first.empty()) first = st.error().message;
+  }
+  return first;
+}
+
+namespace {
+
+// --- Worker -----------------------------------------------------------------------------
+
+struct worker_state {
+  std::shared_ptr<const NodeSettings> settings;
+  node_actor node;
+  OpenRequest req;
+  caf::actor_addr parent;
+  std::shared_ptr<Scene> scene = std::make_shared<Scene>();
+  std::vector<std::pair<std::vector<uint8_t>, bool>> cached;  // updates that arrived while rendering
+  bool in_flight = false;
+  std::string broken;  // an update this node could not apply: its tiles would be wrong
+  renderer_actor renderer;
+  Router router;
+  static inline const char* name = "tessera.worker";
+};
+using worker_ptr = worker_actor::stateful_pointer<worker_state>;
+
+void worker_log(worker_ptr self, const std::string& what) {
+  auto& st = self->state;
+  node_log(*st.settings, "{\"node\": \"" + st.settings->name + "\", \"session\": " + std::to_string(st.req.session) +
+                             ", " + what + "}");
+}
+
+void worker_apply(worker_ptr self, const std::vector<uint8_t>& bytes, bool reset) {
+  auto& st = self->state;
+  if (reset) {
+    st.scene = std::make_shared<Scene>();
+    st.broken.clear();
+  }
+  std::string err = apply_records(*st.scene, bytes, st.settings->limits);
+  if (!err.empty() && st.broken.empty()) {
+    st.broken = err;
+    worker_log(self, "\"update_failed\": \"" + err + "\"");
+  }
+}
+
+void worker_apply_cached(worker_ptr self) {
+  auto& st = self->state;
+  auto cached = std::move(st.cached);
+  st.cached.clear();
+  for (auto& [bytes, reset] : cached) worker_apply(self, bytes, reset);
+}
+
+worker_actor::behavior_type worker_impl(worker_ptr self, std::shared_ptr<const NodeSettings> settings, node_actor node,
+                                        OpenRequest req, caf::strong_actor_ptr parent) {
+  auto& st = self->state;
+  st.settings = std::move(settings);
+  st.node = std::move(node);
+  st.req = req;
+  st.router.layout = {req.packet_w, req.packet_h};
+  st.router.log = [self](const std::string& line) { worker_log(self, line); };
+  if (st.settings->render) {
+    st.router.self_node = st.settings->info();
+    st.renderer = spawn_renderer(self->system(), st.router.layout, st.settings->detached);
+    self->link_to(st.renderer);
+  }
+  if (parent) {
+    st.parent = caf::actor_cast<caf::actor_addr>(parent);
+    self->monitor(parent);
+  }
+  if (st.node) self->monitor(st.node);  // the node shuts down: its workers go with it
+  self->set_down_handler([=](caf::down_msg& m) {
+    if (m.source == self->state.parent || (self->state.node && m.source == self->state.node.address())) {
+      self->quit(caf::exit_reason::user_shutdown);  // the session ended, or its link to us broke
+      return;
+    }
+    self->state.router.child_failed(m.source, to_string(m.reason));
+  });
+  auto snapshot = [self] {
+    auto& st = self->state;
+    std::vector<std::pair<std::vector<uint8_t>, bool>> out;
+    out.emplace_back(scene_snapshot_bytes(SceneSnapshot{st.scene}), true);
+    for (auto& c : st.cached) out.push_back(c);  // not applied here yet, but already forwarded
+    return out;
+  };
+  auto join = [self, snapshot] {
+    auto& st = self->state;
+    OpenRequest r = st.req;
+    r.master = st.settings->name;
+    st.router.join_children(self, st.node, r, st.settings->task_timeout_ms, snapshot);
+  };
+  join();
+  self->delayed_send(self, std::chrono::milliseconds(st.settings->reconnect_ms), tick_atom::value);
+  return {
+      [=](update_atom, std::vector<uint8_t>& bytes, bool reset) {
+        auto& st = self->state;
+        st.router.forward(self, bytes, reset);
+        if (st.in_flight) st.cached.emplace_back(std::move(bytes), reset);
+        else worker_apply(self, bytes, reset);
+      },
+      [=](render_atom, RenderBatch& batch) -> caf::result<BatchReply> {
+        auto rp = self->make_response_promise<BatchReply>();
+        auto local = [self](const RenderTask& t, std::function<void(TileResult&&)> cb) {
+          auto& st = self->state;
+          if (!st.broken.empty()) {
+            TileResult r;
+            r.frame = t.frame;
+            r.pixels = t.pixels;
+            r.error = "node " + st.settings->name + " has no valid scene: " + st.broken;
+            cb(std::move(r));
+            return;
+          }
+          if (st.scene->width() != t.width || st.scene->height() != t.height) st.scene->set_resolution(t.width, t.height);
+          st.in_flight = true;
+          self->request(st.renderer, caf::infinite, render_atom::value, SceneSnapshot{st.scene}, t)
+              .then(
+                  [=](TileResult& r) {
+                    self->state.in_flight = false;
+                    worker_apply_cached(self);
+                    cb(std::move(r));
+                  },
+                  [=](caf::error& e) {
+                    self->state.in_flight = false;
+                    worker_apply_cached(self);
+                    TileResult r;
+                    r.frame = t.frame;
+                    r.pixels = t.pixels;
+                    r.error = "renderer: " + to_string(e);
+                    cb(std::move(r));
+                  });
+        };
+        self->state.router.dispatch(self, batch, local, [rp](BatchReply&& r) mutable { rp.deliver(std::move(r)); });
+        return rp;
+      },
+      [=](nodes_atom) -> caf::result<std::vector<NodeInfo>> {
+        auto rp = self->make_response_promise<std::vector<NodeInfo>>();
+        self->state.router.commit(self, self->state.settings->task_timeout_ms,
+                                  [rp](std::vector<NodeInfo> l) mutable { rp.deliver(std::move(l)); });
+        return rp;
+      },
+      [=](tick_atom) {
+        join();
+        self->delayed_send(self, std::chrono::milliseconds(self->state.settings->reconnect_ms), tick_atom::value);
+      },
+  };
+}
+
+// --- Node -------------------------------------------------------------------------------
+
+struct node_state {
+  std::shared_ptr<const NodeSettings> settings;
+  struct Child {
+    std::string name, host;
+    uint16_t port = 0;
+    node_actor node;
+    bool connecting = false;
+    bool reported = false;  // a failure to connect was logged (log the next change only)
+  };
+  std::vector<Child> children;
+  static inline const char* name = "tessera.node";
+};
+using node_ptr = node_actor::stateful_pointer<node_state>;
+
+void node_event(node_ptr self, const std::string& what) {
+  node_log(*self->state.settings, "{\"node\": \"" + self->state.settings->name + "\", " + what + "}");
+}
+
+void connect_child(node_ptr self, size_t i) {
+  auto& c = self->state.children[i];
+  if (c.node || c.connecting || !self->system().has_middleman()) return;
+  c.connecting = true;
+  auto mm = self->system().middleman().actor_handle();
+  self->request(mm, std::chrono::seconds(5), caf::connect_atom::value, c.host, c.port)
+      .then(
+          [=](const caf::node_id&, caf::strong_actor_ptr& p, const std::set<std::string>&) {
+            auto& c = self->state.children[i];
+            c.connecting = false;
+            if (!p) return;
+            c.node = caf::actor_cast<node_actor>(p);
+            c.reported = false;
+            self->monitor(c.node);
+            node_event(self, "\"child_connected\": \"" + c.name + "\"");
+          },
+          [=](caf::error& e) {
+            auto& c = self->state.children[i];
+            c.connecting = false;
+            if (!c.reported) node_event(self, "\"child_unreachable\": \"" + c.name + "\", \"reason\": \"" +
+                                                  self->system().render(e) + "\"");
+            c.reported = true;
+          });
+}
+
+node_actor::behavior_type node_impl(node_ptr self, std::shared_ptr<const NodeSettings> settings) {
+  auto& st = self->state;
+  st.settings = std::move(settings);
+  for (const auto& spec : st.settings->children) {
+    node_state::Child c;
+    c.name = spec;
+    auto colon = spec.rfind(':');
+    c.host = spec.substr(0, colon);
+    c.port = uint16_t(std::stoi(spec.substr(colon + 1)));
+    st.children.push_back(std::move(c));
+  }
+  for (size_t i = 0; i < st.children.size(); ++i) connect_child(self, i);
+  self->set_down_handler([=](caf::down_msg& m) {
+    for (auto& c : self->state.children)
+      if (c.node && c.node.address() == m.source) {
+        c.node = nullptr;
+        node_event(self, "\"child_lost\": \"" + c.name + "\", \"reason\": \"" + to_string(m.reason) + "\"");
+      }
+  });
+  if (!st.children.empty())
+    self->delayed_send(self, std::chrono::milliseconds(st.settings->reconnect_ms), tick_atom::value);
+  return {
+      [=](open_atom, const OpenRequest& req) -> caf::result<OpenReply> {
+        auto& st = self->state;
+        auto rp = self->make_response_promise<OpenReply>();
+        auto w = spawn_worker(self->system(), st.settings, caf::actor_cast<node_actor>(self), req,
+                              self->current_sender());
+        node_event(self, "\"worker_opened\": " + std::to_string(req.session) + ", \"master\": \"" + req.master + "\"");
+        self->request(w, std::chrono::milliseconds(2 * st.settings->task_timeout_ms), nodes_atom::value)
+            .then([=](std::vector<NodeInfo>& l) mutable { rp.deliver(OpenReply{caf::actor_cast<caf::actor>(w), l}); },
+                  [=](caf::error& e) mutable {
+                    self->send_exit(w, caf::exit_reason::user_shutdown);
+                    rp.deliver(e);
+                  });
+        return rp;
+      },
+      [=](links_atom) {
+        std::vector<ChildLink> out;
+        for (auto& c : self->state.children)
+          if (c.node) out.push_back(ChildLink{c.name, caf::actor_cast<caf::actor>(c.node)});
+        return out;
+      },
+      [=](tick_atom) {
+        auto& st = self->state;
+        for (size_t i = 0; i < st.children.size(); ++i) connect_child(self, i);
+        self->delayed_send(self, std::chrono::milliseconds(st.settings->reconnect_ms), tick_atom::value);
+      },
+  };
+}
+
+}  // namespace
+
+worker_actor spawn_worker(caf::actor_system& sys, std::shared_ptr<const NodeSettings> settings, node_actor node,
+                          OpenRequest request, caf::strong_actor_ptr parent) {
+  return sys.spawn(worker_impl, std::move(settings), std::move(node), std::move(request), std::move(parent));
+}
+
+node_actor spawn_node(caf::actor_system& sys, std::shared_ptr<const NodeSettings> settings) {
+  for (const auto& spec : settings->children) {
+    auto colon = spec.rfind(':');
+    bool ok = colon != std::string::npos && colon > 0 && colon + 1 < spec.size() &&
+              spec.find_first_not_of("0123456789", colon + 1) == std::string::npos && spec.size() - colon <= 6 &&
+              std::stoi(spec.substr(colon + 1)) > 0 && std::stoi(spec.substr(colon + 1)) < 65536;
+    if (!ok) throw std::invalid_argument("child node '" + spec + "' is not host:port");
+  }
+  return sys.spawn(node_impl, std::move(settings));
+}
+
+}  // namespace tessera

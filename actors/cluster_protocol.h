@@ -1,0 +1,39 @@
+#pragma once
+// The cluster protocols (paper 5.2): nodes form a tree over CAF's middleman; every node
+// publishes one node actor on its cluster port; a session's master opens one worker per node
+// of its sub-tree, and the workers relay scene updates down and tiles up.
+//
+//   node_actor   (one per process, published)
+//     open      -> a worker for one session on this node's sub-tree, with its flattened
+//                  node list (renderer coefficients of every rendering node below, this node
+//                  first if it renders); recursive: the worker opens workers on the children
+//     links     -> the children this node is connected to now (used by its own workers to
+//                  notice children that came back)
+//   worker_actor (one per session per node)
+//     update    -> encoded client-protocol scene records (net/scene_records.h); reset=true
+//                  replaces the whole scene (a node that joins a running session). Applied at
+//                  once, or cached while this node renders, and forwarded to the children.
+//     render    -> BatchReply: renders its own task, relays the others, validates what the
+//                  children return, fails the tasks of a child that is down or too late.
+//     nodes     -> commits membership changes (dead children out, rejoined children in) and
+//                  returns the flattened list that the next batches are indexed by.
+//
+// Nothing is exchanged during a frame except the batch going down and the tiles coming up;
+// rendering nodes never talk to each other.
+#include <caf/typed_actor.hpp>
+#include <caf/replies_to.hpp>
+
+#include "actors/messages.h"
+
+namespace tessera {
+
+using worker_actor = caf::typed_actor<caf::reacts_to<update_atom, std::vector<uint8_t>, bool>,
+                                      caf::replies_to<render_atom, RenderBatch>::with<BatchReply>,
+                                      caf::replies_to<nodes_atom>::with<std::vector<NodeInfo>>,
+                                      caf::reacts_to<tick_atom>>;
+
+using node_actor = caf::typed_actor<caf::replies_to<open_atom, OpenRequest>::with<OpenReply>,
+                                    caf::replies_to<links_atom>::with<std::vector<ChildLink>>,
+                                    caf::reacts_to<tick_atom>>;
+
+}  // namespace tessera

@@ -1,0 +1,372 @@
+#pragma once
+// The fan-out of one sub-tree, shared by the session (the root of a client's tree) and the
+// workers below it (cluster_protocol.h): which nodes the sub-tree has, how a batch of tasks
+// is split between this node's own renderer and its children, collecting and validating what
+// comes back, failing the tasks of children that are down or too late, and children that
+// join (again) while the session runs.
+//
+// Header-only because every function runs inside an actor (templated on its self pointer);
+// all of it runs on that actor's thread.
+#include <chrono>
+#include <algorithm>
+#include <functional>
+#include <map>
+#include <memory>
+#include <optional>
+#include <set>
+#include <string>
+#include <vector>
+
+#include <caf/all.hpp>
+
+#include "actors/cluster_protocol.h"
+#include "actors/node.h"
+#include "renderer/rect.h"
+
+namespace tessera {
+
+// Why a tile that a node returned cannot be used (empty string: it can). `expected` is the
+// task that was sent; pixels and SAT must match it exactly.
+std::string check_tile(const TileResult& t, uint32_t frame, const Rect& expected, PacketLayout layout, int32_t width,
+                       int32_t height);
+
+// The flattened list of a sub-tree and the JSON of a node list, for log lines.
+std::string nodes_json(const std::vector<NodeInfo>& nodes);
+
+struct RouterChild {
+  std::string name;            // the child's cluster address as this node knows it
+  worker_actor worker;
+  std::vector<NodeInfo> nodes; // its flattened list as of the last commit
+  bool alive = true;
+  bool routed = false;         // part of the committed list (batches are indexed by it)
+};
+
+// One batch in flight: the reply being assembled, part by part (this node's own task, then
+// one part per routed child).
+struct BatchJoin {
+  BatchReply reply;
+  std::vector<bool> part_done;
+  size_t left = 0;
+  std::function<void(BatchReply&&)> done;
+
+  void finish_part(size_t part) {
+    if (part_done[part]) return;
+    part_done[part] = true;
+    if (--left == 0 && done) {
+      auto d = std::move(done);
+      done = nullptr;
+      d(std::move(reply));
+    }
+  }
+};
+
+class Router {
+ public:
+  using LocalRender = std::function<void(const RenderTask&, std::function<void(TileResult&&)>)>;
+
+  std::optional<NodeInfo> self_node;  // set when this node renders
+  std::vector<RouterChild> children;
+  bool changed = false;               // membership changed since the last commit
+  PacketLayout layout;
+  std::function<void(const std::string&)> log;
+
+  // The committed flattened list: this node first (if it renders), then each routed child's.
+  std::vector<NodeInfo> list() const {
+    std::vector<NodeInfo> out;
+    if (self_node) out.push_back(*self_node);
+    for (auto& c : children)
+      if (c.routed) out.insert(out.end(), c.nodes.begin(), c.nodes.end());
+    return out;
+  }
+  bool busy() const { return opening_ > 0 || committing_; }
+  size_t alive_children() const {
+    size_t n = 0;
+    for (auto& c : children) n += c.alive;
+    return n;
+  }
+
+  // A child's worker is down (down message) or failed a request: its outstanding tasks
+  // fail now, it leaves at the next commit.
+  void child_failed(const caf::actor_addr& who, const std::string& why) {
+    for (auto& c : children)
+      if (c.alive && c.worker.address() == who) {
+        mark_dead(c, why);  // may run batch callbacks that change `children`: stop here
+        return;
+      }
+  }
+
+  // Sends encoded scene records to every live child (routed or joining).
+  template <class Self>
+  void forward(Self* self, const std::vector<uint8_t>& records, bool reset) {
+    for (auto& c : children)
+      if (c.alive) self->send(c.worker, update_atom::value, records, reset);
+  }
+
+  // Splits a batch indexed by list() between the local renderer and the children.
+  template <class Self>
+  void dispatch(Self* self, const RenderBatch& b, const LocalRender& local, std::function<void(BatchReply&&)> done) {
+    auto join = std::make_shared<BatchJoin>();
+    join->done = std::move(done);
+    join->reply.tiles.resize(b.tasks.size());
+    for (size_t i = 0; i < b.tasks.size(); ++i) {
+      join->reply.tiles[i].frame = b.frame;
+      join->reply.tiles[i].pixels = b.tasks[i];
+    }
+    const std::vector<NodeInfo> nodes = list();
+    if (b.tasks.size() != nodes.size()) {
+      for (auto& t : join->reply.tiles)
+        t.error = "batch of " + std::to_string(b.tasks.size()) + " tasks for a sub-tree of " +
+                  std::to_string(nodes.size()) + " nodes";
+      join->reply.changed = true;
+      auto d = std::move(join->done);
+      d(std::move(join->reply));
+      return;
+    }
+    // Parts: [own task] + one per routed child.
+    size_t parts = (self_node ? 1 : 0);
+    for (auto& c : children) parts += c.routed;
+    join->part_done.assign(parts + 1, false);  // +1: this call's own guard part
+    join->left = parts + 1;
+    size_t part = 0, at = 0;
+    if (self_node) {
+      const size_t my_part = part++;
+      const size_t my_at = at++;
+      if (b.tasks[my_at].empty()) {
+        join->finish_part(my_part);
+      } else {
+        RenderTask t;
+        t.frame = b.frame;
+        t.width = b.width;
+        t.height = b.height;
+        t.pixels = b.tasks[my_at];
+        t.ao_samples = b.ao_samples;
+        t.max_depth = b.max_depth;
+        local(t, [join, my_part, my_at](TileResult&& r) {
+          if (join->part_done[my_part]) return;
+          if (r.pixels.empty() && r.error.empty()) r.pixels = join->reply.tiles[my_at].pixels;
+          join->reply.tiles[my_at] = std::move(r);
+          join->finish_part(my_part);
+        });
+      }
+    }
+    for (auto& c : children) {
+      if (!c.routed) continue;
+      const size_t my_part = part++;
+      const size_t begin = at, count = c.nodes.size();
+      at += count;
+      RenderBatch sub = b;
+      sub.tasks.assign(b.tasks.begin() + long(begin), b.tasks.begin() + long(begin + count));
+      // Children below answer earlier than we must, so a late grandchild fails at its own
+      // parent and the healthy tiles of that sub-tree still arrive in time.
+      sub.timeout_ms = std::max<uint32_t>(50, b.timeout_ms * 4 / 5);
+      bool any = false;
+      for (auto& r : sub.tasks) any |= !r.empty();
+      if (!c.alive) {
+        fail_range(*join, begin, count, "node " + c.name + " is down");
+        join->finish_part(my_part);
+        continue;
+      }
+      if (!any) {
+        join->finish_part(my_part);
+        continue;
+      }
+      auto& out = outstanding_of(c);
+      out.erase(std::remove_if(out.begin(), out.end(),
+                               [](const Outstanding& o) {
+                                 auto j = o.join.lock();
+                                 return !j || j->part_done[o.part];
+                               }),
+                out.end());
+      out.push_back({join, my_part, begin, count});
+      const std::string name = c.name;
+      const caf::actor_addr addr = c.worker.address();
+      self->request(c.worker, std::chrono::milliseconds(b.timeout_ms), render_atom::value, std::move(sub))
+          .then(
+              [=](BatchReply& r) {
+                if (join->part_done[my_part]) return;
+                if (r.changed) changed = true;
+                if (r.tiles.size() != count) {
+                  log_bad(name, "returned " + std::to_string(r.tiles.size()) + " tiles for " +
+                                    std::to_string(count) + " tasks");
+                  fail_range(*join, begin, count, "node " + name + " returned a malformed batch");
+                } else {
+                  for (size_t i = 0; i < count; ++i) {
+                    TileResult& t = r.tiles[i];
+                    const Rect want = join->reply.tiles[begin + i].pixels;
+                    if (t.error.empty()) {
+                      std::string bad = check_tile(t, b.frame, want, layout, b.width, b.height);
+                      if (!bad.empty()) {
+                        log_bad(name, bad);
+                        t = TileResult{};
+                        t.error = "node " + name + " sent an impossible tile: " + bad;
+                      }
+                    }
+                    t.frame = b.frame;
+                    t.pixels = want;
+                    join->reply.tiles[begin + i] = std::move(t);
+                  }
+                }
+                join->finish_part(my_part);
+              },
+              [=](caf::error& e) {
+                child_failed(addr, to_string(e));
+                if (join->part_done[my_part]) return;
+                fail_range(*join, begin, count, "node " + name + ": " + to_string(e));
+                join->finish_part(my_part);
+              });
+    }
+    join->reply.changed = changed;
+    join->finish_part(parts);  // the guard: done runs once, after every part was started
+  }
+
+  // Commits membership: dead children leave, joined children enter, and every live child
+  // commits its own sub-tree; `done` gets the new flattened list. Waits for joins in flight.
+  template <class Self>
+  void commit(Self* self, uint32_t timeout_ms, std::function<void(std::vector<NodeInfo>)> done) {
+    if (busy()) {
+      after_.push_back([=] { commit(self, timeout_ms, done); });
+      return;
+    }
+    std::vector<RouterChild> keep;
+    for (auto& c : children) {
+      if (c.alive) keep.push_back(std::move(c));
+      else self->send_exit(c.worker, caf::exit_reason::user_shutdown);  // a zombie must not render on
+    }
+    children = std::move(keep);
+    changed = false;
+    if (children.empty()) {
+      done(list());
+      return;
+    }
+    committing_ = true;
+    auto left = std::make_shared<size_t>(children.size());
+    auto finish = [=] {
+      if (--*left > 0) return;
+      committing_ = false;
+      std::vector<RouterChild> alive;
+      for (auto& c : children)
+        if (c.alive) alive.push_back(std::move(c));
+      children = std::move(alive);
+      done(list());
+      run_after();
+    };
+    for (auto& c : children) {
+      const caf::actor_addr addr = c.worker.address();
+      self->request(c.worker, std::chrono::milliseconds(timeout_ms), nodes_atom::value)
+          .then(
+              [=](std::vector<NodeInfo>& nodes) {
+                for (auto& x : children)
+                  if (x.worker.address() == addr) {
+                    x.nodes = std::move(nodes);
+                    x.routed = x.alive;
+                  }
+                finish();
+              },
+              [=](caf::error& e) {
+                child_failed(addr, "nodes query: " + to_string(e));
+                finish();
+              });
+    }
+  }
+
+  // Opens workers on the children that `node` is connected to and this router does not
+  // have yet; each new one gets the whole scene (snapshot()) and enters at the next commit.
+  template <class Self>
+  void join_children(Self* self, const node_actor& node, const OpenRequest& req, uint32_t timeout_ms,
+                     std::function<std::vector<std::pair<std::vector<uint8_t>, bool>>()> snapshot) {
+    if (!node) return;
+    ++opening_;
+    self->request(node, std::chrono::milliseconds(timeout_ms), links_atom::value)
+        .then(
+            [=](std::vector<ChildLink>& links) {
+              for (auto& l : links) {
+                bool have = joining_.count(l.name) > 0;
+                for (auto& c : children) have |= c.alive && c.name == l.name;
+                if (have || !l.node) continue;
+                joining_.insert(l.name);
+                ++opening_;
+                const std::string name = l.name;
+                self->request(caf::actor_cast<node_actor>(l.node), std::chrono::milliseconds(timeout_ms),
+                              open_atom::value, req)
+                    .then(
+                        [=](OpenReply& r) {
+                          joining_.erase(name);
+                          auto w = caf::actor_cast<worker_actor>(r.worker);
+                          if (w) {
+                            self->monitor(w);
+                            for (auto& [bytes, reset] : snapshot()) self->send(w, update_atom::value, bytes, reset);
+                            RouterChild c;
+                            c.name = name;
+                            c.worker = w;
+                            c.nodes = std::move(r.nodes);
+                            children.push_back(std::move(c));
+                            changed = true;
+                            if (log) log("\"joined\": \"" + name + "\", \"nodes\": " + nodes_json(children.back().nodes));
+                          }
+                          opened();
+                        },
+                        [=](caf::error& e) {
+                          joining_.erase(name);
+                          if (log) log("\"join_failed\": \"" + name + "\", \"reason\": \"" + to_string(e) + "\"");
+                          opened();
+                        });
+              }
+              opened();
+            },
+            [=](caf::error&) { opened(); });
+  }
+
+ private:
+  struct Outstanding {
+    std::weak_ptr<BatchJoin> join;
+    size_t part, begin, count;
+  };
+  void fail_range(BatchJoin& j, size_t begin, size_t count, const std::string& why) {
+    for (size_t i = begin; i < begin + count; ++i) {
+      TileResult& t = j.reply.tiles[i];
+      t.rgba.clear();
+      t.sat.clear();
+      if (t.error.empty()) t.error = why;
+    }
+  }
+  void mark_dead(RouterChild& c, const std::string& why) {
+    c.alive = false;
+    changed = true;
+    const std::string name = c.name;
+    auto it = outstanding_.find(c.worker.address());
+    std::vector<Outstanding> outs;
+    if (it != outstanding_.end()) {
+      outs = std::move(it->second);
+      outstanding_.erase(it);
+    }
+    if (log) log("\"node_lost\": \"" + name + "\", \"reason\": \"" + why + "\"");
+    for (auto& o : outs) {
+      auto j = o.join.lock();
+      if (!j || j->part_done[o.part]) continue;
+      fail_range(*j, o.begin, o.count, "node " + name + " is down: " + why);
+      j->reply.changed = true;
+      j->finish_part(o.part);
+    }
+  }
+  void log_bad(const std::string& name, const std::string& what) {
+    if (log) log("\"rejected_tile\": \"" + name + "\", \"reason\": \"" + what + "\"");
+  }
+  void opened() {
+    if (--opening_ == 0) run_after();
+  }
+  void run_after() {
+    if (busy()) return;
+    auto a = std::move(after_);
+    after_.clear();
+    for (auto& f : a) f();
+  }
+  std::vector<Outstanding>& outstanding_of(RouterChild& c) { return outstanding_[c.worker.address()]; }
+
+  size_t opening_ = 0;
+  bool committing_ = false;
+  std::set<std::string> joining_;
+  std::vector<std::function<void()>> after_;
+  std::map<caf::actor_addr, std::vector<Outstanding>> outstanding_;
+};
+
+}  // namespace tessera
