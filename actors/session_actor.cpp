@@ -127,6 +127,9 @@ void start_frame(self_ptr self, uint32_t client_frame) {
   st.meta.display = uint8_t(st.hs.display);
   st.meta.quality = st.hs.jpeg_quality;
   st.meta.render_start_ns = now_ns();
+  st.meta.dropped = st.dropped;  // for the display channel's Stats record
+  st.meta.scene_bytes = scene_bytes(*st.scene);
+  st.meta.triangles = st.scene->triangle_count();
   st.tiles.clear();
   TaskRequest req{st.seq, st.meta.width, st.meta.height, st.layout.w, st.layout.h};
   RenderTask base;
