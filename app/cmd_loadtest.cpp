@@ -85,7 +85,8 @@ int run(const std::vector<std::string>& argv) {
   const auto records = protocol::scene_to_records(setup.loaded.scene, {false, false, false, true});
   const auto upload = protocol::pack_messages(records, 16u << 20);
   std::mutex mu;
-  std::vector<std::vector<std::pair<Clock::time_point, FrameRecord>>> received(size_t(clients));
+  using Received = std::vector<std::pair<Clock::time_point, FrameRecord>>;
+  std::vector<Received> received(static_cast<size_t>(clients));
   std::vector<double> upload_ms(size_t(clients), 0);
   std::vector<std::string> errors;
   std::atomic<int> ready{0}, finished{0};

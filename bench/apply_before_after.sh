@@ -27,7 +27,7 @@ int main(int argc, char** argv) {
 CPP
 libs="build/codecs/libtessera_codecs.a build/renderer/libtessera_scene.a -lturbojpeg -lsquish -lz -ltbb -lpng"
 build_one() {  # $1 = name, $2 = source root holding renderer/scene.* and net/protocol.*
-  g++ -std=c++17 -O2 -DNDEBUG -I"$2" -I. "$tmp/main.cpp" "$2/renderer/scene.cpp" "$2/net/protocol.cpp" $libs -o "$tmp/$1"
+  g++ -std=c++17 -O2 -DNDEBUG -I"$2" -I. "$tmp/main.cpp" "$2/renderer/scene.cpp" "$2/net/protocol.cpp" $libs -o "$tmp/$1.bin"
 }
 mkdir -p "$tmp/before/renderer" "$tmp/before/net" "$tmp/after/renderer" "$tmp/after/net"
 for f in renderer/scene.h renderer/scene.cpp net/protocol.h net/protocol.cpp; do
@@ -37,8 +37,8 @@ done
 build_one before "$tmp/before"
 build_one after "$tmp/after"
 for shared in 0 3000; do
-  nice "$tmp/before" "before ($BASE)" "$LIST" $shared
-  nice "$tmp/after" "after" "$LIST" $shared
+  nice "$tmp/before.bin" "before ($BASE)" "$LIST" $shared
+  nice "$tmp/after.bin" "after" "$LIST" $shared
 done
 printf '{"summary": true, "bench": "apply_before_after", "base": "%s", "cpu": "%s", "threads": 1}\n' \
   "$BASE" "$(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //')"
