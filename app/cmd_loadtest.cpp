@@ -88,6 +88,7 @@ int run(const std::vector<std::string>& argv) {
   using Received = std::vector<std::pair<Clock::time_point, FrameRecord>>;
   std::vector<Received> received(static_cast<size_t>(clients));
   std::vector<double> upload_ms(size_t(clients), 0);
+  std::vector<protocol::Stats> last_stats(static_cast<size_t>(clients));  // the node's own figures
   std::vector<std::string> errors;
   std::atomic<int> ready{0}, finished{0};
   std::atomic<bool> stop{false};
@@ -137,6 +138,7 @@ int run(const std::vector<std::string>& argv) {
         if (!recs) return fail("undecodable server message: " + recs.error().message);
         for (auto& r : recs.value()) {
           if (auto* e = std::get_if<protocol::ErrorReply>(&r)) return fail("server error: " + e->message);
+          if (auto* st = std::get_if<protocol::Stats>(&r)) last_stats[size_t(ci)] = *st;
           auto* f = std::get_if<protocol::Frame>(&r);
           if (!f) continue;
           last = now;
@@ -193,6 +195,11 @@ int run(const std::vector<std::string>& argv) {
     tiling.push_back(f.t.tiling_ms);
     bytes.push_back(double(f.bytes));
   }
+  // Bytes per frame as the node counts them (Stats): for MJPEG the JPEG parts, which the
+  // WebSocket's Frame records do not carry.
+  std::vector<double> node_bytes;
+  for (auto& st : last_stats)
+    if (st.frames) node_bytes.push_back(double(st.bytes_sent) / st.frames);
   double total_fps = 0;
   std::string per;
   for (size_t i = 0; i < fps.size(); ++i) {
@@ -203,10 +210,10 @@ int run(const std::vector<std::string>& argv) {
               "\"ao\": %d, \"window_s\": %.3f, \"frames_in_window\": %zu, \"fps_per_client\": [%s], \"fps_total\": %.3f, "
               "\"median_rendering_ms\": %.3f, \"median_kernel_ms\": %.3f, \"median_sat_ms\": %.3f, "
               "\"median_tiling_ms\": %.3f, \"median_encode_ms\": %.3f, \"median_pipeline_ms\": %.3f, "
-              "\"median_bytes\": %.0f, \"median_upload_ms\": %.1f, \"errors\": %zu, \"scene\": %s, "
+              "\"median_bytes\": %.0f, \"node_bytes_per_frame\": %.0f, \"median_upload_ms\": %.1f, \"errors\": %zu, \"scene\": %s, "
               "\"triangles\": %zu, \"node\": \"%s\", \"cpu\": %s, \"threads\": %d}\n",
               clients, display.c_str(), quality, W, H, ao, window_s, all.size(), per.c_str(), total_fps, median(rendering),
-              median(kernel), median(sat), median(tiling), median(encode), median(pipeline), median(bytes),
+              median(kernel), median(sat), median(tiling), median(encode), median(pipeline), median(bytes), median(node_bytes),
               median(upload_ms), errors.size(), json_str(setup.scene_path).c_str(),
               setup.loaded.scene.triangle_count(), server ? "in-process" : "external", json_str(cpu_model()).c_str(),
               threads);

@@ -92,7 +92,7 @@ set xlabel "encode time per frame (ms, ${W}x${H}, log)"; set logscale x
 set title "error against encode time"
 plot ${plot_time%, }
 unset logscale x
-set xlabel "bytes per frame (KiB)"
+set xlabel "bytes per frame (KiB)"; set xrange [0:500]
 set title "error against bytes"
 plot ${plot_bytes%, }
 unset multiplot
