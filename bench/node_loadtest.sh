@@ -15,3 +15,14 @@ for display in jpeg s3tc mjpeg; do
       --clients $clients --display $display --seconds "$SECS" --warmup 2 | grep '"summary": true' | tee -a "$out"
   done
 done
+# The table of docs/results/node.md.
+python3 - "$out" <<'PY'
+import json, sys
+print("| display | clients | window s | frames in window | fps per client | fps total | rendering ms | encode ms | pipeline ms | bytes/frame |")
+print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+for l in open(sys.argv[1]):
+    r = json.loads(l)
+    per = ", ".join(f"{x:.2f}" for x in r["fps_per_client"])
+    print(f"| {r['display']} | {r['clients']} | {r['window_s']:.1f} | {r['frames_in_window']} | {per} | {r['fps_total']:.2f} | "
+          f"{r['median_rendering_ms']:.0f} | {r['median_encode_ms']:.1f} | {r['median_pipeline_ms']:.1f} | {r['node_bytes_per_frame']:,.0f} |")
+PY
