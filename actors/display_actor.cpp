@@ -20,12 +20,45 @@ struct display_state {
   uint64_t session = 0;
   uint64_t frames = 0, bytes = 0;
   int64_t t0_ns = 0;
+  // The Stats window: frames sent and their pipeline times since the last Stats record.
+  int64_t window_start_ns = 0;  // 0: no frame sent yet
+  uint32_t window_frames = 0;
+  double window_pipeline_ms = 0;
   static inline const char* name = "tessera.display";
 };
 
 int64_t now_ns() {
   return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
       .count();
+}
+
+constexpr int64_t kStatsPeriodNs = 1'000'000'000;
+
+// About once per second while frames flow: after a frame is sent, a Stats record covering the
+// frames sent since the previous one (fps, mean pipeline time) and the session's totals.
+void maybe_send_stats(display_state& st, const FrameMeta& m, int64_t sent_ns, double pipeline_ms) {
+  if (st.window_start_ns == 0) {  // the first frame opens the first window
+    st.window_start_ns = sent_ns;
+    return;
+  }
+  st.window_frames++;
+  st.window_pipeline_ms += pipeline_ms;
+  const int64_t span = sent_ns - st.window_start_ns;
+  if (span < kStatsPeriodNs) return;
+  protocol::Stats s;
+  s.frames = uint32_t(st.frames);
+  s.dropped = m.dropped;
+  s.bytes_sent = st.bytes;
+  s.scene_bytes = m.scene_bytes;
+  s.triangles = m.triangles;
+  s.nodes = m.nodes;
+  // Frames sent after the one that opened the window, over the window's length.
+  s.fps = float(double(st.window_frames) * 1e9 / double(span));
+  s.mean_pipeline_ms = float(st.window_pipeline_ms / st.window_frames);
+  st.sink->send(protocol::encode(protocol::ServerRecord{s}));
+  st.window_start_ns = sent_ns;
+  st.window_frames = 0;
+  st.window_pipeline_ms = 0;
 }
 
 // Composes the tiles into one RGBA image (a single full-size tile is moved, not copied).
@@ -104,6 +137,7 @@ display_actor::behavior_type display_impl(display_actor::stateful_pointer<displa
               }
               st.frames++;
               st.bytes += bytes;
+              maybe_send_stats(st, m, sent_ns, f.timings.pipeline_ms);
               auto rel = [&](int64_t ns) { return double(ns - st.t0_ns) / 1e6; };
               char line[768];
               std::snprintf(line, sizeof line,

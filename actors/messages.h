@@ -141,11 +141,16 @@ struct FrameMeta {
   double kernel_ms = 0, rendering_ms = 0, sat_ms = 0, tiling_ms = 0;
   int64_t render_start_ns = 0, render_end_ns = 0;
   uint32_t nodes = 1;
+  // The session's figures as of the start of the frame, for the display channel's Stats record.
+  uint32_t dropped = 0;       // render requests merged into a later frame so far
+  uint64_t scene_bytes = 0;   // buffers + textures held for the client
+  uint64_t triangles = 0;     // scene triangles (instances counted each time)
 };
 template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, FrameMeta& x) {
   return f(caf::meta::type_name("tessera::frame_meta"), x.seq, x.client_frame, x.width, x.height, x.display,
-           x.quality, x.kernel_ms, x.rendering_ms, x.sat_ms, x.tiling_ms, x.render_start_ns, x.render_end_ns, x.nodes);
+           x.quality, x.kernel_ms, x.rendering_ms, x.sat_ms, x.tiling_ms, x.render_start_ns, x.render_end_ns, x.nodes,
+           x.dropped, x.scene_bytes, x.triangles);
 }
 
 // Session -> display channel: the tiles of one frame.

@@ -174,6 +174,9 @@ void start_frame(self_ptr self, uint32_t client_frame) {
   st.meta.quality = st.hs.jpeg_quality;
   st.meta.render_start_ns = now_ns();
   st.recovered = 0;
+  st.meta.dropped = st.dropped;  // for the display channel's Stats record
+  st.meta.scene_bytes = scene_bytes(*st.scene);
+  st.meta.triangles = st.scene->triangle_count();
   // Membership changes (lost nodes, nodes that joined) are committed between frames only.
   if (!st.committed || st.router.changed || st.router.busy()) {
     st.router.commit(self, st.settings->task_timeout_ms, [self](std::vector<NodeInfo> nodes) {

@@ -1,10 +1,13 @@
-// tessera loadtest --scene S.gltf --camera-loop L.json [--clients N] [--display jpeg|s3tc]
-//                  [--frames F] [--size W H] [--ao A] [--quality Q] [--host H --port P] [--threads T]
-// Uploads the scene from N simultaneous WebSocket clients, replays the camera loop with two
-// render requests outstanding per client, and prints one JSON line per received frame and a
-// summary (frames per second delivered per client and in total, pipeline/encode/bytes).
+// tessera loadtest --scene S.gltf --camera-loop L.json [--clients N] [--display jpeg|s3tc|mjpeg]
+//                  [--seconds S] [--warmup K] [--size W H] [--ao A] [--quality Q] [--host H --port P] [--threads T]
+// Uploads the scene from N simultaneous WebSocket clients; each replays the camera loop with two
+// render requests outstanding. Once every client has received K frames (all connected and
+// streaming), a common window of S seconds opens; the frames each client receives inside it
+// are counted. Prints one JSON line per frame received in the window and a summary (frames
+// per second per client and in total over the common window, pipeline/encode/bytes medians).
 // Without --port it runs a node in this process on a free localhost port.
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cstdio>
 #include <mutex>
@@ -28,14 +31,18 @@ struct FrameRecord {
   uint32_t frame = 0;
   protocol::FrameTimings t;
   size_t bytes = 0;
-  double received_ms = 0;  // since the client's first request
+  double received_ms = 0;  // since the common window opened
 };
 
 int run(const std::vector<std::string>& argv) {
   Args args(argv);
   if (args.flag("--help")) {
-    std::puts("tessera loadtest --scene S.gltf --camera-loop L.json [--clients N] [--display jpeg|s3tc] [--frames F]\n"
-              "                 [--size W H] [--ao A] [--quality Q] [--host H --port P] [--threads T] [--warmup K]");
+    std::puts("tessera loadtest --scene S.gltf --camera-loop L.json [--clients N] [--display jpeg|s3tc|mjpeg]\n"
+              "                 [--seconds S] [--warmup K] [--size W H] [--ao A] [--quality Q] [--host H --port P]\n"
+              "                 [--threads T]\n"
+              "Frames per second over a common window of S seconds (default 20) that opens once every client\n"
+              "has received K frames (default 2). mjpeg: frames counted from the WebSocket's Frame records\n"
+              "(timings, empty payload); the JPEG goes to /mjpeg/TOKEN, which nobody reads here.");
     return 0;
   }
   int threads = 0;
@@ -44,15 +51,17 @@ int run(const std::vector<std::string>& argv) {
   if (setup.loop.frames.empty()) throw std::invalid_argument("--camera-loop is required");
   const int clients = int(args.integer("--clients", 1));
   const std::string display = args.str("--display", "jpeg");
-  const int frames = int(args.integer("--frames", 60));
-  const int warmup = int(args.integer("--warmup", 4));
+  const double seconds = double(args.integer("--seconds", 20));
+  const int warmup = int(args.integer("--warmup", 2));
   const int ao = int(args.integer("--ao", 0));
   const int quality = int(args.integer("--quality", 85));
   std::string host = args.str("--host", "127.0.0.1");
   long port = args.integer("--port", -1);
   args.finish();
-  if (clients < 1 || clients > 64 || frames < 1) throw std::invalid_argument("--clients 1..64, --frames >= 1");
-  if (display != "jpeg" && display != "s3tc") throw std::invalid_argument("--display must be jpeg or s3tc");
+  if (clients < 1 || clients > 64 || seconds < 1 || warmup < 1)
+    throw std::invalid_argument("--clients 1..64, --seconds >= 1, --warmup >= 1");
+  if (display != "jpeg" && display != "s3tc" && display != "mjpeg")
+    throw std::invalid_argument("--display must be jpeg, s3tc or mjpeg");
   const int W = setup.loaded.scene.width(), H = setup.loaded.scene.height();
 
   // An in-process node unless --port names one.
@@ -76,68 +85,102 @@ int run(const std::vector<std::string>& argv) {
   const auto records = protocol::scene_to_records(setup.loaded.scene, {false, false, false, true});
   const auto upload = protocol::pack_messages(records, 16u << 20);
   std::mutex mu;
-  std::vector<FrameRecord> all;
-  std::vector<double> fps(size_t(clients), 0), upload_ms(size_t(clients), 0);
+  using Received = std::vector<std::pair<Clock::time_point, FrameRecord>>;
+  std::vector<Received> received(static_cast<size_t>(clients));
+  std::vector<double> upload_ms(size_t(clients), 0);
+  std::vector<protocol::Stats> last_stats(static_cast<size_t>(clients));  // the node's own figures
   std::vector<std::string> errors;
+  std::atomic<int> ready{0}, finished{0};
+  std::atomic<bool> stop{false};
   auto client_main = [&](int ci) {
     WsClient ws;
     std::string err;
+    bool counted_ready = false;
     auto fail = [&](const std::string& e) {
       std::lock_guard<std::mutex> l(mu);
       errors.push_back("client " + std::to_string(ci) + ": " + e);
     };
-    if (!ws.connect(host, uint16_t(port), "/ws", &err)) return fail(err);
-    protocol::Handshake hs;
-    hs.display = display == "s3tc" ? protocol::DisplayKind::s3tc : protocol::DisplayKind::jpeg;
-    hs.jpeg_quality = uint8_t(quality);
-    hs.width = W;
-    hs.height = H;
-    auto t_up = Clock::now();
-    ws.send(protocol::encode(protocol::ClientRecord{hs}));
-    for (auto& m : upload) ws.send(m);
-    ws.send(protocol::encode(protocol::ClientRecord{protocol::Settings{uint32_t(ao), 4}}));
-    const int total = warmup + frames;
-    int sent = 0, got = 0;
-    auto request = [&] {
-      size_t k = size_t(sent) % setup.loop.frames.size();
-      ws.send(protocol::encode(std::vector<protocol::ClientRecord>{protocol::SetCamera{setup.loop.camera(k)},
-                                                                   protocol::RenderRequest{uint32_t(sent)}}));
-      ++sent;
-    };
-    request();
-    request();  // two outstanding: the node renders f+1 while f is encoded and sent
-    Clock::time_point t0;
-    std::vector<FrameRecord> mine;
-    protocol::Limits lim;
-    while (got < total) {
-      auto msg = ws.receive(60000);
-      if (!msg) return fail("timeout or closed after " + std::to_string(got) + " frames");
-      auto recs = protocol::decode_server(msg->data(), msg->size(), lim);
-      if (!recs) return fail("undecodable server message: " + recs.error().message);
-      for (auto& r : recs.value()) {
-        if (auto* e = std::get_if<protocol::ErrorReply>(&r)) return fail("server error: " + e->message);
-        auto* f = std::get_if<protocol::Frame>(&r);
-        if (!f) continue;
-        if (got == 0) upload_ms[size_t(ci)] = std::chrono::duration<double, std::milli>(Clock::now() - t_up).count();
-        if (got == warmup) t0 = Clock::now();
-        if (got >= warmup)
-          mine.push_back({ci, f->frame, f->timings, msg->size(),
-                          std::chrono::duration<double, std::milli>(Clock::now() - t0).count()});
-        ++got;
-        if (sent < total) request();
+    auto body = [&] {
+      const std::string resource = display == "mjpeg" ? "/ws?session=loadtest" + std::to_string(ci) : "/ws";
+      if (!ws.connect(host, uint16_t(port), resource, &err)) return fail(err);
+      protocol::Handshake hs;
+      hs.display = display == "s3tc" ? protocol::DisplayKind::s3tc
+                                      : display == "mjpeg" ? protocol::DisplayKind::mjpeg : protocol::DisplayKind::jpeg;
+      hs.jpeg_quality = uint8_t(quality);
+      hs.width = W;
+      hs.height = H;
+      auto t_up = Clock::now();
+      ws.send(protocol::encode(protocol::ClientRecord{hs}));
+      for (auto& m : upload) ws.send(m);
+      ws.send(protocol::encode(protocol::ClientRecord{protocol::Settings{uint32_t(ao), 4}}));
+      uint32_t sent = 0;
+      int got = 0;
+      auto request = [&] {
+        size_t k = size_t(sent) % setup.loop.frames.size();
+        ws.send(protocol::encode(std::vector<protocol::ClientRecord>{protocol::SetCamera{setup.loop.camera(k)},
+                                                                     protocol::RenderRequest{sent}}));
+        ++sent;
+      };
+      request();
+      request();  // two outstanding: the node renders f+1 while f is encoded and sent
+      protocol::Limits lim;
+      auto last = Clock::now();
+      while (!stop) {
+        auto msg = ws.receive(200);
+        if (!msg) {
+          if (ws.closed()) return fail("connection closed after " + std::to_string(got) + " frames");
+          if (Clock::now() - last > std::chrono::seconds(120))
+            return fail("no frame for 120 s after " + std::to_string(got) + " frames");
+          continue;
+        }
+        const auto now = Clock::now();
+        auto recs = protocol::decode_server(msg->data(), msg->size(), lim);
+        if (!recs) return fail("undecodable server message: " + recs.error().message);
+        for (auto& r : recs.value()) {
+          if (auto* e = std::get_if<protocol::ErrorReply>(&r)) return fail("server error: " + e->message);
+          if (auto* st = std::get_if<protocol::Stats>(&r)) last_stats[size_t(ci)] = *st;
+          auto* f = std::get_if<protocol::Frame>(&r);
+          if (!f) continue;
+          last = now;
+          if (got == 0) upload_ms[size_t(ci)] = std::chrono::duration<double, std::milli>(now - t_up).count();
+          received[size_t(ci)].push_back({now, FrameRecord{ci, f->frame, f->timings, msg->size(), 0}});
+          if (++got == warmup && !counted_ready) {
+            counted_ready = true;
+            ++ready;
+          }
+          request();
+        }
       }
-    }
-    double secs = std::chrono::duration<double>(Clock::now() - t0).count();
+    };
+    body();
+    ++finished;
     ws.close();
-    std::lock_guard<std::mutex> l(mu);
-    fps[size_t(ci)] = secs > 0 ? double(frames - 1) / secs : 0;
-    all.insert(all.end(), mine.begin(), mine.end());
   };
   std::vector<std::thread> ts;
   for (int c = 0; c < clients; ++c) ts.emplace_back(client_main, c);
+  // The common window: opens when every client streams, lasts --seconds.
+  while (ready < clients && finished == 0) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  const auto w0 = Clock::now();
+  while (finished == 0 && Clock::now() - w0 < std::chrono::duration<double>(seconds))
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  const auto w1 = Clock::now();
+  stop = true;
   for (auto& t : ts) t.join();
   if (server) server->stop();
   for (auto& e : errors) std::fprintf(stderr, "error: %s\n", e.c_str());
+  const double window_s = std::chrono::duration<double>(w1 - w0).count();
+  std::vector<double> fps(size_t(clients), 0);
+  std::vector<FrameRecord> all;
+  for (int c = 0; c < clients; ++c) {
+    size_t n = 0;
+    for (auto& [t, f] : received[size_t(c)])
+      if (t >= w0 && t < w1) {
+        f.received_ms = std::chrono::duration<double, std::milli>(t - w0).count();
+        all.push_back(f);
+        ++n;
+      }
+    fps[size_t(c)] = window_s > 0 ? double(n) / window_s : 0;
+  }
   std::vector<double> pipeline, encode, rendering, kernel, bytes, sat, tiling;
   for (auto& f : all) {
     std::printf("{\"client\": %d, \"frame\": %u, \"kernel_ms\": %.3f, \"rendering_ms\": %.3f, \"sat_ms\": %.3f, "
@@ -152,6 +195,11 @@ int run(const std::vector<std::string>& argv) {
     tiling.push_back(f.t.tiling_ms);
     bytes.push_back(double(f.bytes));
   }
+  // Bytes per frame as the node counts them (Stats): for MJPEG the JPEG parts, which the
+  // WebSocket's Frame records do not carry.
+  std::vector<double> node_bytes;
+  for (auto& st : last_stats)
+    if (st.frames) node_bytes.push_back(double(st.bytes_sent) / st.frames);
   double total_fps = 0;
   std::string per;
   for (size_t i = 0; i < fps.size(); ++i) {
@@ -159,13 +207,13 @@ int run(const std::vector<std::string>& argv) {
     per += (i ? ", " : "") + std::to_string(fps[i]);
   }
   std::printf("{\"summary\": true, \"clients\": %d, \"display\": \"%s\", \"quality\": %d, \"width\": %d, \"height\": %d, "
-              "\"ao\": %d, \"frames_per_client\": %d, \"fps_per_client\": [%s], \"fps_total\": %.3f, "
+              "\"ao\": %d, \"window_s\": %.3f, \"frames_in_window\": %zu, \"fps_per_client\": [%s], \"fps_total\": %.3f, "
               "\"median_rendering_ms\": %.3f, \"median_kernel_ms\": %.3f, \"median_sat_ms\": %.3f, "
               "\"median_tiling_ms\": %.3f, \"median_encode_ms\": %.3f, \"median_pipeline_ms\": %.3f, "
-              "\"median_bytes\": %.0f, \"median_upload_ms\": %.1f, \"errors\": %zu, \"scene\": %s, "
+              "\"median_bytes\": %.0f, \"node_bytes_per_frame\": %.0f, \"median_upload_ms\": %.1f, \"errors\": %zu, \"scene\": %s, "
               "\"triangles\": %zu, \"node\": \"%s\", \"cpu\": %s, \"threads\": %d}\n",
-              clients, display.c_str(), quality, W, H, ao, frames, per.c_str(), total_fps, median(rendering),
-              median(kernel), median(sat), median(tiling), median(encode), median(pipeline), median(bytes),
+              clients, display.c_str(), quality, W, H, ao, window_s, all.size(), per.c_str(), total_fps, median(rendering),
+              median(kernel), median(sat), median(tiling), median(encode), median(pipeline), median(bytes), median(node_bytes),
               median(upload_ms), errors.size(), json_str(setup.scene_path).c_str(),
               setup.loaded.scene.triangle_count(), server ? "in-process" : "external", json_str(cpu_model()).c_str(),
               threads);

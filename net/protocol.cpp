@@ -1027,12 +1027,7 @@ Status check_session_order(bool handshake_done, const std::vector<ClientRecord>&
 // ---------------------------------------------------------------------------------------
 // Applying.
 
-uint64_t scene_bytes(const Scene& scene) {
-  uint64_t n = 0;
-  for (auto& [id, e] : scene.buffers()) n += e.value.bytes();
-  for (auto& [id, e] : scene.textures()) n += e.value.rgba.size();
-  return n;
-}
+uint64_t scene_bytes(const Scene& scene) { return scene.held_bytes(); }
 
 bool is_scene_update(const ClientRecord& r) {
   return !(std::holds_alternative<Handshake>(r) || std::holds_alternative<Settings>(r) ||
@@ -1041,32 +1036,7 @@ bool is_scene_update(const ClientRecord& r) {
 
 namespace {
 
-// Triangles a mesh contributes, with buffer `bid` replaced by `b` (nullptr: as in the scene).
-uint64_t mesh_triangles(const Scene& s, const Mesh& m, Id bid = kNoId, const Buffer* b = nullptr) {
-  if (!m.visible) return 0;
-  auto get = [&](Id id) { return id == bid && b ? b : s.buffer(id); };
-  if (m.indices != kNoId) {
-    const Buffer* ib = get(m.indices);
-    return ib ? ib->u.size() / 3 : 0;
-  }
-  const Buffer* pb = get(m.positions);
-  return pb ? pb->count() / 3 : 0;
-}
-
-// Scene triangles if mesh `mid` became `mesh` (nullptr: unchanged) and buffer `bid` became `b`.
-uint64_t triangles_with(const Scene& s, Id mid, const Mesh* mesh, Id bid, const Buffer* b) {
-  uint64_t n = 0;
-  for (auto& [id, e] : s.meshes())
-    if (id != mid) n += mesh_triangles(s, e.value, bid, b);
-  if (mesh) n += mesh_triangles(s, *mesh, bid, b);
-  return n;
-}
-
 Error apply_error(ErrorCode c, std::string m) { return message_error(c, std::move(m)); }
-
-bool references(const Mesh& m, Id b) {
-  return m.positions == b || m.normals == b || m.texcoords == b || m.indices == b;
-}
 
 }  // namespace
 
@@ -1101,11 +1071,11 @@ Status apply(Scene& scene, ClientRecord&& record, const Limits& lim) {
     Status operator()(SetBuffer& b) {
       const Buffer* old = s.buffer(b.id);
       if (auto st = bytes_check(old ? old->bytes() : 0, b.buffer.bytes(), "buffer", b.id); !st) return st;
-      bool used = false;
-      for (auto& [id, e] : s.meshes()) used = used || references(e.value, b.id);
-      if (used) {
-        uint64_t tris = triangles_with(s, kNoId, nullptr, b.id, &b.buffer);
-        if (tris > lim.max_triangles)
+      // Only meshes that take their triangles from this buffer change the count (O(log n):
+      // the scene keeps reference counts per buffer).
+      {
+        uint64_t tris = s.triangles_with_buffer(b.id, &b.buffer);
+        if (tris > lim.max_triangles && tris != s.triangle_count())  // a buffer no mesh draws from changes nothing
           return apply_error(ErrorCode::limit_exceeded, "buffer " + std::to_string(b.id) + ": scene would hold " +
                                                             std::to_string(tris) + " triangles, limit " +
                                                             std::to_string(lim.max_triangles));
@@ -1133,7 +1103,7 @@ Status apply(Scene& scene, ClientRecord&& record, const Limits& lim) {
         std::string why = s.validate_mesh(mesh);
         if (!why.empty()) return apply_error(ErrorCode::bad_mesh, "mesh " + std::to_string(m.id) + ": " + why);
       }
-      uint64_t tris = triangles_with(s, m.id, &mesh, kNoId, nullptr);
+      uint64_t tris = s.triangles_with_mesh(m.id, &mesh);  // O(log n): the scene keeps a running total
       if (tris > lim.max_triangles)
         return apply_error(ErrorCode::limit_exceeded, "mesh " + std::to_string(m.id) + ": scene would hold " +
                                                           std::to_string(tris) + " triangles, limit " +

@@ -1,5 +1,6 @@
 #include "renderer/scene.h"
 
+#include <algorithm>
 #include <cmath>
 
 namespace tessera {
@@ -15,8 +16,9 @@ std::string Scene::validate_mesh(const Mesh& m) const {
   if (!pos) return "mesh references missing position buffer " + std::to_string(m.positions);
   if (pos->type != Buffer::Type::f32 || pos->components != 3) return "position buffer must be float3";
   size_t nv = pos->count();
-  for (float v : pos->f)
-    if (!std::isfinite(v)) return "position buffer " + std::to_string(m.positions) + " holds NaN or Inf";
+  // The per-buffer facts (computed when the buffer was set) make this O(log n) per mesh.
+  const BufferIndex& pos_index = buffer_index_.at(m.positions);
+  if (!pos_index.finite) return "position buffer " + std::to_string(m.positions) + " holds NaN or Inf";
   if (m.normals != kNoId) {
     const Buffer* n = buffer(m.normals);
     if (!n) return "mesh references missing normal buffer " + std::to_string(m.normals);
@@ -34,8 +36,9 @@ std::string Scene::validate_mesh(const Mesh& m) const {
     if (!ib) return "mesh references missing index buffer " + std::to_string(m.indices);
     if (ib->type != Buffer::Type::u32 || ib->components != 1) return "index buffer must be uint32 scalars";
     if (ib->u.size() % 3) return "index count " + std::to_string(ib->u.size()) + " is not a multiple of 3";
-    for (uint32_t i : ib->u)
-      if (i >= nv) return "index " + std::to_string(i) + " out of range (vertex count " + std::to_string(nv) + ")";
+    if (buffer_index_.at(m.indices).max_index > nv)  // some index is out of range: name the first
+      for (uint32_t i : ib->u)
+        if (i >= nv) return "index " + std::to_string(i) + " out of range (vertex count " + std::to_string(nv) + ")";
   } else if (nv % 3) {
     return "non-indexed mesh needs a multiple of 3 vertices, has " + std::to_string(nv);
   }
@@ -43,13 +46,90 @@ std::string Scene::validate_mesh(const Mesh& m) const {
   return {};
 }
 
-size_t Scene::triangle_count() const {
-  size_t n = 0;
-  for (auto& [id, e] : meshes_) {
-    if (!e.value.visible) continue;
-    if (const Buffer* ib = buffer(e.value.indices)) n += ib->u.size() / 3;
-    else if (const Buffer* pb = buffer(e.value.positions)) n += pb->count() / 3;
-  }
+uint64_t Scene::mesh_triangles(const Mesh& m) const {
+  if (!m.visible) return 0;
+  return m.indices != kNoId ? index_triangles(buffer(m.indices)) : position_triangles(buffer(m.positions));
+}
+
+void Scene::count_mesh(const Mesh& m, int sign) {
+  if (!m.visible) return;
+  if (sign > 0) triangles_ += mesh_triangles(m);
+  else triangles_ -= mesh_triangles(m);
+  const Id id = m.indices != kNoId ? m.indices : m.positions;
+  BufferIndex& ix = buffer_index_[id];
+  (m.indices != kNoId ? ix.index_refs : ix.position_refs) += uint32_t(sign);
+  if (ix.index_refs == 0 && ix.position_refs == 0 && !buffer(id)) buffer_index_.erase(id);
+}
+
+void Scene::set_buffer(Id id, Buffer b) {
+  BufferIndex& ix = buffer_index_[id];
+  const Buffer* old = buffer(id);
+  // Triangles of the meshes that take theirs from this buffer change with it.
+  triangles_ -= ix.index_refs * index_triangles(old) + ix.position_refs * position_triangles(old);
+  triangles_ += ix.index_refs * index_triangles(&b) + ix.position_refs * position_triangles(&b);
+  held_bytes_ -= old ? old->bytes() : 0;
+  held_bytes_ += b.bytes();
+  ix.finite = true;
+  for (float v : b.f) ix.finite = ix.finite && std::isfinite(v);
+  ix.max_index = 0;
+  for (uint32_t i : b.u) ix.max_index = std::max<uint64_t>(ix.max_index, uint64_t(i) + 1);
+  put(buffers_, id, std::move(b));
+}
+
+bool Scene::remove_buffer(Id id) {
+  const Buffer* old = buffer(id);
+  if (!old) return false;
+  BufferIndex& ix = buffer_index_[id];
+  triangles_ -= ix.index_refs * index_triangles(old) + ix.position_refs * position_triangles(old);
+  held_bytes_ -= old->bytes();
+  ix.finite = true;
+  ix.max_index = 0;
+  if (ix.index_refs == 0 && ix.position_refs == 0) buffer_index_.erase(id);
+  return drop(buffers_, id);
+}
+
+void Scene::set_texture(Id id, Texture t) {
+  const Texture* old = texture(id);
+  held_bytes_ -= old ? old->rgba.size() : 0;
+  held_bytes_ += t.rgba.size();
+  put(textures_, id, std::move(t));
+}
+
+bool Scene::remove_texture(Id id) {
+  const Texture* old = texture(id);
+  if (!old) return false;
+  held_bytes_ -= old->rgba.size();
+  return drop(textures_, id);
+}
+
+void Scene::set_mesh(Id id, Mesh m) {
+  auto it = meshes_.find(id);
+  if (it != meshes_.end()) count_mesh(it->second.value, -1);
+  count_mesh(m, +1);
+  put(meshes_, id, std::move(m));
+}
+
+bool Scene::remove_mesh(Id id) {
+  auto it = meshes_.find(id);
+  if (it == meshes_.end()) return false;
+  count_mesh(it->second.value, -1);
+  return drop(meshes_, id);
+}
+
+uint64_t Scene::triangles_with_buffer(Id id, const Buffer* b) const {
+  auto it = buffer_index_.find(id);
+  if (it == buffer_index_.end()) return triangles_;
+  const BufferIndex& ix = it->second;
+  const Buffer* old = buffer(id);
+  return triangles_ - ix.index_refs * index_triangles(old) - ix.position_refs * position_triangles(old) +
+         ix.index_refs * index_triangles(b) + ix.position_refs * position_triangles(b);
+}
+
+uint64_t Scene::triangles_with_mesh(Id id, const Mesh* m) const {
+  uint64_t n = triangles_;
+  auto it = meshes_.find(id);
+  if (it != meshes_.end()) n -= mesh_triangles(it->second.value);
+  if (m) n += mesh_triangles(*m);
   return n;
 }
 

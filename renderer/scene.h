@@ -113,15 +113,16 @@ struct Entry {
 class Scene {
  public:
   // Mutators bump the scene version and stamp the entry with it.
-  void set_buffer(Id id, Buffer b) { put(buffers_, id, std::move(b)); }
-  void set_texture(Id id, Texture t) { put(textures_, id, std::move(t)); }
+  // Buffer, texture and mesh mutators also keep the running totals below up to date.
+  void set_buffer(Id id, Buffer b);
+  void set_texture(Id id, Texture t);
   void set_material(Id id, Material m) { put(materials_, id, std::move(m)); }
-  void set_mesh(Id id, Mesh m) { put(meshes_, id, std::move(m)); }
+  void set_mesh(Id id, Mesh m);
   void set_light(Id id, Light l) { put(lights_, id, std::move(l)); }
-  bool remove_buffer(Id id) { return drop(buffers_, id); }
-  bool remove_texture(Id id) { return drop(textures_, id); }
+  bool remove_buffer(Id id);
+  bool remove_texture(Id id);
   bool remove_material(Id id) { return drop(materials_, id); }
-  bool remove_mesh(Id id) { return drop(meshes_, id); }
+  bool remove_mesh(Id id);
   bool remove_light(Id id) { return drop(lights_, id); }
 
   void set_camera(const Camera& c) { camera_ = c; camera_version_ = ++version_; }
@@ -151,7 +152,16 @@ class Scene {
   // not an error (the default material is used until it arrives).
   std::string validate_mesh(const Mesh& m) const;
 
-  size_t triangle_count() const;  // over visible meshes, instances counted each time
+  // Triangles over visible meshes, instances counted each time. A mesh counts its index
+  // buffer's triangles when it names one (0 while that buffer is missing), else its
+  // positions / 3 (0 while missing). Kept as a running total: O(1).
+  size_t triangle_count() const { return size_t(triangles_); }
+  // What triangle_count() would be if buffer `id` held `b` (nullptr: removed), or if mesh `id`
+  // were `m` (nullptr: removed). O(log n): the sync channel checks limits per record with these.
+  uint64_t triangles_with_buffer(Id id, const Buffer* b) const;
+  uint64_t triangles_with_mesh(Id id, const Mesh* m) const;
+  // Bytes of the buffers (4 per element) and textures (RGBA8 texels) held. O(1).
+  uint64_t held_bytes() const { return held_bytes_; }
 
  private:
   template <class T>
@@ -172,6 +182,20 @@ class Scene {
     return it == map.end() ? nullptr : &it->second.value;
   }
 
+  // Per buffer: facts validate_mesh needs, computed once when the buffer is set, and how
+  // many visible meshes take their triangles from it (as index buffer / as non-indexed positions).
+  struct BufferIndex {
+    bool finite = true;        // every float is finite
+    uint64_t max_index = 0;    // largest uint32 element + 1 (0: none)
+    uint32_t index_refs = 0, position_refs = 0;
+  };
+  static uint64_t index_triangles(const Buffer* b) { return b ? b->u.size() / 3 : 0; }
+  static uint64_t position_triangles(const Buffer* b) { return b ? b->count() / 3 : 0; }
+  uint64_t mesh_triangles(const Mesh& m) const;
+  void count_mesh(const Mesh& m, int sign);  // adds/removes a mesh's references and triangles
+
+  std::map<Id, BufferIndex> buffer_index_;   // ids of buffers held or referenced by a visible mesh
+  uint64_t triangles_ = 0, held_bytes_ = 0;
   std::map<Id, Entry<Buffer>> buffers_;
   std::map<Id, Entry<Texture>> textures_;
   std::map<Id, Entry<Material>> materials_;

@@ -266,3 +266,69 @@ TEST_CASE("The node serves the shared scenes at /scenes/ and nothing outside the
     CHECK(r->status == 404);
   }
 }
+
+TEST_CASE("A client streaming frames for more than a second receives Stats records with the session's figures",
+          "[e2e]") {
+  TestNode node;
+  ProtoClient c;
+  REQUIRE(c.connect(node.port()));
+  REQUIRE(c.handshake(DisplayKind::jpeg, 96, 64, 80));
+  REQUIRE(c.upload(pavilion().scene));
+  // Stream with two requests outstanding until two Stats records have arrived (or 30 s).
+  uint32_t sent = 0, frames = 0;
+  uint64_t frame_bytes = 0;
+  std::vector<std::pair<protocol::Stats, uint64_t>> stats;  // with the frame bytes received before it
+  std::vector<uint32_t> frames_before;
+  std::vector<std::chrono::steady_clock::time_point> arrived;  // of each frame
+  auto request = [&] {
+    REQUIRE(c.send({protocol::SetCamera{pavilion_loop().camera(sent % pavilion_loop().frames.size())},
+                    protocol::RenderRequest{sent}}));
+    ++sent;
+  };
+  request();
+  request();
+  const auto t0 = std::chrono::steady_clock::now();
+  while (stats.size() < 2 && std::chrono::steady_clock::now() - t0 < std::chrono::seconds(30)) {
+    auto msg = c.ws.receive(5000);
+    REQUIRE(msg);
+    auto recs = protocol::decode_server(msg->data(), msg->size(), c.limits);
+    REQUIRE(recs);
+    for (auto& r : recs.value()) {
+      REQUIRE_FALSE(std::holds_alternative<protocol::ErrorReply>(r));
+      if (std::holds_alternative<protocol::Frame>(r)) {
+        ++frames;
+        frame_bytes += msg->size();
+        arrived.push_back(std::chrono::steady_clock::now());
+        request();
+      } else if (auto* s = std::get_if<protocol::Stats>(&r)) {
+        stats.emplace_back(*s, frame_bytes);
+        frames_before.push_back(frames);
+      }
+    }
+  }
+  const double streamed_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  REQUIRE(stats.size() == 2);
+  CHECK(streamed_s > 1.0);  // the first Stats comes a second after the first frame
+  for (size_t i = 0; i < stats.size(); ++i) {
+    const protocol::Stats& s = stats[i].first;
+    // The node sends the Stats record right after the frame it counts last.
+    CHECK(s.frames == frames_before[i]);
+    CHECK(s.bytes_sent == stats[i].second);
+    CHECK(s.scene_bytes == protocol::scene_bytes(pavilion().scene));
+    CHECK(s.triangles == pavilion().scene.triangle_count());
+    CHECK(s.nodes == 1);
+    CHECK(s.dropped == 0);  // never more than one request waits while a frame renders
+    // The rate the client saw over the same frames (the window opens at the first frame, then
+    // at the frame of the previous Stats), within a factor of two of the node's figure.
+    const size_t first = i == 0 ? 0 : frames_before[i - 1] - 1, last = frames_before[i] - 1;
+    REQUIRE(last > first);
+    const double span = std::chrono::duration<double>(arrived[last] - arrived[first]).count();
+    CHECK(span > 0.5);
+    const double client_fps = double(last - first) / span;
+    CHECK(s.fps > 0.5 * client_fps);
+    CHECK(s.fps < 2.0 * client_fps);
+    CHECK(s.mean_pipeline_ms >= 0);
+    CHECK(s.mean_pipeline_ms < 5000);
+  }
+  CHECK(stats[1].first.frames > stats[0].first.frames);
+}

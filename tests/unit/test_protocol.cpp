@@ -1,5 +1,6 @@
 // Client protocol: round trips of every record type, one test per validation rule, and
 // truncation at every byte offset.
+#include <random>
 #include <catch2/catch.hpp>
 
 #include <cmath>
@@ -979,4 +980,61 @@ TEST_CASE("Server-side rules: handshake reply, frame and stats fields", "[protoc
   m = encode(ServerRecord{Stats{}});
   m[8] = uint8_t(RecordType::camera);  // a client record from the server
   server_fails(m, ErrorCode::unknown_record);
+}
+
+TEST_CASE("The scene's running triangle and byte totals equal a direct recount after random updates", "[unit]") {
+  using namespace tessera;
+  std::mt19937 rng(7);
+  Scene scene;
+  protocol::Limits lim;
+  auto recount = [&] {
+    uint64_t tris = 0, bytes = 0;
+    for (auto& [id, e] : scene.meshes()) {
+      const Mesh& m = e.value;
+      if (!m.visible) continue;
+      if (m.indices != kNoId) tris += scene.buffer(m.indices) ? scene.buffer(m.indices)->u.size() / 3 : 0;
+      else tris += scene.buffer(m.positions) ? scene.buffer(m.positions)->count() / 3 : 0;
+    }
+    for (auto& [id, e] : scene.buffers()) bytes += e.value.bytes();
+    for (auto& [id, e] : scene.textures()) bytes += e.value.rgba.size();
+    return std::make_pair(tris, bytes);
+  };
+  for (int step = 0; step < 3000; ++step) {
+    const Id id = Id(1 + rng() % 12);
+    switch (rng() % 5) {
+      case 0: {  // a float3 buffer of 3..30 vertices
+        protocol::SetBuffer b;
+        b.id = id;
+        b.buffer.components = 3;
+        b.buffer.f.assign(size_t(3 * 3 * (1 + rng() % 10)), 0.5f);
+        (void)protocol::apply(scene, b, lim);
+        break;
+      }
+      case 1: {  // an index buffer
+        protocol::SetBuffer b;
+        b.id = id;
+        b.buffer.type = Buffer::Type::u32;
+        b.buffer.u.assign(size_t(3 * (rng() % 6)), 0u);
+        (void)protocol::apply(scene, b, lim);
+        break;
+      }
+      case 2: {  // a mesh, indexed or not, visible or not
+        protocol::SetMesh m;
+        m.id = id;
+        m.mesh.positions = Id(1 + rng() % 12);
+        m.mesh.indices = rng() % 2 ? Id(1 + rng() % 12) : kNoId;
+        m.mesh.visible = rng() % 4 != 0;
+        (void)protocol::apply(scene, m, lim);
+        break;
+      }
+      case 3: (void)protocol::apply(scene, protocol::Remove{protocol::RecordType::buffer, id}, lim); break;
+      default: (void)protocol::apply(scene, protocol::Remove{protocol::RecordType::mesh, id}, lim); break;
+    }
+    auto [tris, bytes] = recount();
+    REQUIRE(scene.triangle_count() == tris);
+    REQUIRE(protocol::scene_bytes(scene) == bytes);
+  }
+  // And a copy carries them along.
+  Scene copy = scene;
+  CHECK(copy.triangle_count() == scene.triangle_count());
 }
