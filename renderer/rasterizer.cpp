@@ -189,8 +189,13 @@ void main() {
     if (uHasSpecularTexture) ks *= texture(uSpecularTexture, vUv).rgb;
     vec3 ke = uEmissiveColor;
     if (uHasEmissiveTexture) ke *= texture(uEmissiveTexture, vUv).rgb;
-    vec3 N = normalize(vNormal);
     vec3 V = normalize(-vWorldPos);
+    // Two-sided lighting as the ray tracer: the geometric normal turned to the viewer, and
+    // the shading normal turned to the geometric normal's side.
+    vec3 Ng = cross(dFdx(vWorldPos), dFdy(vWorldPos));
+    if (dot(Ng, V) < 0.0) Ng = -Ng;
+    vec3 N = normalize(vNormal);
+    if (dot(N, Ng) < 0.0) N = -N;
     color = ke + uAmbientIntensity * kd + uSceneAmbient * kd;
     for (int i = 0; i < MAX_LIGHTS; i++) {
       if (i >= uNumPoint) break;
@@ -575,8 +580,8 @@ void Rasterizer::Impl::sync(const Scene& scene, std::vector<std::string>& warnin
       if (b != kNoId) v = std::max(v, scene.buffers().at(b).version);
     Geom& g = geoms[key];
     if (!g.used && (!g.vao || g.version != v)) {
+      upload_geom(scene, key, g);  // resets g
       g.version = v;
-      upload_geom(scene, key, g);
     }
     g.used = true;
   }
