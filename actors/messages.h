@@ -67,11 +67,12 @@ struct RenderTask {
   Rect pixels;
   int32_t ao_samples = 0;
   int32_t max_depth = 4;
+  uint8_t renderer = 0;  // protocol::RendererKind: 0 ray tracer, 1 rasterizer
 };
 template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, RenderTask& x) {
   return f(caf::meta::type_name("tessera::render_task"), x.frame, x.width, x.height, x.pixels, x.ao_samples,
-           x.max_depth);
+           x.max_depth, x.renderer);
 }
 
 // What a rendering node returns for a task: RGBA pixels of the rectangle and the serialised

@@ -135,6 +135,7 @@ void start_frame(self_ptr self, uint32_t client_frame) {
   base.height = st.meta.height;
   base.ao_samples = int32_t(st.render.ao_samples);
   base.max_depth = int32_t(st.render.max_depth);
+  base.renderer = uint8_t(st.hs.renderer);
   SceneSnapshot snap{st.scene};  // read-only until the frame is rendered: updates are cached meanwhile
   self->request(st.tiler, caf::infinite, tasks_atom::value, req).then([=](TaskList& tl) {
     auto& st = self->state;
@@ -188,11 +189,6 @@ void on_tile(self_ptr self, TileResult&& t) {
 
 void on_handshake(self_ptr self, const Handshake& h) {
   auto& st = self->state;
-  if (h.renderer != RendererKind::raytracer) {
-    fail(self, Error{ErrorCode::bad_handshake,
-                     "renderer 'rasterizer' is not available on this node yet; use 'raytracer'", 0});
-    return;
-  }
   if (h.display == DisplayKind::mjpeg && st.sink->token().empty()) {
     fail(self, Error{ErrorCode::bad_handshake,
                      "display 'mjpeg' needs a session token: connect the WebSocket to /ws?session=TOKEN and "
@@ -201,10 +197,11 @@ void on_handshake(self_ptr self, const Handshake& h) {
     return;
   }
   st.hs = h;
+  if (st.settings->renderer >= 0) st.hs.renderer = RendererKind(st.settings->renderer);  // tessera serve --renderer
   st.handshake_done = true;
   st.scene->set_resolution(h.width, h.height);
   HandshakeReply r;
-  r.renderer = h.renderer;
+  r.renderer = st.hs.renderer;
   r.display = h.display;
   r.jpeg_quality = h.jpeg_quality;
   r.nodes = 1;  // single node: this node renders every frame

@@ -111,7 +111,8 @@ void main() {
 }
 )";
 
-const char* kFragmentShader = R"(#version 300 es
+// Prefixed with "#version 300 es\n#define CAN_DISCARD 0|1\n".
+const char* kFragmentShader = R"(
 precision highp float;
 precision highp int;
 #define MAX_LIGHTS 8
@@ -176,11 +177,13 @@ void main() {
     kd *= t.rgb;
     alpha *= t.a;
   }
+#if CAN_DISCARD  // a program without discard lets llvmpipe test depth before shading
   if (uAlphaMask) {
     if (alpha < uAlphaCutoff) discard;
     alpha = 1.0;
   }
   if (alpha < 0.05) discard;
+#endif
   vec3 color;
   if (uModelKind == 0) {
     color = kd;
@@ -277,10 +280,14 @@ struct Rasterizer::Impl {
   EGLDisplay dpy = EGL_NO_DISPLAY;
   EGLContext ctx = EGL_NO_CONTEXT;
   std::string context_error;  // non-empty: creation failed once; every call reports it
-  GLuint program = 0, white = 0, fbo = 0, color_rb = 0, depth_rb = 0;
+  struct Program {
+    GLuint name = 0;
+    Uniforms u{};
+  };
+  Program programs[2];  // [0] may discard (alpha masks, alpha textures, opacity < 0.05), [1] never does
+  GLuint white = 0, fbo = 0, color_rb = 0, depth_rb = 0;
   int32_t fb_w = 0, fb_h = 0;
   GLint max_texture = 0, max_renderbuffer = 0;
-  Uniforms u{};
 
   std::map<Id, Tex> textures;
   std::map<GeomKey, Geom> geoms;
@@ -301,7 +308,8 @@ struct Rasterizer::Impl {
       if (fbo) glDeleteFramebuffers(1, &fbo);
       if (color_rb) glDeleteRenderbuffers(1, &color_rb);
       if (depth_rb) glDeleteRenderbuffers(1, &depth_rb);
-      if (program) glDeleteProgram(program);
+      for (Program& p : programs)
+        if (p.name) glDeleteProgram(p.name);
       eglMakeCurrent(dpy, EGL_NO_SURFACE, EGL_NO_SURFACE, EGL_NO_CONTEXT);
     }
     eglDestroyContext(dpy, ctx);
@@ -373,34 +381,40 @@ void Rasterizer::Impl::create_context() {
       ctx = EGL_NO_CONTEXT;
       egl_fail("eglMakeCurrent without a surface: " + egl_error_name(e));
     }
-    // Program.
-    GLuint vs = compile(GL_VERTEX_SHADER, kVertexShader), fs = compile(GL_FRAGMENT_SHADER, kFragmentShader);
-    program = glCreateProgram();
-    glAttachShader(program, vs);
-    glAttachShader(program, fs);
-    glLinkProgram(program);
-    glDeleteShader(vs);
-    glDeleteShader(fs);
-    GLint ok = 0;
-    glGetProgramiv(program, GL_LINK_STATUS, &ok);
-    if (!ok) {
-      char log[2048] = {};
-      glGetProgramInfoLog(program, sizeof log, nullptr, log);
-      throw std::runtime_error(std::string("rasterizer: program does not link: ") + log);
+    // Programs.
+    for (int variant = 0; variant < 2; ++variant) {
+      std::string fs_src = std::string("#version 300 es\n#define CAN_DISCARD ") + (variant == 0 ? "1" : "0") + "\n" +
+                           kFragmentShader;
+      GLuint vs = compile(GL_VERTEX_SHADER, kVertexShader), fs = compile(GL_FRAGMENT_SHADER, fs_src.c_str());
+      GLuint program = glCreateProgram();
+      programs[variant].name = program;
+      glAttachShader(program, vs);
+      glAttachShader(program, fs);
+      glLinkProgram(program);
+      glDeleteShader(vs);
+      glDeleteShader(fs);
+      GLint ok = 0;
+      glGetProgramiv(program, GL_LINK_STATUS, &ok);
+      if (!ok) {
+        char log[2048] = {};
+        glGetProgramInfoLog(program, sizeof log, nullptr, log);
+        throw std::runtime_error(std::string("rasterizer: program does not link: ") + log);
+      }
+      auto loc = [&](const char* n) { return glGetUniformLocation(program, n); };
+      Uniforms& u = programs[variant].u;
+      u = {loc("uModel"), loc("uNormalMatrix"), loc("uViewProj"), loc("uModelKind"), loc("uDiffuseColor"),
+           loc("uSpecularColor"), loc("uEmissiveColor"), loc("uShininess"), loc("uAmbientIntensity"), loc("uOpacity"),
+           loc("uAlphaCutoff"), loc("uAlphaMask"), loc("uHasDiffuseTexture"), loc("uHasSpecularTexture"),
+           loc("uHasEmissiveTexture"), loc("uDiffuseTexture"), loc("uSpecularTexture"), loc("uEmissiveTexture"),
+           loc("uSceneAmbient"), loc("uNumPoint"), loc("uNumDir"), loc("uNumSpot"), loc("uPointPosition"),
+           loc("uPointIntensity"), loc("uPointAttenuation"), loc("uDirDirection"), loc("uDirIntensity"),
+           loc("uSpotPosition"), loc("uSpotDirection"), loc("uSpotIntensity"), loc("uSpotAttenuation"),
+           loc("uSpotCone"), loc("uDiffuseScale"), loc("uExposure"), loc("uEncodeSrgb"), loc("uBlend")};
+      glUseProgram(program);
+      glUniform1i(u.diffuse_tex, 0);
+      glUniform1i(u.specular_tex, 1);
+      glUniform1i(u.emissive_tex, 2);
     }
-    auto loc = [&](const char* n) { return glGetUniformLocation(program, n); };
-    u = {loc("uModel"), loc("uNormalMatrix"), loc("uViewProj"), loc("uModelKind"), loc("uDiffuseColor"),
-         loc("uSpecularColor"), loc("uEmissiveColor"), loc("uShininess"), loc("uAmbientIntensity"), loc("uOpacity"),
-         loc("uAlphaCutoff"), loc("uAlphaMask"), loc("uHasDiffuseTexture"), loc("uHasSpecularTexture"),
-         loc("uHasEmissiveTexture"), loc("uDiffuseTexture"), loc("uSpecularTexture"), loc("uEmissiveTexture"),
-         loc("uSceneAmbient"), loc("uNumPoint"), loc("uNumDir"), loc("uNumSpot"), loc("uPointPosition"),
-         loc("uPointIntensity"), loc("uPointAttenuation"), loc("uDirDirection"), loc("uDirIntensity"),
-         loc("uSpotPosition"), loc("uSpotDirection"), loc("uSpotIntensity"), loc("uSpotAttenuation"),
-         loc("uSpotCone"), loc("uDiffuseScale"), loc("uExposure"), loc("uEncodeSrgb"), loc("uBlend")};
-    glUseProgram(program);
-    glUniform1i(u.diffuse_tex, 0);
-    glUniform1i(u.specular_tex, 1);
-    glUniform1i(u.emissive_tex, 2);
     // A white texel for samplers without a texture.
     const uint8_t texel[4] = {255, 255, 255, 255};
     glGenTextures(1, &white);
@@ -421,7 +435,8 @@ void Rasterizer::Impl::create_context() {
       eglDestroyContext(dpy, ctx);
       ctx = EGL_NO_CONTEXT;
     }
-    program = white = fbo = 0;
+    for (Program& p : programs) p.name = 0;
+    white = fbo = 0;
     throw;
   }
 }
@@ -458,6 +473,7 @@ void Rasterizer::Impl::upload_texture(Id id, const Texture& src, Tex& t, bool de
   glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_S, wrap(src.sampler.wrap_s));
   glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_T, wrap(src.sampler.wrap_t));
   t.decoded = decode;
+  t.has_alpha = src.has_alpha();
   if (glGetError() == GL_OUT_OF_MEMORY) throw std::runtime_error("rasterizer: out of memory uploading texture " + std::to_string(id));
   ++stats.textures_uploaded;
 }
@@ -707,12 +723,6 @@ void Rasterizer::Impl::render(const Rect& requested, const RenderSettings& setti
   glDepthMask(GL_TRUE);
   glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
 
-  glUseProgram(program);
-  glUniformMatrix4fv(u.view_proj, 1, GL_FALSE, view_proj.m.data());
-  glUniform1f(u.diffuse_scale, env.linear ? 1.0f / kPi : 1.0f);
-  glUniform1f(u.exposure, env.exposure);
-  glUniform1i(u.encode_srgb, encode ? 1 : 0);
-  glUniform3f(u.scene_ambient, env.ambient.x, env.ambient.y, env.ambient.z);
   float pp[kMaxLights * 3] = {}, pi[kMaxLights * 3] = {}, pa[kMaxLights * 3] = {}, dd[kMaxLights * 3] = {},
         di[kMaxLights * 3] = {}, sp[kMaxLights * 3] = {}, sd[kMaxLights * 3] = {}, si[kMaxLights * 3] = {},
         sa[kMaxLights * 3] = {}, sc[kMaxLights * 2] = {};
@@ -733,19 +743,28 @@ void Rasterizer::Impl::render(const Rect& requested, const RenderSettings& setti
       ++ns;
     }
   }
-  glUniform1i(u.num_point, np);
-  glUniform1i(u.num_dir, nd);
-  glUniform1i(u.num_spot, ns);
-  glUniform3fv(u.point_pos, kMaxLights, pp);
-  glUniform3fv(u.point_int, kMaxLights, pi);
-  glUniform3fv(u.point_att, kMaxLights, pa);
-  glUniform3fv(u.dir_dir, kMaxLights, dd);
-  glUniform3fv(u.dir_int, kMaxLights, di);
-  glUniform3fv(u.spot_pos, kMaxLights, sp);
-  glUniform3fv(u.spot_dir, kMaxLights, sd);
-  glUniform3fv(u.spot_int, kMaxLights, si);
-  glUniform3fv(u.spot_att, kMaxLights, sa);
-  glUniform2fv(u.spot_cone, kMaxLights, sc);
+  for (const Program& prog : programs) {
+    const Uniforms& u = prog.u;
+    glUseProgram(prog.name);
+    glUniformMatrix4fv(u.view_proj, 1, GL_FALSE, view_proj.m.data());
+    glUniform1f(u.diffuse_scale, env.linear ? 1.0f / kPi : 1.0f);
+    glUniform1f(u.exposure, env.exposure);
+    glUniform1i(u.encode_srgb, encode ? 1 : 0);
+    glUniform3f(u.scene_ambient, env.ambient.x, env.ambient.y, env.ambient.z);
+    glUniform1i(u.num_point, np);
+    glUniform1i(u.num_dir, nd);
+    glUniform1i(u.num_spot, ns);
+    glUniform3fv(u.point_pos, kMaxLights, pp);
+    glUniform3fv(u.point_int, kMaxLights, pi);
+    glUniform3fv(u.point_att, kMaxLights, pa);
+    glUniform3fv(u.dir_dir, kMaxLights, dd);
+    glUniform3fv(u.dir_int, kMaxLights, di);
+    glUniform3fv(u.spot_pos, kMaxLights, sp);
+    glUniform3fv(u.spot_dir, kMaxLights, sd);
+    glUniform3fv(u.spot_int, kMaxLights, si);
+    glUniform3fv(u.spot_att, kMaxLights, sa);
+    glUniform2fv(u.spot_cone, kMaxLights, sc);
+  }
 
   // Draw list: opaque front to back, then transparent back to front (as three.js sorts,
   // by the clip-space depth of each object's origin, ties by id).
@@ -757,6 +776,7 @@ void Rasterizer::Impl::render(const Rect& requested, const RenderSettings& setti
     bool transparent;
     float z;
     Id id;
+    bool can_discard;
   };
   static const Material kDefault = default_material();
   std::vector<Draw> draws;
@@ -770,7 +790,11 @@ void Rasterizer::Impl::render(const Rect& requested, const RenderSettings& setti
     const float* vp = view_proj.m.data();
     float cz = vp[2] * o.x + vp[6] * o.y + vp[10] * o.z + vp[14];
     float cw = vp[3] * o.x + vp[7] * o.y + vp[11] * o.z + vp[15];
-    draws.push_back({&inst, &geoms.at(inst.key), m, opacity, opacity < 1 && !m->alpha_mask, cw != 0 ? cz / cw : 0, id});
+    const Geom* g = &geoms.at(inst.key);
+    auto tex = g->has_uv && m->diffuse_texture != kNoId ? textures.find(m->diffuse_texture) : textures.end();
+    bool alpha_tex = tex != textures.end() && tex->second.name && tex->second.has_alpha;
+    bool can_discard = m->alpha_mask || opacity < 0.05f || alpha_tex;
+    draws.push_back({&inst, g, m, opacity, opacity < 1 && !m->alpha_mask, cw != 0 ? cz / cw : 0, id, can_discard});
   }
   std::stable_sort(draws.begin(), draws.end(), [](const Draw& a, const Draw& b) {
     if (a.transparent != b.transparent) return !a.transparent;
@@ -783,6 +807,7 @@ void Rasterizer::Impl::render(const Rect& requested, const RenderSettings& setti
   glDisable(GL_CULL_FACE);  // XML3D: no face culling
   glDisable(GL_BLEND);
   bool blending = false;
+  const Program* current = nullptr;
   for (const Draw& d : draws) {
     if (d.transparent && !blending) {
       glEnable(GL_BLEND);
@@ -790,6 +815,12 @@ void Rasterizer::Impl::render(const Rect& requested, const RenderSettings& setti
       glDepthMask(GL_FALSE);
       blending = true;
     }
+    const Program& prog = programs[d.can_discard ? 0 : 1];
+    if (&prog != current) {
+      glUseProgram(prog.name);
+      current = &prog;
+    }
+    const Uniforms& u = prog.u;
     const Material& m = *d.mat;
     Mat4 model = rebase * d.inst->transform;
     Mat4 nm4 = transpose(inverse(d.inst->transform));
