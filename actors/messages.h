@@ -73,11 +73,12 @@ struct RenderTask {
   Rect pixels;
   int32_t ao_samples = 0;
   int32_t max_depth = 4;
+  uint8_t renderer = 0;  // protocol::RendererKind: 0 ray tracer, 1 rasterizer
 };
 template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, RenderTask& x) {
   return f(caf::meta::type_name("tessera::render_task"), x.frame, x.width, x.height, x.pixels, x.ao_samples,
-           x.max_depth);
+           x.max_depth, x.renderer);
 }
 
 // What a rendering node returns for a task: RGBA pixels of the rectangle and the serialised
@@ -211,11 +212,12 @@ struct RenderBatch {
   int32_t ao_samples = 0, max_depth = 4;
   uint32_t timeout_ms = 5000;  // the sender gives up on this batch after this long
   std::vector<Rect> tasks;
+  uint8_t renderer = 0;        // protocol::RendererKind of the session
 };
 template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, RenderBatch& x) {
   return f(caf::meta::type_name("tessera::render_batch"), x.frame, x.width, x.height, x.ao_samples, x.max_depth,
-           x.timeout_ms, x.tasks);
+           x.timeout_ms, x.tasks, x.renderer);
 }
 // tiles[i] answers tasks[i] (error set when that node failed); changed: the sub-tree lost or
 // gained nodes, so its parent should ask for the node list again before the next frame.

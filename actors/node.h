@@ -29,6 +29,7 @@ struct NodeSettings {
   protocol::Limits limits;
   NodeCoefficient coefficient;          // this node's renderer coefficient (tiler input)
   PacketLayout packet_layout{0, 0};     // {0, 0}: detect from the CPU
+  int renderer = -1;                    // -1: each session's handshake chooses; else the protocol::RendererKind for all
   bool detached = true;                 // renderer and encoder on their own threads (false in deterministic tests)
   std::shared_ptr<const Scene> preload; // given to sessions whose scene has no meshes at their first frame
   std::string server_version = "tessera 0.1.0";

@@ -1,12 +1,15 @@
-// Renderer actor: syncs its ray tracer with the snapshot, renders the task, builds and
-// serialises the SAT of the task's cost map (SAT generation happens on the rendering node,
-// paper 6.2, so only the SAT travels to the tiler).
+// Renderer actor: syncs its renderer (the ray tracer or the rasterizer, as the task says)
+// with the snapshot, renders the task, builds and serialises the SAT of the task's cost map
+// (SAT generation happens on the rendering node, paper 6.2, so only the SAT travels to the
+// tiler). The rasterizer's GL context is created on its first task, in this actor's thread;
+// when it cannot be created the task fails with the reason and the actor keeps serving.
 #include <chrono>
 #include <exception>
 
 #include <caf/all.hpp>
 
 #include "actors/node.h"
+#include "renderer/rasterizer.h"
 #include "renderer/raytracer.h"
 #include "renderer/sat.h"
 
@@ -15,6 +18,7 @@ namespace {
 
 struct renderer_state {
   std::unique_ptr<RayTracer> rt;
+  std::unique_ptr<Rasterizer> raster;  // created on the first rasterizer task
   std::vector<std::string> warnings;
   static inline const char* name = "tessera.renderer";
 };
@@ -31,19 +35,28 @@ renderer_actor::behavior_type renderer_impl(renderer_actor::stateful_pointer<ren
         out.pixels = task.pixels;
         try {
           auto& st = self->state;
-          if (!st.rt) st.rt = std::make_unique<RayTracer>(layout);
+          Renderer* renderer = nullptr;
+          if (task.renderer == 1) {
+            if (!st.raster) st.raster = std::make_unique<Rasterizer>();
+            renderer = st.raster.get();
+          } else if (task.renderer == 0) {
+            if (!st.rt) st.rt = std::make_unique<RayTracer>(layout);
+            renderer = st.rt.get();
+          } else {
+            throw std::runtime_error("unknown renderer " + std::to_string(int(task.renderer)));
+          }
           if (!snap.scene) throw std::runtime_error("render task without a scene");
           if (snap.scene->width() != task.width || snap.scene->height() != task.height)
             throw std::runtime_error("scene resolution does not match the task");
           st.warnings.clear();
-          st.rt->sync(*snap.scene, st.warnings);
+          renderer->sync(*snap.scene, st.warnings);
           RenderSettings s;
           s.ao_samples = task.ao_samples;
           s.max_depth = task.max_depth;
           s.frame = task.frame;
           s.cost_map = true;
           TaskResult r;
-          st.rt->render(task.pixels, s, r);
+          renderer->render(task.pixels, s, r);
           out.pixels = r.pixels;
           out.kernel_ms = r.kernel_ms;
           out.rendering_ms = r.rendering_ms;

@@ -141,6 +141,7 @@ class Router {
         t.pixels = b.tasks[my_at];
         t.ao_samples = b.ao_samples;
         t.max_depth = b.max_depth;
+        t.renderer = b.renderer;
         local(t, [join, my_part, my_at](TileResult&& r) {
           if (join->part_done[my_part]) return;
           if (r.pixels.empty() && r.error.empty()) r.pixels = join->reply.tiles[my_at].pixels;

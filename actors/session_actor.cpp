@@ -215,6 +215,7 @@ void render_batch(self_ptr self) {
   batch.height = st.meta.height;
   batch.ao_samples = int32_t(st.render.ao_samples);
   batch.max_depth = int32_t(st.render.max_depth);
+  batch.renderer = uint8_t(st.hs.renderer);
   // Bounded delay for lost nodes: the configured timeout, or 3x the last frame if longer.
   batch.timeout_ms = std::max<uint32_t>(st.settings->task_timeout_ms, uint32_t(3 * st.last_rendering_ms + 200));
   batch.tasks.assign(st.nodes.size(), Rect{});
@@ -283,6 +284,7 @@ void recover(self_ptr self, BatchReply&& r, std::vector<Rect> tasks) {
     t.pixels = tasks[i];
     t.ao_samples = int32_t(st.render.ao_samples);
     t.max_depth = int32_t(st.render.max_depth);
+    t.renderer = uint8_t(st.hs.renderer);
     (*perfs)[i] = st.settings->coefficient.single_core_perf;
     render_local(self, t, [self, seq, i, tiles, perfs, left](TileResult&& res) {
       (*tiles)[i] = std::move(res);
@@ -354,11 +356,6 @@ void finish_frame(self_ptr self, std::vector<TileResult>&& tiles, std::vector<do
 
 void on_handshake(self_ptr self, const Handshake& h) {
   auto& st = self->state;
-  if (h.renderer != RendererKind::raytracer) {
-    fail(self, Error{ErrorCode::bad_handshake,
-                     "renderer 'rasterizer' is not available on this node yet; use 'raytracer'", 0});
-    return;
-  }
   if (h.display == DisplayKind::mjpeg && st.sink->token().empty()) {
     fail(self, Error{ErrorCode::bad_handshake,
                      "display 'mjpeg' needs a session token: connect the WebSocket to /ws?session=TOKEN and "
@@ -367,6 +364,7 @@ void on_handshake(self_ptr self, const Handshake& h) {
     return;
   }
   st.hs = h;
+  if (st.settings->renderer >= 0) st.hs.renderer = RendererKind(st.settings->renderer);  // tessera serve --renderer
   st.handshake_done = true;
   st.scene->set_resolution(h.width, h.height);
   // The reply names the nodes this client gets: commit the tree first (children that are
@@ -376,7 +374,7 @@ void on_handshake(self_ptr self, const Handshake& h) {
     auto& st = self->state;
     if (st.closed) return;
     HandshakeReply r;
-    r.renderer = h.renderer;
+    r.renderer = st.hs.renderer;
     r.display = h.display;
     r.jpeg_quality = h.jpeg_quality;
     r.nodes = uint32_t(std::max<size_t>(1, st.used.size()));  // with none, this node renders

@@ -2,9 +2,11 @@
 // Replays a camera loop on this node and prints one JSON line per frame, then a summary.
 #include <chrono>
 #include <cstdio>
+#include <cstdlib>
 
 #include "app/command.h"
 #include "app/common.h"
+#include "renderer/rasterizer.h"
 #include "renderer/raytracer.h"
 
 namespace tessera::app {
@@ -13,7 +15,7 @@ namespace {
 const char* kHelp =
     "tessera bench --scene S.gltf --camera-loop L.json [--frames N] [--step K] [--size W H]\n"
     "              [--ao N] [--depth D] [--shadows 0|1] [--threads T] [--warmup W]\n"
-    "              [--compare bare|specialised|costmap|breakdown] [--plain]\n"
+    "              [--compare bare|specialised|costmap|breakdown] [--plain] [--renderer raytracer|rasterizer]\n"
     "Replays the camera loop (every K-th frame with --step K) and prints one JSON line per frame:\n"
     "kernel_ms (sum of the cost map), rendering_ms (wall), rays by kind and Mrays/s, then a summary\n"
     "line with medians and conditions. --compare adds, in the same run and per frame:\n"
@@ -21,9 +23,71 @@ const char* kHelp =
     "  specialised the kernel with AO, secondary rays, textures and filters compiled out\n"
     "  costmap     the same render with the per-packet TSC timing switched off\n"
     "  breakdown   marginal Mrays/s per ray kind (primary; +shadow; +AO; +secondary)\n"
-    "--plain strips textures, reflection, refraction and alpha masks from the scene's materials.\n";
+    "--plain strips textures, reflection, refraction and alpha masks from the scene's materials.\n"
+    "--renderer rasterizer replays the loop with the OpenGL ES rasterizer (its threads: LP_NUM_THREADS;\n"
+    "no rays, no cost map); --compare bare then times the ray tracer's bare primary-ray loop on the same\n"
+    "frames in the same run (ours_over_bare = rasterizer ms / bare ms).\n";
 
 double mrays(uint64_t rays, double ms) { return ms > 0 ? double(rays) / (ms * 1e3) : 0; }
+
+// The rasterizer's replay: frame time (wall, including read-back) per frame, and with
+// compare_bare the ray tracer's bare primary-ray loop over the same camera in the same run.
+int run_rasterizer(SceneSetup& setup, long frames, long step, long warmup, bool compare_bare, const RenderSettings& settings,
+                   int threads) {
+  Rasterizer gl;
+  std::unique_ptr<RayTracer> rt;
+  if (compare_bare) rt = std::make_unique<RayTracer>();
+  std::vector<std::string> warnings;
+  Scene& scene = setup.loaded.scene;
+  const Rect full{0, 0, scene.width(), scene.height()};
+  auto sync = [&] {
+    warnings.clear();
+    gl.sync(scene, warnings);
+    if (rt) rt->sync(scene, warnings);
+  };
+  setup.set_frame(0);
+  sync();
+  for (auto& w : warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
+  for (long i = 0; i < warmup; ++i) { TaskResult r; gl.render(full, settings, r); }
+  std::vector<double> rendering, sync_ms, bare_ms, ratio;
+  for (long f = 0; f < frames; ++f) {
+    size_t k = size_t(f * step) % setup.loop.frames.size();
+    setup.set_frame(k);
+    auto t0 = std::chrono::steady_clock::now();
+    warnings.clear();
+    gl.sync(scene, warnings);
+    sync_ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+    if (rt) rt->sync(scene, warnings);
+    // Alternate which side goes first, so that neither always pays for a cold cache.
+    double bare = 0;
+    uint64_t n = 0;
+    if (rt && f % 2 == 1) bare = rt->trace_primary_only(full, &n);
+    TaskResult r;
+    gl.render(full, settings, r);
+    if (rt && f % 2 == 0) bare = rt->trace_primary_only(full, &n);
+    rendering.push_back(r.rendering_ms);
+    std::printf("{\"frame\": %zu, \"rendering_ms\": %.3f, \"sync_ms\": %.3f", k, r.rendering_ms, sync_ms.back());
+    if (rt) {
+      bare_ms.push_back(bare);
+      ratio.push_back(bare > 0 ? r.rendering_ms / bare : 0);
+      std::printf(", \"bare_ms\": %.3f, \"ours_over_bare\": %.4f", bare, ratio.back());
+    }
+    std::printf("}\n");
+    std::fflush(stdout);
+  }
+  const char* lp = std::getenv("LP_NUM_THREADS");
+  std::printf("{\"summary\": true, \"renderer\": \"rasterizer\", \"scene\": %s, \"width\": %d, \"height\": %d, "
+              "\"frames\": %ld, \"step\": %ld, \"rendering_ms\": %.3f, \"sync_ms\": %.3f, \"triangles\": %zu, "
+              "\"gl\": %s, \"lp_num_threads\": %s, \"cpu\": %s, \"threads\": %d",
+              json_str(setup.scene_path).c_str(), scene.width(), scene.height(), frames, step, median(rendering),
+              median(sync_ms), scene.triangle_count(), json_str(gl.gl_description()).c_str(),
+              json_str(lp ? lp : "unset").c_str(), json_str(cpu_model()).c_str(), threads);
+  if (rt)
+    std::printf(", \"compare\": \"bare\", \"compare_ms\": %.3f, \"compare_ratio\": %.4f, \"isa\": %s", median(bare_ms),
+                median(ratio), json_str(isa_name(rt->packet_layout())).c_str());
+  std::printf("}\n");
+  return 0;
+}
 
 int run(const std::vector<std::string>& argv) {
   Args args(argv);
@@ -37,7 +101,13 @@ int run(const std::vector<std::string>& argv) {
   long warmup = args.integer("--warmup", 1);
   std::string compare = args.str("--compare");
   RenderSettings settings = read_settings(args);
+  std::string kind = read_renderer_kind(args);
   args.finish();
+  if (kind == "rasterizer") {
+    if (!compare.empty() && compare != "bare")
+      throw std::invalid_argument("--compare " + compare + " is for the ray tracer; the rasterizer takes only --compare bare");
+    return run_rasterizer(setup, frames, step, warmup, compare == "bare", settings, threads);
+  }
   if (step < 1 || frames < 1) throw std::invalid_argument("--step and --frames must be >= 1");
   if (!compare.empty() && compare != "bare" && compare != "specialised" && compare != "costmap" && compare != "breakdown")
     throw std::invalid_argument("--compare must be bare, specialised, costmap or breakdown");

@@ -1,9 +1,9 @@
-// tessera render --scene S.gltf [--camera-loop L.json --frame K] --size W H [--ao N] [--depth D] --out F.png
+// tessera render --scene S.gltf [--camera-loop L.json --frame K] --size W H [--ao N] [--depth D]
+//                [--renderer raytracer|rasterizer] --out F.png
 #include <cstdio>
 
 #include "app/command.h"
 #include "app/common.h"
-#include "renderer/raytracer.h"
 
 namespace tessera::app {
 namespace {
@@ -12,8 +12,11 @@ int run(const std::vector<std::string>& argv) {
   Args args(argv);
   if (args.flag("--help")) {
     std::puts("tessera render --scene S.gltf [--camera-loop L.json --frame K] [--size W H] [--ao N] [--depth D]\n"
-              "               [--shadows 0|1] [--ao-distance X] [--threads T] --out F.png\n"
-              "Renders one image with the ray tracer and prints its figures as one JSON line.");
+              "               [--shadows 0|1] [--ao-distance X] [--threads T] [--renderer raytracer|rasterizer]\n"
+              "               --out F.png\n"
+              "Renders one image (with the ray tracer by default) and prints its figures as one JSON line.\n"
+              "The rasterizer has no AO, reflection, refraction or shadows; --threads does not limit it\n"
+              "(llvmpipe's threads are set by LP_NUM_THREADS).");
     return 0;
   }
   int threads = 0;
@@ -22,25 +25,27 @@ int run(const std::vector<std::string>& argv) {
   long frame = args.integer("--frame", 0);
   std::string out_path = args.required("--out");
   RenderSettings settings = read_settings(args);
+  std::string kind = read_renderer_kind(args);
   args.finish();
   settings.frame = uint32_t(frame);
   setup.set_frame(size_t(frame));
 
   for (auto& w : setup.loaded.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
-  RayTracer rt;
+  std::unique_ptr<Renderer> renderer = make_renderer(kind);
   std::vector<std::string> warnings;
-  rt.sync(setup.loaded.scene, warnings);
+  renderer->sync(setup.loaded.scene, warnings);
   for (auto& w : warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
   const Scene& scene = setup.loaded.scene;
   TaskResult res;
-  rt.render({0, 0, scene.width(), scene.height()}, settings, res);
+  renderer->render({0, 0, scene.width(), scene.height()}, settings, res);
   if (res.image.width > 0 && res.image.height > 0) write_png(out_path, res.image);
   else std::fprintf(stderr, "warning: empty image (size %dx%d); nothing written\n", scene.width(), scene.height());
   std::printf("{\"out\": %s, \"width\": %d, \"height\": %d, \"kernel_ms\": %.3f, \"rendering_ms\": %.3f, "
-              "\"rays\": {\"primary\": %llu, \"shadow\": %llu, \"ao\": %llu, \"secondary\": %llu}, \"threads\": %d}\n",
+              "\"rays\": {\"primary\": %llu, \"shadow\": %llu, \"ao\": %llu, \"secondary\": %llu}, \"threads\": %d, "
+              "\"renderer\": %s}\n",
               json_str(out_path).c_str(), scene.width(), scene.height(), res.kernel_ms, res.rendering_ms,
               (unsigned long long)res.rays.primary, (unsigned long long)res.rays.shadow, (unsigned long long)res.rays.ao,
-              (unsigned long long)res.rays.secondary, threads);
+              (unsigned long long)res.rays.secondary, threads, json_str(kind).c_str());
   return 0;
 }
 

@@ -1,5 +1,5 @@
 // tessera serve [--config configs/single.ini] [--host H] [--port P] [--web-root DIR]
-//               [--scene S.gltf] [--threads T] [--tessera.NAME=VALUE ...]
+//               [--scene S.gltf] [--threads T] [--renderer client|raytracer|rasterizer] [--tessera.NAME=VALUE ...]
 #include <csignal>
 #include <cstdio>
 #include <thread>
@@ -10,6 +10,7 @@
 #include "app/command.h"
 #include "app/common.h"
 #include "app/node_config.h"
+#include "renderer/rasterizer.h"
 
 namespace tessera::app {
 namespace {
@@ -17,6 +18,7 @@ namespace {
 const char* kHelp =
     "tessera serve [--config FILE.ini] [--host H] [--port P] [--web-root DIR] [--scenes-root DIR]\n"
     "              [--scene S.gltf] [--threads T]   (DIR of --scenes-root is served at /scenes/)\n"
+    "              [--renderer client|raytracer|rasterizer]\n"
     "              [--tessera.NAME=VALUE ...] [--scheduler.max-threads=N]\n"
     "Runs one node: the web client and demo pages over HTTP at http://H:P/, the client protocol on the\n"
     "WebSocket ws://H:P/ws, MJPEG streams at /mjpeg/<session token>. Defaults: 127.0.0.1:8080, web/.\n"
@@ -27,6 +29,9 @@ const char* kHelp =
     "Cluster (docs/operations.md): [--cluster-port P] publishes this node to parents; [--children H:P,H:P]\n"
     "names its children; [--no-render] makes it a hub or dedicated master; [--no-http] serves no clients.\n"
     "INI: cluster-port, cluster-host, children, render, http, name, task-timeout-ms, reconnect-ms.\n"
+    "--renderer: 'client' (default) renders each session with the renderer its handshake asks for (the\n"
+    "ray tracer unless the page says renderer=\"rasterizer\"); raytracer or rasterizer renders every\n"
+    "session with that one. The listening line says whether the rasterizer's GL context can be created.\n"
     "Stops on SIGINT/SIGTERM.\n";
 
 int run(const std::vector<std::string>& argv) {
@@ -40,6 +45,9 @@ int run(const std::vector<std::string>& argv) {
   long cluster_port = args.integer("--cluster-port", -2);
   std::string children = args.str("--children");
   bool no_render = args.flag("--no-render"), no_http = args.flag("--no-http");
+  std::string renderer = args.str("--renderer", "client");
+  if (renderer != "client" && renderer != "raytracer" && renderer != "rasterizer")
+    throw std::invalid_argument("--renderer must be client, raytracer or rasterizer, not '" + renderer + "'");
   // Everything else of the form --group.name=value goes to CAF's parser.
   caf::actor_system_config::string_list caf_args;
   for (const auto& a : argv)
@@ -86,6 +94,13 @@ int run(const std::vector<std::string>& argv) {
   if (cfg.render_threads > 0)
     limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, size_t(cfg.render_threads));
   auto settings = cfg.node_settings();
+  if (renderer != "client")
+    settings->renderer = int(renderer == "rasterizer" ? protocol::RendererKind::rasterizer : protocol::RendererKind::raytracer);
+  // Probe the rasterizer once, so that the operator sees whether it can serve (a session that
+  // asks for it on a node without EGL gets the same reason as an error, and others go on).
+  std::string gl_why;
+  bool gl_ok = rasterizer_available(&gl_why);
+  if (renderer == "rasterizer" && !gl_ok) throw std::runtime_error("--renderer rasterizer: " + gl_why);
   ServerOptions opts = cfg.server_options();
   if (!scenes_root.empty()) opts.scenes_root = scenes_root;
   caf::actor_system sys{cfg};
@@ -113,13 +128,14 @@ int run(const std::vector<std::string>& argv) {
   for (auto& c : cfg.children) kids += (kids.empty() ? "" : ", ") + json_str(c);
   std::printf("{\"listening\": %s, \"websocket\": %s, \"cluster\": %s, \"name\": %s, \"children\": [%s], "
               "\"render\": %s, \"web_root\": %s, \"scene\": %s, \"max_clients\": %d, \"render_threads\": %d, "
-              "\"cpu\": %s}\n",
+              "\"cpu\": %s, \"renderer\": %s, \"rasterizer\": %s}\n",
               server ? json_str("http://" + opts.host + ":" + std::to_string(server->port()) + "/").c_str() : "null",
               server ? json_str("ws://" + opts.host + ":" + std::to_string(server->port()) + "/ws").c_str() : "null",
               published >= 0 ? json_str(cfg.cluster_host + ":" + std::to_string(published)).c_str() : "null",
               json_str(settings->name).c_str(), kids.c_str(), cfg.renders ? "true" : "false",
               json_str(opts.web_root).c_str(), json_str(cfg.scene).c_str(), cfg.max_clients,
-              cfg.render_threads > 0 ? cfg.render_threads : hardware_threads(), json_str(cpu_model()).c_str());
+              cfg.render_threads > 0 ? cfg.render_threads : hardware_threads(), json_str(cpu_model()).c_str(),
+              json_str(renderer).c_str(), json_str(gl_ok ? "available" : "unavailable: " + gl_why).c_str());
   std::fflush(stdout);
   int sig = 0;
   sigwait(&sigs, &sig);

@@ -5,6 +5,9 @@
 #include <fstream>
 #include <thread>
 
+#include "renderer/rasterizer.h"
+#include "renderer/raytracer.h"
+
 namespace tessera::app {
 
 std::string cpu_model() {
@@ -36,6 +39,19 @@ RenderSettings read_settings(Args& args) {
   if (s.ao_samples < 0 || s.ao_samples > 4096) throw std::invalid_argument("--ao must be in 0..4096");
   if (s.max_depth < 1 || s.max_depth > 64) throw std::invalid_argument("--depth must be in 1..64");
   return s;
+}
+
+std::string read_renderer_kind(Args& args) {
+  std::string kind = args.str("--renderer", "raytracer");
+  if (kind != "raytracer" && kind != "rasterizer")
+    throw std::invalid_argument("--renderer must be raytracer or rasterizer, not '" + kind + "'");
+  return kind;
+}
+
+std::unique_ptr<Renderer> make_renderer(const std::string& kind) {
+  if (kind == "rasterizer") return std::make_unique<Rasterizer>();
+  if (kind == "raytracer") return std::make_unique<RayTracer>();
+  throw std::invalid_argument("unknown renderer '" + kind + "'");
 }
 
 void SceneSetup::set_frame(size_t k) {

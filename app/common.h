@@ -21,6 +21,11 @@ std::unique_ptr<tbb::global_control> limit_threads(Args& args, int* threads);
 // --ao N --depth D --shadows 0|1 --ao-distance X
 RenderSettings read_settings(Args& args);
 
+// --renderer raytracer|rasterizer (ray tracer by default), checked.
+std::string read_renderer_kind(Args& args);
+// A renderer of that kind ("raytracer" or "rasterizer").
+std::unique_ptr<Renderer> make_renderer(const std::string& kind);
+
 // Loads --scene (+ optional --camera-loop), sets the resolution from --size W H.
 struct SceneSetup {
   LoadedScene loaded;
