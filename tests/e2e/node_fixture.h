@@ -1,6 +1,7 @@
 #pragma once
 // An in-process node on a free localhost port, and a protocol client for the e2e tests.
 #include <chrono>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <optional>
@@ -8,13 +9,17 @@
 #include <thread>
 #include <vector>
 
+#include <catch2/catch.hpp>
+
 #include <caf/all.hpp>
 
 #include "actors/node.h"
 #include "net/protocol.h"
 #include "net/scene_records.h"
 #include "net/server.h"
+#include "codecs/jpeg.h"
 #include "renderer/gltf_loader.h"
+#include "renderer/raytracer.h"
 
 namespace tessera::test {
 
@@ -119,6 +124,39 @@ inline const LoadedScene& pavilion() {
 inline const CameraLoop& pavilion_loop() {
   static CameraLoop l = load_camera_loop("../shared/scenes/pavilion/camera-loop.json");
   return l;
+}
+
+// The ray tracer's direct render of a scene from a camera (AO seeded as a session seeds its
+// frame `seq`): what a node's frame must show.
+inline Image render_direct(const Scene& original, const Camera& cam, int w, int h, int ao, uint32_t seq) {
+  Scene scene = original;
+  scene.set_resolution(w, h);
+  scene.set_camera(cam);
+  RayTracer rt;
+  std::vector<std::string> warnings;
+  rt.sync(scene, warnings);
+  RenderSettings s;
+  s.ao_samples = ao;
+  s.frame = seq;
+  TaskResult r;
+  rt.render({0, 0, w, h}, s, r);
+  return std::move(r.image);
+}
+
+inline Image decode_jpeg(const std::vector<uint8_t>& bytes) {
+  Image img;
+  std::string err;
+  REQUIRE(jpeg_decode(bytes.data(), bytes.size(), img, err));
+  return img;
+}
+
+inline bool wait_for(const std::function<bool()>& pred, int timeout_ms = 5000) {
+  auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
+  while (std::chrono::steady_clock::now() < deadline) {
+    if (pred()) return true;
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
+  return pred();
 }
 
 }  // namespace tessera::test

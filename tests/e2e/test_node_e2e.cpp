@@ -25,34 +25,7 @@ constexpr int W = 320, H = 180;
 
 // The ray tracer's direct render of loop frame k (AO seeded as the session seeds frame `seq`).
 Image direct_render(size_t k, int ao, uint32_t seq) {
-  Scene scene = pavilion().scene;
-  scene.set_resolution(W, H);
-  scene.set_camera(pavilion_loop().camera(k));
-  RayTracer rt;
-  std::vector<std::string> warnings;
-  rt.sync(scene, warnings);
-  RenderSettings s;
-  s.ao_samples = ao;
-  s.frame = seq;
-  TaskResult r;
-  rt.render({0, 0, W, H}, s, r);
-  return std::move(r.image);
-}
-
-Image decode_jpeg(const std::vector<uint8_t>& bytes) {
-  Image img;
-  std::string err;
-  REQUIRE(jpeg_decode(bytes.data(), bytes.size(), img, err));
-  return img;
-}
-
-bool wait_for(const std::function<bool()>& pred, int timeout_ms = 5000) {
-  auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
-  while (std::chrono::steady_clock::now() < deadline) {
-    if (pred()) return true;
-    std::this_thread::sleep_for(std::chrono::milliseconds(10));
-  }
-  return pred();
+  return render_direct(pavilion().scene, pavilion_loop().camera(k), W, H, ao, seq);
 }
 
 }  // namespace

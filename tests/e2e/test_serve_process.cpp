@@ -21,92 +21,12 @@
 
 #include "net/http.h"
 #include "tests/e2e/node_fixture.h"
+#include "tests/e2e/process.h"
 
 using namespace tessera;
 using namespace tessera::test;
 
 namespace {
-
-// A child process with its stdout and stderr on pipes.
-class Process {
- public:
-  explicit Process(const std::vector<std::string>& args) {
-    int out[2], err[2];
-    REQUIRE(pipe(out) == 0);
-    REQUIRE(pipe(err) == 0);
-    pid_ = fork();
-    REQUIRE(pid_ >= 0);
-    if (pid_ == 0) {
-      dup2(out[1], 1);
-      dup2(err[1], 2);
-      close(out[0]), close(out[1]), close(err[0]), close(err[1]);
-      std::vector<char*> argv;
-      for (auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-      argv.push_back(nullptr);
-      execv(argv[0], argv.data());
-      _exit(127);
-    }
-    close(out[1]);
-    close(err[1]);
-    out_ = out[0];
-    err_ = err[0];
-    fcntl(out_, F_SETFL, O_NONBLOCK);
-    fcntl(err_, F_SETFL, O_NONBLOCK);
-  }
-  ~Process() {
-    if (pid_ > 0 && !status_) {
-      kill(pid_, SIGKILL);
-      waitpid(pid_, nullptr, 0);
-    }
-    close(out_);
-    close(err_);
-  }
-  // The first line the child writes to stdout, within timeout_ms.
-  std::optional<std::string> first_line(int timeout_ms) {
-    auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
-    while (std::chrono::steady_clock::now() < deadline) {
-      pump();
-      auto nl = stdout_.find('\n');
-      if (nl != std::string::npos) return stdout_.substr(0, nl);
-      if (exited(0)) return std::nullopt;
-      pollfd p{out_, POLLIN, 0};
-      poll(&p, 1, 50);
-    }
-    return std::nullopt;
-  }
-  // Waits up to timeout_ms for the child to exit; its wait status, or nullopt.
-  std::optional<int> wait(int timeout_ms) {
-    auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
-    do {
-      pump();
-      if (exited(0)) break;
-      std::this_thread::sleep_for(std::chrono::milliseconds(20));
-    } while (std::chrono::steady_clock::now() < deadline);
-    pump();
-    return status_;
-  }
-  void signal(int sig) { kill(pid_, sig); }
-  const std::string& out() const { return stdout_; }
-  const std::string& err() const { return stderr_; }
-
- private:
-  bool exited(int) {
-    if (status_) return true;
-    int st = 0;
-    if (waitpid(pid_, &st, WNOHANG) == pid_) status_ = st;
-    return bool(status_);
-  }
-  void pump() {
-    char buf[4096];
-    ssize_t n;
-    while ((n = read(out_, buf, sizeof buf)) > 0) stdout_.append(buf, size_t(n));
-    while ((n = read(err_, buf, sizeof buf)) > 0) stderr_.append(buf, size_t(n));
-  }
-  pid_t pid_ = -1;
-  int out_ = -1, err_ = -1;
-  std::string stdout_, stderr_;
-  std::optional<int> status_;
-};
 
 // The port from serve's first line: {"listening": "http://127.0.0.1:PORT/", ...}.
 uint16_t listening_port(const std::string& line) {

@@ -1,0 +1,140 @@
+// A real tree of `tessera serve` processes on localhost (the built binary, TESSERA_BINARY):
+// workers publish their node on a cluster port, a master names them as children, and a
+// protocol client streams the pavilion through the master. Frames must match the ray
+// tracer's direct render while nodes are killed (SIGKILL, mid-stream) and come back.
+#include <catch2/catch.hpp>
+
+#include <signal.h>
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "tests/e2e/node_fixture.h"
+#include "tests/e2e/process.h"
+
+using namespace tessera;
+using namespace tessera::test;
+using protocol::DisplayKind;
+
+namespace {
+
+constexpr int W = 240, H = 136;
+
+std::string field(const std::string& line, const std::string& key) {
+  auto at = line.find("\"" + key + "\": \"");
+  if (at == std::string::npos) return {};
+  at += key.size() + 5;
+  return line.substr(at, line.find('"', at) - at);
+}
+
+// One `tessera serve` process; its first stdout line names its endpoints.
+struct Node {
+  std::unique_ptr<Process> p;
+  uint16_t http = 0, cluster = 0;
+
+  explicit Node(std::vector<std::string> extra) {
+    std::vector<std::string> a{TESSERA_BINARY, "serve", "--threads", "1", "--tessera.reconnect-ms=200",
+                               "--tessera.task-timeout-ms=3000", "--web-root", "web"};
+    a.insert(a.end(), extra.begin(), extra.end());
+    p = std::make_unique<Process>(a);
+    auto line = p->first_line(30000);
+    INFO("stderr: " << p->err());
+    REQUIRE(line);
+    std::string url = field(*line, "listening"), cl = field(*line, "cluster");
+    if (!url.empty()) http = uint16_t(std::stoi(url.substr(url.rfind(':') + 1)));
+    if (!cl.empty()) cluster = uint16_t(std::stoi(cl.substr(cl.rfind(':') + 1)));
+  }
+  std::string addr() const { return "127.0.0.1:" + std::to_string(cluster); }
+};
+
+Node worker(const std::string& name, uint16_t port = 0) {
+  return Node({"--no-http", "--cluster-port", std::to_string(port), "--tessera.name=" + name});
+}
+
+// Requests frame k of the camera loop and checks it against the direct render.
+void check_frame(ProtoClient& c, size_t k, uint32_t number, Process& master) {
+  auto f = c.render(pavilion_loop().camera(k), number);
+  INFO("master stderr tail: " << master.err().substr(master.err().size() > 3000 ? master.err().size() - 3000 : 0));
+  REQUIRE(f);
+  CHECK(f->frame == number);
+  REQUIRE(f->encoding == protocol::FrameEncoding::jpeg);
+  const double psnr = compare(decode_jpeg(f->payload), render_direct(pavilion().scene, pavilion_loop().camera(k), W, H, 0, 0)).psnr;
+  INFO("frame " << number << " PSNR " << psnr);
+  CHECK(psnr >= 30.0);
+}
+
+}  // namespace
+
+TEST_CASE("Two worker processes render for a master; a killed worker's tiles are re-rendered and it rejoins",
+          "[cluster][fault]") {
+  Node w1 = worker("w1"), w2 = worker("w2");
+  const uint16_t p1 = w1.cluster;
+  Node m({"--port", "0", "--no-render", "--children", w1.addr() + "," + w2.addr()});
+  REQUIRE(wait_for([&] { return m.p->err_count("\"child_connected\"") == 2; }, 20000));
+
+  ProtoClient c;
+  REQUIRE(c.connect(m.http));
+  auto hs = c.handshake(DisplayKind::jpeg, W, H, 95);
+  REQUIRE(hs);
+  CHECK(hs->nodes == 2);  // a dedicated master: both workers render, the master does not
+  REQUIRE(c.upload(pavilion().scene));
+  uint32_t n = 1;
+  for (size_t k : {0, 40, 80}) check_frame(c, k, n++, *m.p);
+  CHECK(m.p->err_count("\"cluster_frame\"") >= 3);  // per-node figures of every frame
+  CHECK(w1.p->err_count("\"worker_opened\"") == 1);
+
+  // A worker dies mid-stream: every frame still arrives and is right.
+  w1.p->signal(SIGKILL);
+  for (size_t k : {100, 120, 140}) check_frame(c, k, n++, *m.p);
+  CHECK(m.p->err_count("\"node_lost\"") >= 1);
+
+  // It comes back on the same port: the session reopens a worker there, sends it the scene,
+  // and tiles over both workers again.
+  Node back = worker("w1b", p1);
+  bool rejoined = wait_for([&] { return m.p->err_count("\"joined\": \"127.0.0.1:" + std::to_string(p1)) == 2; }, 20000);
+  INFO("master stderr: " << m.p->err());
+  REQUIRE(rejoined);
+  for (size_t k : {160, 180}) check_frame(c, k, n++, *m.p);
+  CHECK(m.p->err_count("\"name\": \"w1b\"") >= 1);
+  CHECK(back.p->err_count("\"worker_opened\"") == 1);
+  CHECK(m.p->err_count("\"error\"") == 0);  // the client never got an error
+}
+
+TEST_CASE("A hub relays a sub-tree; when it dies its sub-tree leaves and the rest keeps rendering", "[cluster][fault]") {
+  Node w3 = worker("w3"), w4 = worker("w4"), w5 = worker("w5");
+  Node hub({"--no-http", "--no-render", "--cluster-port", "0", "--tessera.name=hub", "--children",
+            w3.addr() + "," + w4.addr()});
+  REQUIRE(wait_for([&] { return hub.p->err_count("\"child_connected\"") == 2; }, 20000));
+  Node m({"--port", "0", "--children", hub.addr() + "," + w5.addr()});  // the master renders too
+  REQUIRE(wait_for([&] { return m.p->err_count("\"child_connected\"") == 2; }, 20000));
+
+  ProtoClient c;
+  REQUIRE(c.connect(m.http));
+  auto hs = c.handshake(DisplayKind::jpeg, W, H, 95);
+  REQUIRE(hs);
+  CHECK(hs->nodes == 4);  // master, w3 and w4 through the hub, w5
+  REQUIRE(c.upload(pavilion().scene));
+  uint32_t n = 1;
+  for (size_t k : {0, 50}) check_frame(c, k, n++, *m.p);
+  CHECK(w3.p->err_count("\"worker_opened\"") == 1);  // opened by the hub's worker, not by the master
+
+  // A page may limit the node count: the strongest nodes first (here all equal: list order).
+  ProtoClient limited;
+  REQUIRE(limited.connect(m.http));
+  protocol::Handshake h2;
+  h2.display = DisplayKind::jpeg;
+  h2.width = W;
+  h2.height = H;
+  h2.max_nodes = 2;
+  REQUIRE(limited.send({h2}));
+  auto hs2 = limited.next<protocol::HandshakeReply>();
+  REQUIRE(hs2);
+  CHECK(hs2->nodes == 2);
+
+  hub.p->signal(SIGKILL);
+  for (size_t k : {100, 150, 200}) check_frame(c, k, n++, *m.p);
+  CHECK(m.p->err_count("\"node_lost\": \"" + hub.addr()) >= 1);
+  CHECK(m.p->err_count("\"used\": 2") >= 1);  // master and w5 only
+  CHECK(m.p->err_count("\"error\"") == 0);
+}
