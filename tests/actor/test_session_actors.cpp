@@ -10,68 +10,13 @@
 
 #include "actors/node.h"
 #include "net/protocol.h"
+#include "tests/actor/actor_helpers.h"
 
 using namespace tessera;
 using namespace tessera::protocol;
+using namespace tessera::test;
 
 namespace {
-
-struct TestConfig : caf::actor_system_config {
-  TestConfig() { register_message_types(*this); }
-};
-
-// Records what the session sends to its client.
-struct RecordingSink : ClientSink {
-  std::mutex mu;
-  std::vector<ServerRecord> records;
-  int closes = 0;
-  size_t mjpeg = 0;
-  void send(std::vector<uint8_t> message) override {
-    auto r = decode_server(message.data(), message.size(), Limits{});
-    CAF_REQUIRE(r.ok());
-    std::lock_guard<std::mutex> l(mu);
-    for (auto& x : r.value()) records.push_back(std::move(x));
-  }
-  void send_mjpeg(std::shared_ptr<const std::vector<uint8_t>>) override { ++mjpeg; }
-  void close(const std::string&) override { ++closes; }
-  std::string token() const override { return "testtoken"; }
-  template <class T>
-  std::vector<T> all() {
-    std::vector<T> out;
-    for (auto& r : records)
-      if (auto* t = std::get_if<T>(&r)) out.push_back(*t);
-    return out;
-  }
-};
-
-// A quad in front of the camera, one light: 16x16 pixels render in well under a millisecond.
-std::vector<ClientRecord> tiny_scene() {
-  SetBuffer pos;
-  pos.id = 1;
-  pos.buffer.type = Buffer::Type::f32;
-  pos.buffer.components = 3;
-  pos.buffer.f = {-1, -1, 0, 1, -1, 0, 1, 1, 0, -1, 1, 0};
-  SetBuffer idx;
-  idx.id = 2;
-  idx.buffer.type = Buffer::Type::u32;
-  idx.buffer.components = 1;
-  idx.buffer.u = {0, 1, 2, 0, 2, 3};
-  SetMesh mesh;
-  mesh.id = 3;
-  mesh.mesh.positions = 1;
-  mesh.mesh.indices = 2;
-  SetLight light;
-  light.id = 4;
-  light.light.type = Light::Type::directional;
-  light.light.direction = {0, 0, -1};
-  return {pos, idx, mesh, light};
-}
-
-Camera camera_at(float z) {
-  Camera c;
-  c.to_world = Mat4::look_at({0, 0, z}, {0, 0, 0}, {0, 1, 0});
-  return c;
-}
 
 struct fixture : test_coordinator_fixture<TestConfig> {
   std::shared_ptr<RecordingSink> sink = std::make_shared<RecordingSink>();

@@ -1,0 +1,239 @@
+// Deterministic tests of the cluster paths (actors/router.h, actors/cluster.cpp) with CAF's
+// test coordinator: a session whose node has children, some of them real node actors with
+// real workers and renderers, some of them fakes that lie, hang, die or straggle. Every
+// message runs on the test's one thread, timeouts fire only when the test says so.
+#define CAF_SUITE cluster_actors
+#include <caf/test/dsl.hpp>
+#include <caf/test/unit_test_impl.hpp>
+
+#include <memory>
+
+#include "actors/node.h"
+#include "net/protocol.h"
+#include "net/scene_records.h"
+#include "renderer/sat.h"
+#include "tests/actor/actor_helpers.h"
+
+using namespace tessera;
+using namespace tessera::protocol;
+using namespace tessera::test;
+
+namespace {
+
+constexpr int kSize = 16;
+
+// What a fake child does with its tasks.
+enum class Mode { liar, hang, straggler };
+
+struct FakeLog {
+  std::vector<RenderBatch> batches;
+  size_t updates = 0;
+  std::vector<caf::response_promise> held;  // hang: never answered
+};
+
+// A worker that answers (or not) as its mode says; one node named `name`.
+worker_actor::behavior_type fake_worker(worker_actor::pointer self, Mode mode, std::shared_ptr<FakeLog> log) {
+  return {
+      [=](update_atom, std::vector<uint8_t>&, bool) { log->updates++; },
+      [=](render_atom, RenderBatch& b) -> caf::result<BatchReply> {
+        log->batches.push_back(b);
+        if (mode == Mode::hang) {
+          log->held.push_back(self->make_response_promise());
+          return caf::delegated<BatchReply>{};
+        }
+        BatchReply r;
+        for (const Rect& task : b.tasks) {
+          TileResult t;
+          t.frame = b.frame;
+          t.pixels = task;
+          if (mode == Mode::liar) {
+            t.rgba.assign(7, 0);  // not width x height x 4
+          } else {
+            // Valid pixels, and a cost map that says every packet costs 1 ms: a node on a
+            // CPU shared with something else.
+            t.rgba.assign(size_t(task.area()) * 4, 128);
+            CostMap cm;
+            cm.packets = {task.x0 / 2, task.y0 / 2, (task.x1 + 1) / 2, (task.y1 + 1) / 2};
+            cm.cost.assign(size_t(cm.packets.area()), 1'000'000);
+            Sat::from_cost_map(cm).serialize_into(t.sat);
+            t.kernel_ms = double(cm.packets.area());
+          }
+          r.tiles.push_back(std::move(t));
+        }
+        return r;
+      },
+      [=](nodes_atom) { return std::vector<NodeInfo>{NodeInfo{"fake", 1, 1.0}}; },
+      [=](tick_atom) {},
+  };
+}
+
+// A node that opens fake workers.
+node_actor::behavior_type fake_node(node_actor::pointer self, Mode mode, std::shared_ptr<FakeLog> log,
+                                    std::shared_ptr<worker_actor> last) {
+  return {
+      [=](open_atom, const OpenRequest&) {
+        *last = self->spawn<caf::linked>(fake_worker, mode, log);  // ends with its node
+        return OpenReply{caf::actor_cast<caf::actor>(*last), {NodeInfo{"fake", 1, 1.0}}};
+      },
+      [=](links_atom) { return std::vector<ChildLink>{}; },
+      [=](tick_atom) {},
+  };
+}
+
+// The master's own node: its children are whatever the test put in `links`.
+node_actor::behavior_type parent_node(node_actor::pointer, std::shared_ptr<std::vector<ChildLink>> links) {
+  return {
+      [=](open_atom, const OpenRequest&) -> OpenReply { return {}; },
+      [=](links_atom) { return *links; },
+      [=](tick_atom) {},
+  };
+}
+
+struct fixture : test_coordinator_fixture<TestConfig> {
+  std::shared_ptr<RecordingSink> sink = std::make_shared<RecordingSink>();
+  std::shared_ptr<NodeSettings> settings = std::make_shared<NodeSettings>();
+  std::shared_ptr<std::vector<ChildLink>> links = std::make_shared<std::vector<ChildLink>>();
+  std::vector<std::string> lines;
+  node_actor parent;
+  session_actor session;
+  std::vector<caf::actor> nodes;  // the children's node actors (ended with the test)
+
+  fixture() {
+    settings->detached = false;
+    settings->packet_layout = {2, 2};
+    settings->task_timeout_ms = 1000;
+    settings->log = [this](const std::string& l) {
+      if (getenv("TESSERA_TEST_VERBOSE")) fprintf(stderr, "%s\n", l.c_str());
+      lines.push_back(l);
+    };
+    parent = sys.spawn(parent_node, links);
+    settings->node = caf::actor_cast<caf::weak_actor_ptr>(parent);
+  }
+  ~fixture() override {
+    if (session) self->send_exit(session, caf::exit_reason::user_shutdown);
+    self->send_exit(parent, caf::exit_reason::user_shutdown);
+    for (auto& n : nodes) self->send_exit(n, caf::exit_reason::user_shutdown);
+    sched.run();
+  }
+  void add_child(const std::string& name, caf::actor node) {
+    nodes.push_back(node);
+    links->push_back(ChildLink{name, std::move(node)});
+  }
+  // Opens the session (it opens workers on the children), handshakes and uploads.
+  void start() {
+    session = spawn_session(sys, sink, settings, 1);
+    sched.run();
+    Handshake hs;
+    hs.width = kSize;
+    hs.height = kSize;
+    self->send(session, client_atom::value, encode(std::vector<ClientRecord>{hs}));
+    self->send(session, client_atom::value, encode(tiny_scene()));
+    sched.run();
+  }
+  // (sched.run() delivers messages only: the fixture's run() also fires timeouts, and the
+  // periodic reconnect ticks would never end.)
+  void request_frame(uint32_t n) {
+    self->send(session, client_atom::value, encode(std::vector<ClientRecord>{SetCamera{camera_at(3)}, RenderRequest{n}}));
+  }
+  std::vector<uint32_t> frames_sent() {
+    std::vector<uint32_t> out;
+    for (auto& f : sink->all<Frame>()) out.push_back(f.frame);
+    return out;
+  }
+  size_t logged(const std::string& needle) {
+    size_t n = 0;
+    for (auto& l : lines) n += l.find(needle) != std::string::npos;
+    return n;
+  }
+};
+
+}  // namespace
+
+CAF_TEST_FIXTURE_SCOPE(cluster_tests, fixture)
+
+CAF_TEST(a real child node renders its share and gets every accepted scene record) {
+  auto child_settings = std::make_shared<NodeSettings>(*settings);
+  child_settings->node = {};
+  child_settings->name = "child";
+  auto child = spawn_node(sys, child_settings);
+  add_child("child:1", caf::actor_cast<caf::actor>(child));
+  start();
+  auto replies = sink->all<HandshakeReply>();
+  CAF_REQUIRE_EQUAL(replies.size(), 1u);
+  CAF_CHECK_EQUAL(replies[0].nodes, 2u);  // this node and the child
+  request_frame(1);
+  sched.run();
+  CAF_CHECK_EQUAL(frames_sent(), std::vector<uint32_t>{1});
+  CAF_CHECK_EQUAL(logged("\"recovering\""), 0u);
+  CAF_CHECK_EQUAL(logged("\"cluster_frame\": 1"), 1u);
+  CAF_CHECK_EQUAL(sink->all<ErrorReply>().size(), 0u);
+}
+
+CAF_TEST(tiles with impossible sizes are rejected and logged and the master renders that task) {
+  auto log = std::make_shared<FakeLog>();
+  auto last = std::make_shared<worker_actor>();
+  add_child("liar:1", caf::actor_cast<caf::actor>(sys.spawn(fake_node, Mode::liar, log, last)));
+  start();
+  CAF_CHECK_EQUAL(log->updates, 2u);  // the snapshot at join, then the uploaded records
+  request_frame(1);
+  sched.run();
+  CAF_CHECK_EQUAL(frames_sent(), std::vector<uint32_t>{1});
+  CAF_CHECK_EQUAL(logged("\"rejected_tile\": \"liar:1\""), 1u);
+  CAF_CHECK_EQUAL(logged("\"recovering\": 1"), 1u);
+  CAF_CHECK_EQUAL(sink->all<ErrorReply>().size(), 0u);
+}
+
+CAF_TEST(a child that dies mid frame: the frame completes and the next one is tiled among the rest) {
+  auto log = std::make_shared<FakeLog>();
+  auto last = std::make_shared<worker_actor>();
+  add_child("hang:1", caf::actor_cast<caf::actor>(sys.spawn(fake_node, Mode::hang, log, last)));
+  start();
+  request_frame(1);
+  sched.run();
+  CAF_REQUIRE_EQUAL(log->batches.size(), 1u);  // it got its task and holds it
+  CAF_CHECK(frames_sent().empty());            // the frame waits for it
+  self->send_exit(*last, caf::exit_reason::kill);
+  sched.run();
+  CAF_CHECK_EQUAL(frames_sent(), std::vector<uint32_t>{1});
+  CAF_CHECK_EQUAL(logged("\"node_lost\": \"hang:1\""), 1u);
+  request_frame(2);
+  sched.run();
+  CAF_CHECK_EQUAL(frames_sent(), (std::vector<uint32_t>{1, 2}));
+  CAF_CHECK_EQUAL(logged("\"used\": 1"), 1u);  // committed without it before frame 2
+}
+
+CAF_TEST(a child that is alive but never answers is failed by the timeout and its tiles rendered here) {
+  auto log = std::make_shared<FakeLog>();
+  auto last = std::make_shared<worker_actor>();
+  add_child("hang:2", caf::actor_cast<caf::actor>(sys.spawn(fake_node, Mode::hang, log, last)));
+  start();
+  request_frame(1);
+  sched.run();
+  CAF_CHECK(frames_sent().empty());
+  sched.trigger_timeouts();
+  sched.run();
+  CAF_CHECK_EQUAL(frames_sent(), std::vector<uint32_t>{1});
+  CAF_CHECK_EQUAL(logged("\"recovering\": 1"), 1u);
+}
+
+CAF_TEST(the cost maps of a straggler shift its share away in the next frame) {
+  auto log = std::make_shared<FakeLog>();
+  auto last = std::make_shared<worker_actor>();
+  add_child("slow:1", caf::actor_cast<caf::actor>(sys.spawn(fake_node, Mode::straggler, log, last)));
+  start();
+  for (uint32_t f = 1; f <= 3; ++f) {
+    request_frame(f);
+    sched.run();
+  }
+  CAF_CHECK_EQUAL(frames_sent(), (std::vector<uint32_t>{1, 2, 3}));
+  CAF_REQUIRE_EQUAL(log->batches.size(), 3u);
+  auto area = [&](size_t i) { return log->batches[i].tasks.at(0).area(); };
+  CAF_CHECK_EQUAL(area(0), kSize * kSize / 2);  // the first frame is split by area
+  // Then by cost: the region it rendered is now known to be expensive (its cost map says so),
+  // so every frame moves the split into that region and its share shrinks.
+  CAF_CHECK_LESS(area(1), area(0));
+  CAF_CHECK_LESS(area(2), area(1));
+  CAF_CHECK_EQUAL(sink->all<ErrorReply>().size(), 0u);
+}
+
+CAF_TEST_FIXTURE_SCOPE_END()
