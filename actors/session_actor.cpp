@@ -313,7 +313,7 @@ void finish_frame(self_ptr self, std::vector<TileResult>&& tiles, std::vector<do
     st.meta.rendering_ms = std::max(st.meta.rendering_ms, tile.rendering_ms);
     st.meta.sat_ms = std::max(st.meta.sat_ms, tile.sat_ms);
     if (!tile.error.empty()) error = tile.error;
-    if (i < st.nodes.size() && st.nodes.size() > 1) {
+    if (i < st.nodes.size() && st.node) {  // a cluster node: per-node figures
       const NodeInfo& n = st.nodes[i];
       const double norm = tile.kernel_ms * n.single_core_perf / std::max(1e-9, double(n.logical_cores) * n.single_core_perf);
       max_norm = std::max(max_norm, norm);

@@ -2,6 +2,8 @@
 
 #include <stdexcept>
 
+#include <unistd.h>
+
 #include <caf/all.hpp>
 
 #include "app/common.h"
@@ -70,8 +72,9 @@ std::shared_ptr<NodeSettings> NodeConfig::node_settings() const {
   s->task_timeout_ms = uint32_t(task_timeout_ms);
   s->reconnect_ms = uint32_t(reconnect_ms);
   s->name = !name.empty() ? name
-            : cluster_port > 0 ? cluster_host + ":" + std::to_string(cluster_port)
-                               : "local";
+            : cluster_port > 0  ? cluster_host + ":" + std::to_string(cluster_port)
+            : cluster_port == 0 ? cluster_host + ":any/pid" + std::to_string(getpid())
+                                : "local";
   if (!log_frames) s->log = [](const std::string& line) {
     if (line.find("\"frame\"") == std::string::npos) std::fprintf(stderr, "%s\n", line.c_str());
   };
