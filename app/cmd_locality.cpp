@@ -8,6 +8,8 @@
 #include <cstdio>
 #include <numeric>
 
+#include <sys/resource.h>
+
 #include "app/command.h"
 #include "app/common.h"
 #include "renderer/raytracer.h"
@@ -26,9 +28,21 @@ const char* kHelp =
     "  warm_ratio       the same tiles rendered a second time right after the first / first time\n"
     "  rendering_ratio  sum of the tiles' wall times / the full frame's wall time\n"
     "  drift_ratio      full frame after the tiles / full frame before (order effects, noise)\n"
+    "  cpu_ratio        process CPU time (getrusage) of the tiles / of the full frame: unlike the TSC\n"
+    "                   kernel it excludes time a thread spent descheduled (but includes TBB's idle\n"
+    "                   spinning when T > 1)\n"
+    "  full_kernel_per_cpu  the full frame's kernel / its process CPU time: > 1 means the per-packet\n"
+    "                   TSC timings counted time the threads were not running (oversubscription)\n"
     "The tiling is balanced on the frame's own cost map (as the balancer would with perfect\n"
     "coherence). tiles_ratio < 1 is the super-linear effect; if it stays < 1 with T = 1 it is\n"
     "not a threading effect; if warm_ratio < 1 re-touching the same data helps (caches).\n";
+
+double cpu_ms() {  // user + system CPU time of the whole process
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  auto ms = [](const timeval& t) { return double(t.tv_sec) * 1e3 + double(t.tv_usec) * 1e-3; };
+  return ms(u.ru_utime) + ms(u.ru_stime);
+}
 
 double sum_kernels(RayTracer& rt, const std::vector<Rect>& tasks, PacketLayout pl, const Scene& scene,
                    const RenderSettings& s, double* wall) {
@@ -70,7 +84,7 @@ int run(const std::vector<std::string>& argv) {
   std::vector<std::string> warnings;
   // Per (thread count, node count): the per-frame ratios, for the summary.
   std::vector<std::vector<double>> tiles_r(thread_list.size() * node_list.size()), warm_r(tiles_r.size()),
-      wall_r(tiles_r.size());
+      wall_r(tiles_r.size()), cpu_r(tiles_r.size()), per_cpu_r(tiles_r.size());
   for (long f = 0; f < frames; ++f) {
     size_t k = size_t(f * step) % setup.loop.frames.size();
     setup.set_frame(k);
@@ -86,12 +100,17 @@ int run(const std::vector<std::string>& argv) {
       sats.finalize();
       for (size_t ni = 0; ni < node_list.size(); ++ni) {
         const std::vector<Rect> tasks = tile(&sats, space, std::vector<double>(size_t(node_list[ni]), 1.0));
-        std::vector<double> fulls, fulls_wall, tiles, warm, drift, tiles_wall;
+        std::vector<double> fulls, fulls_wall, tiles, warm, drift, tiles_wall, cpu, per_cpu;
         for (long r = 0; r < reps; ++r) {
           TaskResult before, after;
+          double c0 = cpu_ms();
           rt.render(full, settings, before);
+          double c1 = cpu_ms();
           double wall = 0;
           double first = sum_kernels(rt, tasks, pl, scene, settings, &wall);
+          double c2 = cpu_ms();
+          cpu.push_back(c1 > c0 ? (c2 - c1) / (c1 - c0) : 0);
+          per_cpu.push_back(c1 > c0 ? before.kernel_ms / (c1 - c0) : 0);
           // Each tile twice in a row: the second pass finds the tile's data in the caches.
           double warm_sum = 0, cold_sum = 0;
           for (const Rect& t : tasks) {
@@ -112,10 +131,13 @@ int run(const std::vector<std::string>& argv) {
         tiles_r[slot].push_back(median(tiles));
         warm_r[slot].push_back(median(warm));
         wall_r[slot].push_back(median(tiles_wall));
+        cpu_r[slot].push_back(median(cpu));
+        per_cpu_r[slot].push_back(median(per_cpu));
         std::printf("{\"frame\": %zu, \"threads\": %ld, \"nodes\": %ld, \"full_kernel_ms\": %.3f, \"tiles_ratio\": %.4f, "
-                    "\"warm_ratio\": %.4f, \"rendering_ratio\": %.4f, \"drift_ratio\": %.4f}\n",
+                    "\"warm_ratio\": %.4f, \"rendering_ratio\": %.4f, \"drift_ratio\": %.4f, \"cpu_ratio\": %.4f, "
+                    "\"full_kernel_per_cpu\": %.4f}\n",
                     k, long(thread_list[ti]), long(node_list[ni]), median(fulls), median(tiles), median(warm),
-                    median(tiles_wall), median(drift));
+                    median(tiles_wall), median(drift), median(cpu), median(per_cpu));
         std::fflush(stdout);
       }
     }
@@ -126,9 +148,10 @@ int run(const std::vector<std::string>& argv) {
       const auto& v = tiles_r[slot];
       std::printf("{\"group_summary\": true, \"threads\": %ld, \"nodes\": %ld, \"median_tiles_ratio\": %.4f, "
                   "\"min_tiles_ratio\": %.4f, \"max_tiles_ratio\": %.4f, \"median_warm_ratio\": %.4f, "
-                  "\"median_rendering_ratio\": %.4f}\n",
+                  "\"median_rendering_ratio\": %.4f, \"median_cpu_ratio\": %.4f, \"median_full_kernel_per_cpu\": %.4f}\n",
                   long(thread_list[ti]), long(node_list[ni]), median(v), *std::min_element(v.begin(), v.end()),
-                  *std::max_element(v.begin(), v.end()), median(warm_r[slot]), median(wall_r[slot]));
+                  *std::max_element(v.begin(), v.end()), median(warm_r[slot]), median(wall_r[slot]), median(cpu_r[slot]),
+                  median(per_cpu_r[slot]));
     }
   std::printf("{\"summary\": true, \"scene\": %s, \"frames\": %ld, \"step\": %ld, \"reps\": %ld, \"width\": %d, "
               "\"height\": %d, \"ao\": %d, \"depth\": %d, \"cpu\": %s, \"isa\": %s, \"packet\": \"%dx%d\", \"hardware_threads\": %d}\n",
