@@ -26,6 +26,7 @@ const char* kHelp =
     "  full_kernel_ms   the whole frame as one task (rendered before and after the tiles; median)\n"
     "  tiles_ratio      sum of the N tiles' kernels, each tile rendered alone / full kernel\n"
     "  warm_ratio       the same tiles rendered a second time right after the first / first time\n"
+    "  full_warm_ratio  the full frame rendered a second time right after the first / first time\n"
     "  rendering_ratio  sum of the tiles' wall times / the full frame's wall time\n"
     "  drift_ratio      full frame after the tiles / full frame before (order effects, noise)\n"
     "  cpu_ratio        process CPU time (getrusage) of the tiles / of the full frame: unlike the TSC\n"
@@ -84,7 +85,7 @@ int run(const std::vector<std::string>& argv) {
   std::vector<std::string> warnings;
   // Per (thread count, node count): the per-frame ratios, for the summary.
   std::vector<std::vector<double>> tiles_r(thread_list.size() * node_list.size()), warm_r(tiles_r.size()),
-      wall_r(tiles_r.size()), cpu_r(tiles_r.size()), per_cpu_r(tiles_r.size());
+      wall_r(tiles_r.size()), cpu_r(tiles_r.size()), per_cpu_r(tiles_r.size()), full_warm_r(tiles_r.size());
   for (long f = 0; f < frames; ++f) {
     size_t k = size_t(f * step) % setup.loop.frames.size();
     setup.set_frame(k);
@@ -100,16 +101,20 @@ int run(const std::vector<std::string>& argv) {
       sats.finalize();
       for (size_t ni = 0; ni < node_list.size(); ++ni) {
         const std::vector<Rect> tasks = tile(&sats, space, std::vector<double>(size_t(node_list[ni]), 1.0));
-        std::vector<double> fulls, fulls_wall, tiles, warm, drift, tiles_wall, cpu, per_cpu;
+        std::vector<double> fulls, fulls_wall, tiles, warm, drift, tiles_wall, cpu, per_cpu, full_warm;
         for (long r = 0; r < reps; ++r) {
           TaskResult before, after;
           double c0 = cpu_ms();
           rt.render(full, settings, before);
           double c1 = cpu_ms();
+          TaskResult again0;  // ... and the full frame repeated right away
+          rt.render(full, settings, again0);
+          full_warm.push_back(before.kernel_ms > 0 ? again0.kernel_ms / before.kernel_ms : 0);
+          const double c1b = cpu_ms();
           double wall = 0;
           double first = sum_kernels(rt, tasks, pl, scene, settings, &wall);
           double c2 = cpu_ms();
-          cpu.push_back(c1 > c0 ? (c2 - c1) / (c1 - c0) : 0);
+          cpu.push_back(c1 > c0 ? (c2 - c1b) / (c1 - c0) : 0);
           per_cpu.push_back(c1 > c0 ? before.kernel_ms / (c1 - c0) : 0);
           // Each tile twice in a row: the second pass finds the tile's data in the caches.
           double warm_sum = 0, cold_sum = 0;
@@ -133,11 +138,12 @@ int run(const std::vector<std::string>& argv) {
         wall_r[slot].push_back(median(tiles_wall));
         cpu_r[slot].push_back(median(cpu));
         per_cpu_r[slot].push_back(median(per_cpu));
+        full_warm_r[slot].push_back(median(full_warm));
         std::printf("{\"frame\": %zu, \"threads\": %ld, \"nodes\": %ld, \"full_kernel_ms\": %.3f, \"tiles_ratio\": %.4f, "
                     "\"warm_ratio\": %.4f, \"rendering_ratio\": %.4f, \"drift_ratio\": %.4f, \"cpu_ratio\": %.4f, "
-                    "\"full_kernel_per_cpu\": %.4f}\n",
+                    "\"full_kernel_per_cpu\": %.4f, \"full_warm_ratio\": %.4f}\n",
                     k, long(thread_list[ti]), long(node_list[ni]), median(fulls), median(tiles), median(warm),
-                    median(tiles_wall), median(drift), median(cpu), median(per_cpu));
+                    median(tiles_wall), median(drift), median(cpu), median(per_cpu), median(full_warm));
         std::fflush(stdout);
       }
     }
@@ -148,10 +154,11 @@ int run(const std::vector<std::string>& argv) {
       const auto& v = tiles_r[slot];
       std::printf("{\"group_summary\": true, \"threads\": %ld, \"nodes\": %ld, \"median_tiles_ratio\": %.4f, "
                   "\"min_tiles_ratio\": %.4f, \"max_tiles_ratio\": %.4f, \"median_warm_ratio\": %.4f, "
-                  "\"median_rendering_ratio\": %.4f, \"median_cpu_ratio\": %.4f, \"median_full_kernel_per_cpu\": %.4f}\n",
+                  "\"median_rendering_ratio\": %.4f, \"median_cpu_ratio\": %.4f, \"median_full_kernel_per_cpu\": %.4f, "
+                  "\"median_full_warm_ratio\": %.4f}\n",
                   long(thread_list[ti]), long(node_list[ni]), median(v), *std::min_element(v.begin(), v.end()),
                   *std::max_element(v.begin(), v.end()), median(warm_r[slot]), median(wall_r[slot]), median(cpu_r[slot]),
-                  median(per_cpu_r[slot]));
+                  median(per_cpu_r[slot]), median(full_warm_r[slot]));
     }
   std::printf("{\"summary\": true, \"scene\": %s, \"frames\": %ld, \"step\": %ld, \"reps\": %ld, \"width\": %d, "
               "\"height\": %d, \"ao\": %d, \"depth\": %d, \"cpu\": %s, \"isa\": %s, \"packet\": \"%dx%d\", \"hardware_threads\": %d}\n",

@@ -112,7 +112,7 @@ TEST_CASE("tessera balance: per-frame lines per node count, consistent efficienc
 }
 
 TEST_CASE("tessera balance --whole-task is reported as such", "[balance]") {
-  Run r = run_tessera("balance " + base_args() + " --nodes 4 --whole-task");
+  Run r = run_tessera("balance " + base_args() + " --nodes 4 --whole-task --reps 2");
   REQUIRE(r.rc == 0);
   REQUIRE(r.lines.size() == 3 + 1 + 1);
   for (size_t i = 0; i < 3; ++i) {
@@ -122,11 +122,12 @@ TEST_CASE("tessera balance --whole-task is reported as such", "[balance]") {
   CHECK(r.lines[3]["nodes_summary"] == true);
   CHECK(r.lines[4]["summary"] == true);
   CHECK(r.lines[4]["whole_task"] == true);
+  CHECK(r.lines[4]["reps"] == 2);
 }
 
 TEST_CASE("tessera balance rejects bad options", "[balance]") {
   for (const char* bad : {"--nodes 0", "--nodes 2,x", "--nodes 1.5", "--nodes 2 --coefficients 1,-1", "--nodes 2 --frames 1",
-                          "--nodes 2 --step 0", "--nodes 2 --bogus"}) {
+                          "--nodes 2 --step 0", "--nodes 2 --reps 0", "--nodes 2 --bogus"}) {
     INFO(bad);
     CHECK(run_tessera("balance " + base_args() + " " + bad).rc != 0);
   }
