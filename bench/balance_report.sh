@@ -7,7 +7,8 @@
 # coefficients (1,2 cycled), with whole-task timings and with the coarse loop (--step 4), each
 # node single-threaded with the best of 3 renders (--threads 1 --reps 3, see
 # docs/load-balancing.md for why), plus the equal run with 2 threads and 1 render per task;
-# `tessera threadbench` (AO off, as the paper's Table 2) on the pavilion and the living room;
+# `tessera threadbench` (AO off, as the paper's Table 2) on the pavilion and the living room,
+# with 2 threads and with 1 (the control);
 # `tessera locality` (the super-linear experiment). Takes about 10-15 minutes on 2 cores.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -27,8 +28,10 @@ $B --threads 2 --reps 1                    > "$out/balance-equal-t2.jsonl"
 $T balance $P --ao 2 --frames 3 --nodes 8 --threads 1 --reps 3 --tiling-png "$out/balance-tiling.png" > /dev/null
 : > "$out/balance-threads.jsonl"
 for sc in pavilion living-room; do
-  $T threadbench --scene $S/$sc/scene.gltf --camera-loop $S/$sc/camera-loop.json --size "$W" "$H" --ao 0 \
-     --frames "$F" --reps 3 >> "$out/balance-threads.jsonl"
+  for th in 2 1; do  # 1 thread: the control (the schedules can differ only by overhead and noise)
+    $T threadbench --scene $S/$sc/scene.gltf --camera-loop $S/$sc/camera-loop.json --size "$W" "$H" --ao 0 \
+       --frames "$F" --reps 5 --threads $th >> "$out/balance-threads.jsonl"
+  done
 done
 $T locality $P --ao 2 --frames 4 --reps 3 --nodes 4,16,64 --thread-counts 1,2 > "$out/balance-locality.jsonl"
 
@@ -73,14 +76,14 @@ for k, rows in runs.items():
 md += ["", "![efficiency per frame and per node count](balance-efficiency.png)", "",
        "## Thread level: static tiles vs work stealing vs a shared queue (`tessera threadbench`)", "",
        "Rendering performance of the static tiling relative to each dynamic scheduler, 100 x (t_other / t_static - 1)",
-       "(negative: static is slower), median over frames of per-frame medians of 3 interleaved repetitions; the",
+       "(negative: static is slower), median over frames of per-frame medians of 5 interleaved repetitions; the",
        "kernel columns compare the summed per-packet costs the same way.", "",
-       "| scene | threads | AO | frames | vs work stealing | vs shared queue | kernel vs WS | kernel vs queue | static tile balance | images identical |",
+       "| scene | threads | AO | frames | vs work stealing (spread of per-frame ratios) | vs shared queue (spread) | kernel vs WS | kernel vs queue | static tile balance | images identical |",
        "|---|---|---|---|---|---|---|---|---|---|"]
 for r in load("threads"):
     if r.get("summary"):
         md.append(f"| {os.path.basename(os.path.dirname(r['scene']))} | {r['threads']} | {r['ao']} | {r['frames_counted']} | "
-                  f"{r['static_vs_work_stealing_pct']:+.1f}% | {r['static_vs_shared_queue_pct']:+.1f}% | "
+                  f"{r['static_vs_work_stealing_pct']:+.1f}% ({100*r['ratio_spread_work_stealing']:.0f} pts) | {r['static_vs_shared_queue_pct']:+.1f}% ({100*r['ratio_spread_shared_queue']:.0f} pts) | "
                   f"{r['kernel_static_vs_work_stealing_pct']:+.1f}% | {r['kernel_static_vs_shared_queue_pct']:+.1f}% | "
                   f"{r['median_static_tile_balance']:.3f} | {r['images_identical']} |")
 md += ["", "## The super-linear experiment (`tessera locality`)", "",

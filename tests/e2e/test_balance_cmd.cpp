@@ -156,3 +156,24 @@ TEST_CASE("tessera threadbench: three schedules, identical images, a summary wit
   CHECK(s["threads"] == 2);
   CHECK(s["packet"].is_string());
 }
+
+TEST_CASE("tessera locality: one line per frame, thread count and node count, group summaries", "[locality]") {
+  Run r = run_tessera("locality --scene " + kScene + "/scene.gltf --camera-loop " + kScene +
+                      "/camera-loop.json --size 64 36 --frames 2 --reps 1 --nodes 2,5 --thread-counts 1,2");
+  REQUIRE(r.rc == 0);
+  REQUIRE(r.lines.size() == 2 * 2 * 2 + 2 * 2 + 1);
+  for (size_t i = 0; i < 8; ++i) {
+    const json& l = r.lines[i];
+    CHECK(l["threads"] == (i % 4 < 2 ? 1 : 2));
+    CHECK(l["nodes"] == (i % 2 ? 5 : 2));
+    CHECK(double(l["full_kernel_ms"]) > 0);
+    for (const char* k : {"tiles_ratio", "warm_ratio", "rendering_ratio", "drift_ratio", "full_warm_ratio"}) {
+      INFO(k);
+      CHECK(double(l[k]) > 0.05);  // a ratio of two renders of the same work on one machine
+      CHECK(double(l[k]) < 20);
+    }
+  }
+  for (size_t i = 8; i < 12; ++i) CHECK(r.lines[i]["group_summary"] == true);
+  CHECK(r.lines[12]["summary"] == true);
+  CHECK(run_tessera("locality --scene " + kScene + "/scene.gltf --camera-loop " + kScene + "/camera-loop.json --nodes 0").rc != 0);
+}
