@@ -3,6 +3,7 @@
 # docs/results/balance-report.md (tables) and docs/results/balance-efficiency.png (plots of
 # kernel efficiency per frame and per node count). Usage:
 #   bench/balance_report.sh [W H FRAMES]   (default 320 180 12; pavilion, 2 AO rays, depth 4)
+#   bench/balance_report.sh --plots-only   (tables and plots again from the existing .jsonl)
 # It runs: `tessera balance` for N = 1,2,4,8,12,16,20 with equal and with heterogeneous
 # coefficients (1,2 cycled), with whole-task timings and with the coarse loop (--step 4), each
 # node single-threaded with the best of 3 renders (--threads 1 --reps 3, see
@@ -12,12 +13,15 @@
 # `tessera locality` (the super-linear experiment). Takes about 10-15 minutes on 2 cores.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+PLOTS_ONLY=0
+if [ "${1:-}" = "--plots-only" ]; then PLOTS_ONLY=1; shift; fi
 W=${1:-320}; H=${2:-180}; F=${3:-12}
 T=build/app/tessera
 S=../shared/scenes
 out=docs/results
 NODES=1,2,4,8,12,16,20
 command -v gnuplot >/dev/null || { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq gnuplot-nox; }
+if [ $PLOTS_ONLY = 0 ]; then
 P="--scene $S/pavilion/scene.gltf --camera-loop $S/pavilion/camera-loop.json --size $W $H"
 B="$T balance $P --ao 2 --frames $F --nodes $NODES"
 $B --threads 1 --reps 3                    > "$out/balance-equal.jsonl"
@@ -34,6 +38,7 @@ for sc in pavilion living-room; do
   done
 done
 $T locality $P --ao 2 --frames 4 --reps 3 --nodes 4,16,64 --thread-counts 1,2 > "$out/balance-locality.jsonl"
+fi
 
 python3 - "$out" <<'PY'
 import json, os, sys
@@ -119,9 +124,8 @@ set grid
 set title "kernel efficiency per frame (equal nodes, per-packet SATs, 1 thread, best of 3)"
 set xlabel "counted frame"; set ylabel "efficiency (%)"; set key top right font ",8" maxrows 4
 plot for [i=0:6] "/tmp/bal-equal-frames.dat" index i u 1:2 w lp t sprintf("N=%s", word("1 2 4 8 12 16 20", i+1))
-set title "kernel efficiency per node count (median, min..max over frames)"
-set yrange [0:*]
-set xlabel "nodes"; set key top right font ",8"; set xrange [0:21]; set yrange [0:*]
+set title "kernel efficiency per node count (median, min..max over frames; clipped at 130%)"
+set xlabel "nodes"; set key bottom left font ",8"; set xrange [0:21]; set yrange [0:130]
 plot "/tmp/bal-equal-nodes.dat" u 1:2:3:4 w yerrorlines t "per-packet SATs", \
      "/tmp/bal-hetero-nodes.dat" u (\$1+0.2):2:3:4 w yerrorlines t "coefficients 1,2", \
      "/tmp/bal-coarse-nodes.dat" u (\$1+0.4):2:3:4 w yerrorlines t "coarse loop (step 4)", \
