@@ -42,8 +42,12 @@ Run run_tessera(const std::string& args) {
   return r;
 }
 
-std::string base_args() {
-  return "--scene " + kScene + "/scene.gltf --camera-loop " + kScene + "/camera-loop.json --size 64 36 --frames 3 --threads 2";
+// Balance runs use single-threaded nodes and the per-packet best of 3 renders: with several
+// threads per node on a busy machine the TSC kernels of small tasks carry large contention
+// artefacts (docs/load-balancing.md), which would make any bound on the efficiency flaky.
+std::string base_args(int threads = 1) {
+  return "--scene " + kScene + "/scene.gltf --camera-loop " + kScene + "/camera-loop.json --size 64 36 --frames 3 --threads " +
+         std::to_string(threads);
 }
 
 }  // namespace
@@ -51,7 +55,7 @@ std::string base_args() {
 TEST_CASE("tessera balance: per-frame lines per node count, consistent efficiency, summaries, tiling PNG", "[balance]") {
   const std::string png = "/tmp/tessera_test_balance_" + std::to_string(getpid()) + ".png";
   std::remove(png.c_str());
-  Run r = run_tessera("balance " + base_args() + " --nodes 1,3,5 --coefficients 1,2 --tiling-png " + png);
+  Run r = run_tessera("balance " + base_args() + " --nodes 1,3,5 --coefficients 1,2 --reps 3 --tiling-png " + png);
   REQUIRE(r.rc == 0);
   int frames = 0, node_summaries = 0, summaries = 0;
   for (const json& l : r.lines) {
@@ -62,6 +66,7 @@ TEST_CASE("tessera balance: per-frame lines per node count, consistent efficienc
       CHECK(l["whole_task"] == false);
       CHECK(l["width"] == 64);
       CHECK(l["cpu"].is_string());
+      CHECK(l["reps"] == 3);
       CHECK(l.contains("threads"));
     } else if (l.value("nodes_summary", false)) {
       ++node_summaries;
@@ -85,12 +90,16 @@ TEST_CASE("tessera balance: per-frame lines per node count, consistent efficienc
       double single = l["single_kernel_ms"], eff = l["efficiency"];
       CHECK(single > 0);
       CHECK(eff > 0);
-      CHECK(eff < 3);  // super-linear and noisy runs stay far below this
+      CHECK(eff < 3);  // noise and repeat locality stay far below this
       // Efficiency = (single / sum of coefficients) / largest normalised node kernel.
       CHECK(eff == Approx(single / coeff_sum / worst).epsilon(0.01));
       CHECK(double(l["balance"]) >= 0.999);
       CHECK(l["tiled_from"] == (l["frame"] == 0 ? "area" : "previous frame's SATs"));
-      if (n == 1) CHECK(l["balance"] == 1.0);
+      if (n == 1) {
+        CHECK(l["balance"] == 1.0);
+        CHECK(eff > 0.5);  // the reference against a re-render of itself
+        CHECK(eff < 2);
+      }
     }
   }
   CHECK(frames == 3 * 3);
@@ -135,7 +144,7 @@ TEST_CASE("tessera balance rejects bad options", "[balance]") {
 }
 
 TEST_CASE("tessera threadbench: three schedules, identical images, a summary with the conditions", "[threadbench]") {
-  Run r = run_tessera("threadbench " + base_args() + " --reps 1");
+  Run r = run_tessera("threadbench " + base_args(2) + " --reps 1");
   REQUIRE(r.rc == 0);
   REQUIRE(r.lines.size() == 3 + 1);
   for (size_t i = 0; i < 3; ++i) {
