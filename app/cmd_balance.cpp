@@ -1,9 +1,11 @@
-// tessera balance --scene S.gltf --camera-loop L.json --nodes N [--step K] [--coefficients c1,...]
+// tessera balance --scene S.gltf --camera-loop L.json --nodes N1,N2,... [--step K] [--coefficients c1,...]
 // The simulated cluster: replays a camera loop, tiles frame f+1 from the per-node SATs of
 // frame f (paper section 6), renders each node's task in turn on this machine and reports
-// the kernel scaling efficiency per frame (paper Table 1, kernel rows).
+// the kernel scaling efficiency per frame (paper Table 1, kernel rows), for every node count
+// of a list in one run (the single-node reference frame is shared by all node counts).
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <numeric>
 
@@ -17,20 +19,70 @@ namespace tessera::app {
 namespace {
 
 const char* kHelp =
-    "tessera balance --scene S.gltf --camera-loop L.json --nodes N [--frames F] [--step K] [--size W H]\n"
-    "                [--ao A] [--depth D] [--coefficients c1,c2,...] [--whole-task] [--threads T]\n"
-    "                [--tiling-png F.png]\n"
-    "Per frame: the single-node kernel (the whole frame rendered as one task), each node's kernel for\n"
-    "its task, efficiency = (single kernel / sum of coefficients) / max_i(kernel_i / c_i) (for equal\n"
-    "coefficients: single / (N x largest node kernel)), balance = largest / mean normalised node\n"
-    "kernel, SAT generation and tiling times. Frame 0 is split by area; frame f+1 is tiled from frame\n"
-    "f's SATs. --whole-task replaces each node's cost map by its task's average (whole-task timings,\n"
-    "as Cosenza et al. 2008) to show what the per-packet cost map buys. All nodes run here in turn,\n"
-    "so costs share one unit and SATs get performance coefficient 1; --coefficients (renderer\n"
-    "coefficients, e.g. 1,1,0.5) set each node's share as a slower or faster node would.\n";
+    "tessera balance --scene S.gltf --camera-loop L.json --nodes N[,N2,...] [--frames F] [--step K]\n"
+    "                [--size W H] [--ao A] [--depth D] [--coefficients c1,c2,...] [--whole-task]\n"
+    "                [--threads T] [--reps R] [--tiling-png F.png]\n"
+    "For every node count N of the list and every frame: the single-node kernel (the whole frame\n"
+    "rendered as one task, once per frame for all N), each node's kernel for its task, efficiency,\n"
+    "balance = largest / mean normalised node kernel, SAT generation and tiling times. Frame 0 is\n"
+    "split by area and not counted; frame f+1 is tiled from frame f's SATs. One JSON line per frame\n"
+    "and node count, one \"nodes_summary\" line per node count, then the \"summary\" line.\n"
+    "--coefficients: renderer coefficients; node i of N gets c[i mod len] (so 1,2 alternates slow and\n"
+    "fast nodes at every N). A node with coefficient c simulates a node c times as fast as this one:\n"
+    "its kernel is the measured kernel / c, its cost map is the measured one / c, and its SAT enters\n"
+    "the SAT array with performance coefficient c, which normalises it back (paper 6.3).\n"
+    "Efficiency = (single kernel / sum of coefficients) / max_i(kernel_i / c_i): the ideal time of\n"
+    "the cluster over its slowest node; with equal coefficients single / (N x largest node kernel).\n"
+    "--whole-task replaces each node's cost map by its task's average (whole-task timings, as\n"
+    "Cosenza et al. 2008) to show what the per-packet cost map buys. --tiling-png draws the last\n"
+    "frame's tiling of the last node count over the image (paper figure 6).\n"
+    "--reps R (default 1) renders the reference and every node's task R times in a row and keeps,\n"
+    "per packet, the smallest cost (the kernel is the sum of that map): on a shared machine a TSC\n"
+    "timing also counts the time a thread was descheduled, a spike on one packet that a repeat\n"
+    "does not repeat; a real node has its machine to itself.\n";
 
 double ms_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+
+// Renders px `reps` times; out gets the first render's image and the per-packet minimum cost.
+void render_min(RayTracer& rt, const Rect& px, const RenderSettings& s, long reps, TaskResult& out) {
+  rt.render(px, s, out);
+  for (long r = 1; r < reps; ++r) {
+    TaskResult t;
+    rt.render(px, s, t);
+    for (size_t i = 0; i < out.cost.cost.size(); ++i) out.cost.cost[i] = std::min(out.cost.cost[i], t.cost.cost[i]);
+  }
+  if (reps > 1) out.kernel_ms = double(out.cost.total()) * 1e-6;
+}
+
+// The simulated cluster of one node count: its coefficients and last frame's SATs.
+struct Cluster {
+  long nodes = 0;
+  std::vector<double> coeff;
+  double coeff_sum = 0;
+  std::unique_ptr<SatArray> prev;
+  std::vector<double> effs, balances;
+};
+
+std::string list_json(const std::vector<double>& v, const char* fmt) {
+  std::string s = "[";
+  char buf[64];
+  for (size_t i = 0; i < v.size(); ++i) {
+    std::snprintf(buf, sizeof buf, fmt, v[i]);
+    s += (i ? ", " : "") + std::string(buf);
+  }
+  return s + "]";
+}
+
+void draw_tiling(Image& img, const std::vector<Rect>& tasks, PacketLayout pl) {
+  for (const Rect& t : tasks) {
+    Rect px = packets_to_pixels(t, pl, img.width, img.height);
+    if (px.empty()) continue;
+    auto mark = [&](int x, int y) { uint8_t* p = img.pixel(x, y); p[0] = 255; p[1] = 230; p[2] = 0; p[3] = 255; };
+    for (int x = px.x0; x < px.x1; ++x) { mark(x, px.y0); mark(x, px.y1 - 1); }
+    for (int y = px.y0; y < px.y1; ++y) { mark(px.x0, y); mark(px.x1 - 1, y); }
+  }
 }
 
 int run(const std::vector<std::string>& argv) {
@@ -40,29 +92,35 @@ int run(const std::vector<std::string>& argv) {
   auto limit = limit_threads(args, &threads);
   SceneSetup setup = load_scene(args, 640, 360);
   if (setup.loop.frames.empty()) throw std::invalid_argument("--camera-loop is required");
-  long nodes = args.integer("--nodes", 2);
+  std::vector<double> node_list = parse_number_list("--nodes", args.str("--nodes", "2"));
   long step = args.integer("--step", 1);
   long frames = args.integer("--frames", long(setup.loop.frames.size()) / std::max(1L, step));
   std::string coeff_arg = args.str("--coefficients");
   bool whole_task = args.flag("--whole-task");
   std::string png = args.str("--tiling-png");
+  long reps = args.integer("--reps", 1);
   RenderSettings settings = read_settings(args);
   args.finish();
-  if (nodes < 1 || nodes > 4096) throw std::invalid_argument("--nodes must be in 1..4096");
   if (step < 1 || frames < 2) throw std::invalid_argument("--step >= 1 and --frames >= 2 are needed");
-  std::vector<double> coeff = coeff_arg.empty() ? std::vector<double>(size_t(nodes), 1.0) : parse_number_list("--coefficients", coeff_arg);
-  if (coeff.size() != size_t(nodes)) throw std::invalid_argument("--coefficients needs one value per node");
-  for (double c : coeff)
+  if (reps < 1 || reps > 100) throw std::invalid_argument("--reps must be in 1..100");
+  std::vector<double> coeff_pattern = coeff_arg.empty() ? std::vector<double>{1.0} : parse_number_list("--coefficients", coeff_arg);
+  for (double c : coeff_pattern)
     if (!(c > 0) || !std::isfinite(c)) throw std::invalid_argument("coefficients must be finite and > 0");
-  const double coeff_sum = std::accumulate(coeff.begin(), coeff.end(), 0.0);
+  std::vector<Cluster> clusters;
+  for (double n : node_list) {
+    if (n != std::floor(n) || n < 1 || n > 4096) throw std::invalid_argument("--nodes: each count must be an integer in 1..4096");
+    Cluster c;
+    c.nodes = long(n);
+    for (long i = 0; i < c.nodes; ++i) c.coeff.push_back(coeff_pattern[size_t(i) % coeff_pattern.size()]);
+    c.coeff_sum = std::accumulate(c.coeff.begin(), c.coeff.end(), 0.0);
+    clusters.push_back(std::move(c));
+  }
 
   RayTracer rt;
   Scene& scene = setup.loaded.scene;
   const PacketLayout pl = rt.packet_layout();
   const Rect space = packet_space(scene.width(), scene.height(), pl);
   std::vector<std::string> warnings;
-  std::unique_ptr<SatArray> prev;  // SATs of the previous frame
-  std::vector<double> effs, balances;
   for (long f = 0; f < frames; ++f) {
     size_t k = size_t(f * step) % setup.loop.frames.size();
     setup.set_frame(k);
@@ -70,77 +128,93 @@ int run(const std::vector<std::string>& argv) {
     warnings.clear();
     rt.sync(scene, warnings);
 
-    auto t_tile = std::chrono::steady_clock::now();
-    std::vector<Rect> tasks = tile(prev.get(), space, coeff);
-    double tiling_ms = ms_since(t_tile);
-
-    // Reference: the whole frame as one node's task.
+    // Reference: the whole frame as one node's task (shared by every node count).
     TaskResult single;
-    rt.render({0, 0, scene.width(), scene.height()}, settings, single);
+    render_min(rt, {0, 0, scene.width(), scene.height()}, settings, reps, single);
 
-    auto next = std::make_unique<SatArray>(space);
-    std::vector<double> kern(size_t(nodes), 0.0);
-    double sat_ms = 0;
-    Image frame_img(scene.width(), scene.height());
-    for (long i = 0; i < nodes; ++i) {
-      Rect px = packets_to_pixels(tasks[size_t(i)], pl, scene.width(), scene.height());
-      if (px.empty()) continue;
-      TaskResult r;
-      rt.render(px, settings, r);
-      kern[size_t(i)] = r.kernel_ms;
-      if (!png.empty()) blit(frame_img, r.image, px.x0, px.y0);
-      if (whole_task && !r.cost.cost.empty()) {  // one timing per task, spread evenly
-        uint64_t avg = r.cost.total() / r.cost.cost.size();
-        std::fill(r.cost.cost.begin(), r.cost.cost.end(), uint32_t(avg));
-      }
-      auto t_sat = std::chrono::steady_clock::now();
-      Sat sat = Sat::from_cost_map(r.cost);
-      sat_ms += ms_since(t_sat);
-      next->add(std::move(sat), 1.0);
-    }
-    next->finalize();
-    prev = std::move(next);
+    for (size_t ci = 0; ci < clusters.size(); ++ci) {
+      Cluster& cl = clusters[ci];
+      const bool draw = !png.empty() && f == frames - 1 && ci + 1 == clusters.size();
+      auto t_tile = std::chrono::steady_clock::now();
+      std::vector<Rect> tasks = tile(cl.prev.get(), space, cl.coeff);
+      double tiling_ms = ms_since(t_tile);
 
-    double worst = 0, mean = 0;
-    for (long i = 0; i < nodes; ++i) {
-      double t = kern[size_t(i)] / coeff[size_t(i)];
-      worst = std::max(worst, t);
-      mean += kern[size_t(i)];
-    }
-    mean /= coeff_sum;
-    double eff = worst > 0 ? (single.kernel_ms / coeff_sum) / worst : 0;
-    double bal = mean > 0 ? worst / mean : 0;
-    if (f > 0) {  // frame 0 is the area split; efficiency counts from the first balanced frame
-      effs.push_back(eff);
-      balances.push_back(bal);
-    }
-    std::printf("{\"frame\": %zu, \"nodes\": %ld, \"single_kernel_ms\": %.3f, \"node_kernel_ms\": [", k, nodes, single.kernel_ms);
-    for (long i = 0; i < nodes; ++i) std::printf("%s%.3f", i ? ", " : "", kern[size_t(i)]);
-    std::printf("], \"efficiency\": %.4f, \"balance\": %.4f, \"sat_ms\": %.3f, \"tiling_ms\": %.4f, \"tiled_from\": \"%s\"}\n", eff,
-                bal, sat_ms, tiling_ms, f == 0 ? "area" : (whole_task ? "whole-task timings" : "previous frame's SATs"));
-    std::fflush(stdout);
-    if (!png.empty() && f == frames - 1) {
-      // Draw the task borders over the last frame (like the paper's figure 6).
-      for (const Rect& t : tasks) {
-        Rect px = packets_to_pixels(t, pl, scene.width(), scene.height());
+      auto next = std::make_unique<SatArray>(space);
+      std::vector<double> kern(size_t(cl.nodes), 0.0);  // simulated: measured / coefficient
+      double sat_ms = 0;
+      Image frame_img = draw ? Image(scene.width(), scene.height()) : Image();
+      for (long i = 0; i < cl.nodes; ++i) {
+        Rect px = packets_to_pixels(tasks[size_t(i)], pl, scene.width(), scene.height());
         if (px.empty()) continue;
-        for (int x = px.x0; x < px.x1; ++x)
-          for (int y : {px.y0, px.y1 - 1}) { uint8_t* p = frame_img.pixel(x, y); p[0] = 255; p[1] = 230; p[2] = 0; }
-        for (int y = px.y0; y < px.y1; ++y)
-          for (int x : {px.x0, px.x1 - 1}) { uint8_t* p = frame_img.pixel(x, y); p[0] = 255; p[1] = 230; p[2] = 0; }
+        const double c = cl.coeff[size_t(i)];
+        TaskResult r;
+        render_min(rt, px, settings, reps, r);
+        kern[size_t(i)] = r.kernel_ms / c;
+        if (draw) blit(frame_img, r.image, px.x0, px.y0);
+        if (whole_task && !r.cost.cost.empty()) {  // one timing per task, spread evenly
+          uint64_t avg = r.cost.total() / r.cost.cost.size();
+          std::fill(r.cost.cost.begin(), r.cost.cost.end(), uint32_t(avg));
+        }
+        if (c != 1.0)  // what a node c times as fast would have measured
+          for (uint32_t& v : r.cost.cost) v = uint32_t(std::lround(double(v) / c));
+        auto t_sat = std::chrono::steady_clock::now();
+        Sat sat = Sat::from_cost_map(r.cost);
+        sat_ms += ms_since(t_sat);
+        next->add(std::move(sat), c);
       }
-      write_png(png, frame_img);
+      next->finalize();
+      cl.prev = std::move(next);
+
+      double worst = 0, mean = 0;
+      for (long i = 0; i < cl.nodes; ++i) {
+        worst = std::max(worst, kern[size_t(i)]);
+        mean += kern[size_t(i)] * cl.coeff[size_t(i)];
+      }
+      mean /= cl.coeff_sum;  // the ideal: every node busy for the same time
+      double eff = worst > 0 ? (single.kernel_ms / cl.coeff_sum) / worst : 0;
+      double bal = mean > 0 ? worst / mean : 0;
+      if (f > 0) {  // frame 0 is the area split; efficiency counts from the first balanced frame
+        cl.effs.push_back(eff);
+        cl.balances.push_back(bal);
+      }
+      double kern_sum = std::accumulate(kern.begin(), kern.end(), 0.0, [&, i = size_t(0)](double s, double v) mutable {
+        return s + v * cl.coeff[i++];
+      });
+      std::printf("{\"frame\": %zu, \"nodes\": %ld, \"whole_task\": %s, \"single_kernel_ms\": %.3f, \"node_kernel_ms\": %s, "
+                  "\"node_kernel_sum_ratio\": %.4f, \"efficiency\": %.4f, \"balance\": %.4f, \"sat_ms\": %.3f, "
+                  "\"tiling_ms\": %.4f, \"tiled_from\": \"%s\"}\n",
+                  k, cl.nodes, whole_task ? "true" : "false", single.kernel_ms, list_json(kern, "%.3f").c_str(),
+                  single.kernel_ms > 0 ? kern_sum / single.kernel_ms : 0, eff, bal, sat_ms, tiling_ms,
+                  f == 0 ? "area" : (whole_task ? "whole-task timings" : "previous frame's SATs"));
+      std::fflush(stdout);
+      if (draw) {
+        draw_tiling(frame_img, tasks, pl);
+        write_png(png, frame_img);
+      }
     }
   }
-  double mean_eff = effs.empty() ? 0 : std::accumulate(effs.begin(), effs.end(), 0.0) / double(effs.size());
-  double mean_bal = balances.empty() ? 0 : std::accumulate(balances.begin(), balances.end(), 0.0) / double(balances.size());
-  std::printf("{\"summary\": true, \"scene\": %s, \"nodes\": %ld, \"frames\": %ld, \"step\": %ld, \"whole_task\": %s, "
-              "\"coefficients\": %s, \"mean_efficiency\": %.4f, \"median_efficiency\": %.4f, \"mean_balance\": %.4f, "
-              "\"width\": %d, \"height\": %d, \"ao\": %d, \"depth\": %d, \"cpu\": %s, \"isa\": %s, \"packet\": \"%dx%d\", \"threads\": %d}\n",
-              json_str(setup.scene_path).c_str(), nodes, frames, step, whole_task ? "true" : "false",
-              json_str(coeff_arg.empty() ? "equal" : coeff_arg).c_str(), mean_eff, median(effs), mean_bal, scene.width(),
-              scene.height(), settings.ao_samples, settings.max_depth, json_str(cpu_model()).c_str(), json_str(isa_name(pl)).c_str(),
-              pl.w, pl.h, threads);
+  std::vector<double> means, medians;
+  for (const Cluster& cl : clusters) {
+    double mean_eff = cl.effs.empty() ? 0 : std::accumulate(cl.effs.begin(), cl.effs.end(), 0.0) / double(cl.effs.size());
+    double mean_bal = cl.balances.empty() ? 0 : std::accumulate(cl.balances.begin(), cl.balances.end(), 0.0) / double(cl.balances.size());
+    double lo = cl.effs.empty() ? 0 : *std::min_element(cl.effs.begin(), cl.effs.end());
+    double hi = cl.effs.empty() ? 0 : *std::max_element(cl.effs.begin(), cl.effs.end());
+    means.push_back(mean_eff);
+    medians.push_back(median(cl.effs));
+    std::printf("{\"nodes_summary\": true, \"nodes\": %ld, \"whole_task\": %s, \"coefficients\": %s, \"frames_counted\": %zu, "
+                "\"mean_efficiency\": %.4f, \"median_efficiency\": %.4f, \"min_efficiency\": %.4f, \"max_efficiency\": %.4f, "
+                "\"mean_balance\": %.4f}\n",
+                cl.nodes, whole_task ? "true" : "false", list_json(cl.coeff, "%g").c_str(), cl.effs.size(), mean_eff,
+                medians.back(), lo, hi, mean_bal);
+  }
+  std::printf("{\"summary\": true, \"scene\": %s, \"nodes\": %s, \"frames\": %ld, \"step\": %ld, \"whole_task\": %s, "
+              "\"coefficients\": %s, \"mean_efficiency\": %s, \"median_efficiency\": %s, "
+              "\"reps\": %ld, \"width\": %d, \"height\": %d, \"ao\": %d, \"depth\": %d, \"cpu\": %s, \"isa\": %s, \"packet\": \"%dx%d\", "
+              "\"threads\": %d}\n",
+              json_str(setup.scene_path).c_str(), list_json(node_list, "%g").c_str(), frames, step, whole_task ? "true" : "false",
+              json_str(coeff_arg.empty() ? "equal" : coeff_arg).c_str(), list_json(means, "%.4f").c_str(),
+              list_json(medians, "%.4f").c_str(), reps, scene.width(), scene.height(), settings.ao_samples, settings.max_depth,
+              json_str(cpu_model()).c_str(), json_str(isa_name(pl)).c_str(), pl.w, pl.h, threads);
   return 0;
 }
 

@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -247,8 +248,14 @@ struct RayTracer::Impl {
 
   void sync(const Scene& scene, std::vector<std::string>& warnings);
   void build_geom(const Scene& scene, const GeomKey& key, Geom& g);
+  // How a non-default schedule spreads the packets (render_scheduled); nullptr = work stealing.
+  struct SchedulePlan {
+    ThreadSchedule schedule;
+    const std::vector<Rect>* tiles;
+    int threads;
+  };
   template <int N, unsigned F>
-  void render_task(const Rect& pixels, const RenderSettings& s, TaskResult& out);
+  void render_task(const Rect& pixels, const RenderSettings& s, TaskResult& out, const SchedulePlan* plan = nullptr);
   template <int N>
   double trace_primary(const Rect& pixels, uint64_t* rays);
 };
@@ -931,7 +938,7 @@ struct Kernel {
 };
 
 template <int N, unsigned F>
-void RayTracer::Impl::render_task(const Rect& requested, const RenderSettings& cfg, TaskResult& out) {
+void RayTracer::Impl::render_task(const Rect& requested, const RenderSettings& cfg, TaskResult& out, const SchedulePlan* plan) {
   Rect pixels = intersect(requested, {0, 0, width, height});
   out.pixels = pixels;
   out.image = Image(pixels.width(), pixels.height());
@@ -955,43 +962,79 @@ void RayTracer::Impl::render_task(const Rect& requested, const RenderSettings& c
   const bool linear = env.linear;
   const SrgbEncodeLut& enc = srgb_encode_lut();
 
-  tbb::combinable<RayCounts> counts;
-  tbb::parallel_for(
-      tbb::blocked_range2d<int>(packets.y0, packets.y1, 1, packets.x0, packets.x1, 8),
-      [&](const tbb::blocked_range2d<int>& r) {
-        RayCounts& rc = counts.local();
-        Kernel<N, F> k{*this, cfg, rc, ao_dist};
-        for (int py = r.rows().begin(); py != r.rows().end(); ++py)
-          for (int px = r.cols().begin(); px != r.cols().end(); ++px) {
-            uint64_t c0 = cfg.cost_map ? __rdtsc() : 0;
-            Lanes<N> lanes;
-            int xs[N], ys[N];
-            for (int i = 0; i < N; ++i) {
-              int x = px * pw + i % pw, y = py * ph + i / pw;
-              xs[i] = x; ys[i] = y;
-              lanes.set(i, cam.origin, cam.direction(x, y), 1.0f);
-              lanes.valid[i] = pixels.contains(x, y) ? -1 : 0;
-            }
-            Colors<N> c;
-            k.trace(lanes, 0, c, true);
-            for (int i = 0; i < N; ++i) {
-              if (!lanes.valid[i]) continue;
-              uint8_t* p = out.image.pixel(xs[i] - pixels.x0, ys[i] - pixels.y0);
-              float r_ = c.r[i] * exposure, g_ = c.g[i] * exposure, b_ = c.b[i] * exposure;
-              if (linear) { p[0] = encode_srgb(r_, enc); p[1] = encode_srgb(g_, enc); p[2] = encode_srgb(b_, enc); }
-              else { p[0] = encode_linear(r_); p[1] = encode_linear(g_); p[2] = encode_linear(b_); }
-              p[3] = 255;
-            }
-            if (cfg.cost_map) {
-              uint64_t ticks = __rdtsc() - c0;
-              double ns = double(ticks) * ns_per_tick;
-              out.cost.cost[size_t(py - packets.y0) * packets.width() + size_t(px - packets.x0)] =
-                  uint32_t(std::fmin(ns, 4294967295.0));
-            }
-          }
-      });
+  // Renders the packets [x0, x1) x [y0, y1) of the task, counting rays into rc.
+  auto render_block = [&](int y0, int y1, int x0, int x1, RayCounts& rc) {
+    Kernel<N, F> k{*this, cfg, rc, ao_dist};
+    for (int py = y0; py != y1; ++py)
+      for (int px = x0; px != x1; ++px) {
+        uint64_t c0 = cfg.cost_map ? __rdtsc() : 0;
+        Lanes<N> lanes;
+        int xs[N], ys[N];
+        for (int i = 0; i < N; ++i) {
+          int x = px * pw + i % pw, y = py * ph + i / pw;
+          xs[i] = x; ys[i] = y;
+          lanes.set(i, cam.origin, cam.direction(x, y), 1.0f);
+          lanes.valid[i] = pixels.contains(x, y) ? -1 : 0;
+        }
+        Colors<N> c;
+        k.trace(lanes, 0, c, true);
+        for (int i = 0; i < N; ++i) {
+          if (!lanes.valid[i]) continue;
+          uint8_t* p = out.image.pixel(xs[i] - pixels.x0, ys[i] - pixels.y0);
+          float r_ = c.r[i] * exposure, g_ = c.g[i] * exposure, b_ = c.b[i] * exposure;
+          if (linear) { p[0] = encode_srgb(r_, enc); p[1] = encode_srgb(g_, enc); p[2] = encode_srgb(b_, enc); }
+          else { p[0] = encode_linear(r_); p[1] = encode_linear(g_); p[2] = encode_linear(b_); }
+          p[3] = 255;
+        }
+        if (cfg.cost_map) {
+          uint64_t ticks = __rdtsc() - c0;
+          double ns = double(ticks) * ns_per_tick;
+          out.cost.cost[size_t(py - packets.y0) * packets.width() + size_t(px - packets.x0)] =
+              uint32_t(std::fmin(ns, 4294967295.0));
+        }
+      }
+  };
+  if (!plan || plan->schedule == ThreadSchedule::work_stealing) {
+    tbb::combinable<RayCounts> counts;
+    tbb::parallel_for(tbb::blocked_range2d<int>(packets.y0, packets.y1, 1, packets.x0, packets.x1, 8),
+                      [&](const tbb::blocked_range2d<int>& r) {
+                        render_block(r.rows().begin(), r.rows().end(), r.cols().begin(), r.cols().end(), counts.local());
+                      });
+    out.rays = counts.combine([](const RayCounts& a, const RayCounts& b) { RayCounts s = a; s += b; return s; });
+  } else {
+    // One std::thread per worker (the calling thread is worker 0); each counts its own rays.
+    const bool tiles = plan->schedule == ThreadSchedule::static_tiles;
+    const size_t workers = tiles ? plan->tiles->size() : size_t(plan->threads);
+    if (tiles) {  // the tiles must cover the task's packets exactly once
+      int64_t covered = 0;
+      for (size_t i = 0; i < workers; ++i) {
+        Rect a = intersect((*plan->tiles)[i], packets);
+        covered += a.area();
+        for (size_t j = 0; j < i; ++j)
+          if (!intersect(a, intersect((*plan->tiles)[j], packets)).empty())
+            throw std::invalid_argument("static tiles overlap");
+      }
+      if (covered != packets.area()) throw std::invalid_argument("static tiles do not cover the task");
+    }
+    std::vector<RayCounts> rc(workers);
+    std::atomic<int> next_row{packets.y0};
+    auto work = [&](size_t w) {
+      if (tiles) {
+        Rect t = intersect((*plan->tiles)[w], packets);
+        if (!t.empty()) render_block(t.y0, t.y1, t.x0, t.x1, rc[w]);
+      } else {
+        for (int py; (py = next_row.fetch_add(1, std::memory_order_relaxed)) < packets.y1;)
+          render_block(py, py + 1, packets.x0, packets.x1, rc[w]);
+      }
+    };
+    std::vector<std::thread> pool;
+    pool.reserve(workers);
+    for (size_t w = 1; w < workers; ++w) pool.emplace_back(work, w);
+    if (workers > 0) work(0);
+    for (std::thread& t : pool) t.join();
+    for (const RayCounts& c : rc) out.rays += c;
+  }
   out.rendering_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-  out.rays = counts.combine([](const RayCounts& a, const RayCounts& b) { RayCounts s = a; s += b; return s; });
   if (cfg.cost_map) out.kernel_ms = double(out.cost.total()) * 1e-6;
   else out.cost = {};
 }
@@ -1073,6 +1116,25 @@ void RayTracer::render_specialised(const Rect& pixels, const RenderSettings& set
   if (f.secondary || f.textures || f.alpha_masks || settings.ao_samples > 0)
     throw std::invalid_argument("the specialised kernel renders only scenes without AO, secondary rays, textures and alpha masks");
   dispatch_width(impl_->layout.size(), [&](auto n) { impl_->render_task<decltype(n)::value, kNone>(pixels, settings, out); });
+}
+
+const char* schedule_name(ThreadSchedule s) {
+  switch (s) {
+    case ThreadSchedule::static_tiles: return "static tiles";
+    case ThreadSchedule::shared_queue: return "shared queue";
+    default: return "work stealing";
+  }
+}
+
+void RayTracer::render_scheduled(const Rect& pixels, const RenderSettings& settings, ThreadSchedule schedule,
+                                 const std::vector<Rect>& tiles, int threads, TaskResult& out) {
+  if (schedule == ThreadSchedule::static_tiles && tiles.empty())
+    throw std::invalid_argument("static_tiles needs at least one tile");
+  if (schedule == ThreadSchedule::shared_queue && threads < 1)
+    throw std::invalid_argument("shared_queue needs at least one thread");
+  const Impl::SchedulePlan plan{schedule, &tiles, threads};
+  dispatch_width(impl_->layout.size(),
+                 [&](auto n) { impl_->render_task<decltype(n)::value, kAll>(pixels, settings, out, &plan); });
 }
 
 double RayTracer::trace_primary_only(const Rect& pixels, uint64_t* rays) {

@@ -3,6 +3,7 @@
 // pixels on AVX-512, 8 as 4x2 on AVX2, 4 as 2x2 on SSE) for tracing and shading, TBB's
 // work stealing over the packets of a task, and a TSC cost map per packet.
 #include <memory>
+#include <vector>
 
 #include "renderer/renderer.h"
 
@@ -21,6 +22,15 @@ PacketLayout detect_packet_layout();
 const char* isa_name(PacketLayout p);
 // The time-stamp counter's frequency in kHz (read from the kernel or calibrated once).
 double tsc_khz();
+
+// How RayTracer::render_scheduled spreads the packets of a task over threads (the
+// thread-level comparison of the paper's Table 2). render() always uses work stealing.
+enum class ThreadSchedule {
+  work_stealing,  // TBB parallel_for over 2D blocks of packets, exactly as render()
+  static_tiles,   // one thread per given tile (packet space), e.g. from the static tiler
+  shared_queue,   // `threads` threads pulling packet rows from one shared atomic counter
+};
+const char* schedule_name(ThreadSchedule s);
 
 class RayTracer final : public Renderer {
  public:
@@ -49,6 +59,13 @@ class RayTracer final : public Renderer {
   // The physical limit: the same camera rays in the same packets, traced with no shading
   // and no timing. Returns wall milliseconds; rays traced in *rays.
   double trace_primary_only(const Rect& pixels, uint64_t* rays);
+  // The same kernel, cost map and image as render(), with the task's packets scheduled over
+  // threads as `schedule` says. static_tiles: tiles[i] (absolute packet coordinates, clipped
+  // to the task) is rendered by thread i, all tiles together must cover the task's packets;
+  // shared_queue: `threads` threads (>= 1). work_stealing ignores tiles and threads (TBB's
+  // limit applies). Threads are std::threads started per call (the calling thread runs one).
+  void render_scheduled(const Rect& pixels, const RenderSettings& settings, ThreadSchedule schedule,
+                        const std::vector<Rect>& tiles, int threads, TaskResult& out);
 
   struct Impl;  // opaque; public so the kernel and filter functions in the .cpp can name it
 

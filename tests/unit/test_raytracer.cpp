@@ -760,3 +760,46 @@ TEST_CASE("opacity below 1 is see-through along the straight ray", "[raytracer][
   Image flat = render_full(rt, scene, no_ao(1));
   CHECK(std::abs(px(flat, 14, 10).g - 128) <= 1);
 }
+
+// The thread-level schedules of render_scheduled (tessera threadbench) render exactly what
+// render() renders, time every packet, and refuse static tiles that do not cover the task.
+TEST_CASE("render_scheduled: every schedule gives render()'s image and a full cost map", "[raytracer][schedule]") {
+  const int W = 61, H = 37;
+  Scene scene = busy_scene(W, H);
+  RayTracer rt;
+  std::vector<std::string> warnings;
+  rt.sync(scene, warnings);
+  const PacketLayout pl = rt.packet_layout();
+  const Rect space = packet_space(W, H, pl);
+  const Rect tasks[] = {{0, 0, W, H}, {3, 5, 37, 29}};
+  for (const Rect& task : tasks) {
+    TaskResult ref;
+    rt.render(task, busy_settings(), ref);
+    // Uneven static tiles over the whole packet space (clipped to the task), one of them empty.
+    const int mx = space.x1 / 3, my = space.y1 / 2;
+    const std::vector<Rect> tiles = {{0, 0, mx, space.y1}, {mx, 0, space.x1, my}, {mx, my, space.x1, space.y1}, {}};
+    struct Case { ThreadSchedule s; int threads; };
+    for (Case c : {Case{ThreadSchedule::work_stealing, 0}, Case{ThreadSchedule::static_tiles, 0},
+                   Case{ThreadSchedule::shared_queue, 1}, Case{ThreadSchedule::shared_queue, 3}}) {
+      INFO(schedule_name(c.s) << ", " << c.threads << " threads, task " << task.x0 << "," << task.y0);
+      TaskResult r;
+      rt.render_scheduled(task, busy_settings(), c.s, tiles, c.threads, r);
+      CHECK(r.pixels == ref.pixels);
+      CHECK(r.image.rgba == ref.image.rgba);
+      CHECK(r.cost.packets == ref.cost.packets);
+      REQUIRE(r.cost.cost.size() == ref.cost.cost.size());
+      for (uint32_t v : r.cost.cost) CHECK(v > 0);  // every packet rendered and timed once
+      CHECK(r.rays.primary == ref.rays.primary);
+      CHECK(r.rays.total() == ref.rays.total());
+      CHECK(r.kernel_ms > 0);
+    }
+  }
+  TaskResult r;
+  const Rect full{0, 0, W, H};
+  CHECK_THROWS_AS(rt.render_scheduled(full, busy_settings(), ThreadSchedule::static_tiles,
+                                      {{0, 0, space.x1, space.y1 - 1}}, 0, r), std::invalid_argument);  // a row missing
+  CHECK_THROWS_AS(rt.render_scheduled(full, busy_settings(), ThreadSchedule::static_tiles,
+                                      {{0, 0, space.x1, space.y1}, {0, 0, 1, 1}}, 0, r), std::invalid_argument);  // overlap
+  CHECK_THROWS_AS(rt.render_scheduled(full, busy_settings(), ThreadSchedule::static_tiles, {}, 0, r), std::invalid_argument);
+  CHECK_THROWS_AS(rt.render_scheduled(full, busy_settings(), ThreadSchedule::shared_queue, {}, 0, r), std::invalid_argument);
+}

@@ -1,0 +1,188 @@
+// `tessera balance` and `tessera threadbench` as processes on a tiny frame of a shared scene:
+// the JSON lines they print, the figures' internal consistency, the tiling PNG, and the
+// rejection of bad options.
+#include <catch2/catch.hpp>
+#include <nlohmann/json.hpp>
+
+#include <cmath>
+#include <cstdio>
+#include <string>
+#include <vector>
+
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include "renderer/image.h"
+
+using nlohmann::json;
+
+namespace {
+
+const std::string kScene = std::string(TESSERA_SCENES_DIR) + "/pavilion";
+
+struct Run {
+  int rc = -1;
+  std::vector<json> lines;
+};
+
+// Runs `tessera <args>` (stderr discarded) and parses every stdout line as JSON.
+Run run_tessera(const std::string& args) {
+  std::string cmd = std::string(TESSERA_EXE) + " " + args + " 2>/dev/null";
+  Run r;
+  FILE* p = popen(cmd.c_str(), "r");
+  REQUIRE(p);
+  std::string line;
+  for (int c; (c = std::fgetc(p)) != EOF;) {
+    if (c != '\n') { line += char(c); continue; }
+    r.lines.push_back(json::parse(line));  // throws (test fails) on a line that is not JSON
+    line.clear();
+  }
+  int st = pclose(p);
+  r.rc = WIFEXITED(st) ? WEXITSTATUS(st) : -1;
+  return r;
+}
+
+// Balance runs use single-threaded nodes and the per-packet best of 3 renders: with several
+// threads per node on a busy machine the TSC kernels of small tasks carry large contention
+// artefacts (docs/load-balancing.md), which would make any bound on the efficiency flaky.
+std::string base_args(int threads = 1) {
+  return "--scene " + kScene + "/scene.gltf --camera-loop " + kScene + "/camera-loop.json --size 64 36 --frames 3 --threads " +
+         std::to_string(threads);
+}
+
+}  // namespace
+
+TEST_CASE("tessera balance: per-frame lines per node count, consistent efficiency, summaries, tiling PNG", "[balance]") {
+  const std::string png = "/tmp/tessera_test_balance_" + std::to_string(getpid()) + ".png";
+  std::remove(png.c_str());
+  Run r = run_tessera("balance " + base_args() + " --nodes 1,3,5 --coefficients 1,2 --reps 3 --tiling-png " + png);
+  REQUIRE(r.rc == 0);
+  int frames = 0, node_summaries = 0, summaries = 0;
+  for (const json& l : r.lines) {
+    if (l.value("summary", false)) {
+      ++summaries;
+      CHECK(l["nodes"] == json({1, 3, 5}));
+      CHECK(l["mean_efficiency"].size() == 3);
+      CHECK(l["whole_task"] == false);
+      CHECK(l["width"] == 64);
+      CHECK(l["cpu"].is_string());
+      CHECK(l["reps"] == 3);
+      CHECK(l.contains("threads"));
+    } else if (l.value("nodes_summary", false)) {
+      ++node_summaries;
+      CHECK(l["frames_counted"] == 2);  // frame 0 (area split) is not counted
+      int n = l["nodes"];
+      std::vector<double> c = l["coefficients"];
+      REQUIRE(c.size() == size_t(n));
+      for (int i = 0; i < n; ++i) CHECK(c[size_t(i)] == (i % 2 ? 2.0 : 1.0));  // the pattern cycles
+      CHECK(l["min_efficiency"] <= l["median_efficiency"]);
+      CHECK(l["median_efficiency"] <= l["max_efficiency"]);
+    } else {
+      ++frames;
+      int n = l["nodes"];
+      std::vector<double> k = l["node_kernel_ms"];
+      REQUIRE(k.size() == size_t(n));
+      double coeff_sum = 0, worst = 0;
+      for (int i = 0; i < n; ++i) {
+        coeff_sum += i % 2 ? 2.0 : 1.0;
+        worst = std::max(worst, k[size_t(i)]);
+      }
+      double single = l["single_kernel_ms"], eff = l["efficiency"];
+      CHECK(single > 0);
+      CHECK(eff > 0);
+      CHECK(eff < 3);  // noise and repeat locality stay far below this
+      // Efficiency = (single / sum of coefficients) / largest normalised node kernel.
+      CHECK(eff == Approx(single / coeff_sum / worst).epsilon(0.01));
+      CHECK(double(l["balance"]) >= 0.999);
+      CHECK(l["tiled_from"] == (l["frame"] == 0 ? "area" : "previous frame's SATs"));
+      if (n == 1) {
+        CHECK(l["balance"] == 1.0);
+        CHECK(eff > 0.5);  // the reference against a re-render of itself
+        CHECK(eff < 2);
+      }
+    }
+  }
+  CHECK(frames == 3 * 3);
+  CHECK(node_summaries == 3);
+  CHECK(summaries == 1);
+  // The tiling PNG: the frame at full size with the task borders drawn in (255, 230, 0).
+  tessera::Image img = tessera::read_image(png);
+  CHECK(img.width == 64);
+  CHECK(img.height == 36);
+  int border = 0, other = 0;
+  for (int y = 0; y < img.height; ++y)
+    for (int x = 0; x < img.width; ++x) {
+      const uint8_t* p = img.pixel(x, y);
+      (p[0] == 255 && p[1] == 230 && p[2] == 0 ? border : other)++;
+    }
+  CHECK(border >= 2 * (64 + 36) - 4);  // at least the frame's outline
+  CHECK(other > 64 * 36 / 2);           // and mostly the rendered image
+  std::remove(png.c_str());
+}
+
+TEST_CASE("tessera balance --whole-task is reported as such", "[balance]") {
+  Run r = run_tessera("balance " + base_args() + " --nodes 4 --whole-task --reps 2");
+  REQUIRE(r.rc == 0);
+  REQUIRE(r.lines.size() == 3 + 1 + 1);
+  for (size_t i = 0; i < 3; ++i) {
+    CHECK(r.lines[i]["whole_task"] == true);
+    CHECK(r.lines[i]["tiled_from"] == (i == 0 ? "area" : "whole-task timings"));
+  }
+  CHECK(r.lines[3]["nodes_summary"] == true);
+  CHECK(r.lines[4]["summary"] == true);
+  CHECK(r.lines[4]["whole_task"] == true);
+  CHECK(r.lines[4]["reps"] == 2);
+}
+
+TEST_CASE("tessera balance rejects bad options", "[balance]") {
+  for (const char* bad : {"--nodes 0", "--nodes 2,x", "--nodes 1.5", "--nodes 2 --coefficients 1,-1", "--nodes 2 --frames 1",
+                          "--nodes 2 --step 0", "--nodes 2 --reps 0", "--nodes 2 --bogus"}) {
+    INFO(bad);
+    CHECK(run_tessera("balance " + base_args() + " " + bad).rc != 0);
+  }
+  CHECK(run_tessera("balance --scene " + kScene + "/scene.gltf --nodes 2").rc != 0);  // no camera loop
+}
+
+TEST_CASE("tessera threadbench: three schedules, identical images, a summary with the conditions", "[threadbench]") {
+  Run r = run_tessera("threadbench " + base_args(2) + " --reps 1");
+  REQUIRE(r.rc == 0);
+  REQUIRE(r.lines.size() == 3 + 1);
+  for (size_t i = 0; i < 3; ++i) {
+    const json& l = r.lines[i];
+    for (const char* s : {"static tiles", "work stealing", "shared queue"}) {
+      CHECK(double(l["rendering_ms"][s]) > 0);
+      CHECK(double(l["kernel_ms"][s]) > 0);
+    }
+    CHECK(l["images_identical"] == true);
+    CHECK(double(l["static_tile_balance"]) >= 0.999);
+    double t0 = l["rendering_ms"]["static tiles"], t1 = l["rendering_ms"]["work stealing"];
+    CHECK(double(l["static_vs_work_stealing_pct"]) == Approx(100 * (t1 / t0 - 1)).margin(0.05));
+  }
+  const json& s = r.lines[3];
+  CHECK(s["summary"] == true);
+  CHECK(s["frames_counted"] == 2);
+  CHECK(s["images_identical"] == true);
+  CHECK(s["threads"] == 2);
+  CHECK(s["packet"].is_string());
+}
+
+TEST_CASE("tessera locality: one line per frame, thread count and node count, group summaries", "[locality]") {
+  Run r = run_tessera("locality --scene " + kScene + "/scene.gltf --camera-loop " + kScene +
+                      "/camera-loop.json --size 64 36 --frames 2 --reps 1 --nodes 2,5 --thread-counts 1,2");
+  REQUIRE(r.rc == 0);
+  REQUIRE(r.lines.size() == 2 * 2 * 2 + 2 * 2 + 1);
+  for (size_t i = 0; i < 8; ++i) {
+    const json& l = r.lines[i];
+    CHECK(l["threads"] == (i % 4 < 2 ? 1 : 2));
+    CHECK(l["nodes"] == (i % 2 ? 5 : 2));
+    CHECK(double(l["full_kernel_ms"]) > 0);
+    for (const char* k : {"tiles_ratio", "warm_ratio", "rendering_ratio", "drift_ratio", "full_warm_ratio"}) {
+      INFO(k);
+      CHECK(double(l[k]) > 0.05);  // a ratio of two renders of the same work on one machine
+      CHECK(double(l[k]) < 20);
+    }
+  }
+  for (size_t i = 8; i < 12; ++i) CHECK(r.lines[i]["group_summary"] == true);
+  CHECK(r.lines[12]["summary"] == true);
+  CHECK(run_tessera("locality --scene " + kScene + "/scene.gltf --camera-loop " + kScene + "/camera-loop.json --nodes 0").rc != 0);
+}
