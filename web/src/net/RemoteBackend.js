@@ -1,10 +1,11 @@
 // Server rendering backend: <xml3d server="host:port" renderer="raytracer" display="jpeg|s3tc|mjpeg"
-// nodes="N" sync-rate="30" jpeg-quality="85" ao-samples="0" max-depth="4">. The scene goes to
+// nodes="N" sync-rate="30" jpeg-quality="85" ao-samples="0" max-depth="4"> (RenderSettings.js). The scene goes to
 // the node over the sync channel; frames come back on the same WebSocket and are shown in a
 // display element behind a transparent input canvas (which takes the mouse).
 import { SyncChannel } from './SyncChannel.js';
 import { JpegDisplay, S3tcDisplay, MjpegDisplay } from './FrameDisplay.js';
 import { hasS3TC } from './Features.js';
+import { readRenderSettings } from './RenderSettings.js';
 
 function cssColor(doc, el) {
   const c = doc.defaultView.getComputedStyle(el).backgroundColor || '';
@@ -49,8 +50,7 @@ export class RemoteBackend {
       handshake: { renderer: renderer === 'rasterizer' ? 'rasterizer' : 'raytracer', display,
         jpegQuality: Math.min(100, Math.max(1, int(x, 'jpeg-quality', 85))), maxNodes: Math.max(0, int(x, 'nodes', 0)),
         width: handler.width, height: handler.height },
-      settings: x.hasAttribute('ao-samples') || x.hasAttribute('max-depth')
-        ? { aoSamples: int(x, 'ao-samples', 0), maxDepth: int(x, 'max-depth', 4) } : null,
+      settings: this.readSettings(),
       rate: Math.min(120, Math.max(1, int(x, 'sync-rate', 30))),
       onState: (state, detail) => this.state(state, detail),
       onFrame: (f) => this.frame(f),
@@ -60,6 +60,19 @@ export class RemoteBackend {
         ? `uploading scene: ${Math.round(100 * sent / queued)}% of ${(queued / 1048576).toFixed(1)} MB` : null),
     });
     this.channel.connect();
+  }
+
+  // ao-samples / max-depth from the element; bad values are warned about once and replaced by
+  // the default (also on the status line).
+  readSettings() {
+    const { settings, problems } = readRenderSettings(this.handler.xml3d);
+    const key = problems.join('\n');
+    if (key !== this.settingsProblems) {
+      this.settingsProblems = key;
+      for (const p of problems) console.warn(`XML3D: ${p}`);
+      this.handler.setStatus('settings', problems.length ? `⚠ ${problems.join('; ')}` : null, true);
+    }
+    return settings;
   }
 
   state(state, detail) {
@@ -98,6 +111,7 @@ export class RemoteBackend {
     const h = this.handler;
     this.inputElement.width = h.width;
     this.inputElement.height = h.height;
+    this.channel.setSettings(this.readSettings());
     this.channel.setScene(scene, { width: h.width, height: h.height,
       background: cssColor(h.container.ownerDocument, h.container) });
   }
