@@ -86,7 +86,10 @@ export class RemoteBackend {
       failed: `⚠ the Tessera node refused the session: ${detail}`,
     }[state];
     h.setStatus('connection', text, state === 'disconnected' || state === 'failed');
-    if (state === 'ready') this.serverInfo = detail;
+    if (state === 'ready') {
+      this.serverInfo = detail;
+      if (this.frameView.start) this.frameView.start();
+    }
   }
 
   async frame(f) {
@@ -100,11 +103,29 @@ export class RemoteBackend {
         this.display = 'jpeg';
       }
       if (!(await this.frameView.show(f))) return;
+      if (this.display === 'mjpeg') this.flushMjpeg(f.frame);
       this.handler.frameDrawn({ frame: f.frame, timeEnd: performance.now(), renderTimeInMilliseconds: f.timings.rendering,
         timings: f.timings, encoding: f.encoding, width: f.width, height: f.height, remote: true });
     } catch (e) {
       this.handler.setStatus('frame', `⚠ cannot show frame ${f.frame}: ${e.message}`, true);
     }
+  }
+
+  // Chromium shows a part of a multipart/x-mixed-replace stream only when the next part's
+  // boundary arrives, and the node writes the boundary in front of each part, so the newest
+  // frame would stay hidden until another one comes. After the last frame of a change the
+  // client therefore asks for one more (identical) frame, which pushes the previous one out;
+  // and while the stream has shown nothing (it connected after the first frames went out) it
+  // asks again, at most 20 times.
+  flushMjpeg(frame) {
+    const ch = this.channel;
+    if (!this.frameView.showing && (this.mjpegRetries = (this.mjpegRetries || 0) + 1) <= 20) {
+      setTimeout(() => { if (!this.frameView.showing) ch.requestRender(); }, 150);
+      return;
+    }
+    if (frame === this.flushFrame || ch.outstanding > 0 || ch.renderWanted || ch.dirty || ch.queue.length) return;
+    ch.requestRender();
+    this.flushFrame = ch.frameNumber;
   }
 
   update(scene) {
