@@ -103,7 +103,11 @@ async function latency(node, name, display) {
       if (!req) return null;
       const d = window.__drawn.find((f) => f.t >= req.t && f.frame >= req.render);
       return d ? { input: inp, camera: cam.t, request: req.t, drawn: d.t, rendering: d.rendering, pipeline: d.pipeline } : null;
-    }, tIn, { timeout: 60000, polling: 'raf' });
+    }, tIn, { timeout: 60000, polling: 'raf' }).catch(async (e) => {
+      const st = await page.evaluate((t0) => ({ t0, inputs: window.__inputs.slice(-3), sends: window.__sends.slice(-5), drawn: window.__drawn.slice(-3),
+        status: document.querySelector('.tessera-status').textContent, view: document.querySelector('view') && document.querySelector('view').outerHTML.slice(0, 200) }), tIn);
+      throw new Error(`${name} ${display} step ${i}: no frame for the input: ${JSON.stringify(st)}\n${e.message}`);
+    });
     const v = await r.jsonValue();
     out.push({ total: v.drawn - v.input, toSend: v.request - v.input, sendToFrame: v.drawn - v.request, rendering: v.rendering });
     await new Promise((res) => setTimeout(res, 250));

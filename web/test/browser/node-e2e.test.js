@@ -141,6 +141,35 @@ for (const display of ['jpeg', 's3tc', 'mjpeg']) {
     });
 }
 
+test('a mouse drag orbits the camera (examine controller) and the node\'s next frame shows the orbited view',
+  { skip: !BIN && 'TESSERA_BIN not set (CTest passes the tessera binary)' }, async () => {
+    const page = await openNodePage('display=jpeg&controller=examine');
+    await untilMatches(page, 0, MATCH_DB.jpeg);
+    const box = await page.evaluate(() => { const r = document.querySelector('.tessera-xml3d').getBoundingClientRect(); return [r.left + r.width / 2, r.top + r.height / 2]; });
+    const n = await frameCount(page);
+    await page.mouse.move(box[0], box[1]);
+    await page.mouse.down();
+    await page.mouse.move(box[0] + 30, box[1] + 6, { steps: 3 });
+    await page.mouse.up();
+    // The view the page now has (camera to world), as a camera loop for `tessera render`.
+    await page.waitForFunction(() => document.getElementById('x').tessera.scene.camera.toWorld[12] !== 0.5, null, { timeout: 5000 });
+    const m = await page.evaluate(() => [...document.getElementById('x').tessera.scene.camera.toWorld]);
+    const eye = [m[12], m[13], m[14]], target = [m[12] - m[8], m[13] - m[9], m[14] - m[10]];
+    const loop = JSON.parse(fs.readFileSync(path.join(PAGES, 'node-camera-loop.json'), 'utf8'));
+    const centre = [0.05, 0.55, -0.15];  // roughly the scene's middle: an orbit keeps the distance to the examine point
+    const dist = (p) => Math.hypot(p[0] - centre[0], p[1] - centre[1], p[2] - centre[2]);
+    assert.ok(Math.abs(dist(eye) - dist(loop.frames[0].eye)) < 0.5, `orbit, not a jump: eye ${eye.map((v) => v.toFixed(2))}`);
+    fs.writeFileSync(path.join(tmp, 'orbit.json'), JSON.stringify({ fovY_deg: loop.fovY_deg, frames: [{ eye, target, up: [0, 1, 0] }] }));
+    renderReference(BIN, { scene: path.join(PAGES, 'node-scene.gltf'), loop: path.join(tmp, 'orbit.json'), frame: 0, width: W, height: H,
+      out: path.join(tmp, 'ref3.png') });
+    refs[3] = fs.readFileSync(path.join(tmp, 'ref3.png')).toString('base64');
+    const orbited = await untilMatches(page, 3, MATCH_DB.jpeg, { after: n });
+    const before = psnr(orbited.image, await reference(page, 0));
+    assert.ok(before < orbited.psnr - 3, `the frame changed with the drag: ${before.toFixed(1)} dB against the start view, ${orbited.psnr.toFixed(1)} against the orbited one`);
+    console.log(`# drag: orbited view ${orbited.psnr.toFixed(1)} dB (start view ${before.toFixed(1)} dB)`);
+    await page.close();
+  });
+
 const mean = (img) => { let s = 0; for (let i = 0; i < img.length; i += 4) s += img[i] + img[i + 1] + img[i + 2]; return s / (img.length / 4 * 3); };
 async function untilImage(page, pred, { after = 0, timeout = 15000 } = {}, what = '') {
   const t0 = Date.now();
