@@ -157,6 +157,7 @@ export class SyncChannel {
   async flush() {
     if (this.flushing) return;
     this.flushing = true;
+    let sent = false;
     try {
       while (this.queue.length && this.ws && this.ws.bufferedAmount < this.highWater) {
         // Pack records into one message up to messageBytes (a larger record goes alone).
@@ -171,11 +172,14 @@ export class SyncChannel {
           this.progress.sent += item.size;
           if (rec) { batch.push(rec); bytes += size; }
         }
-        if (batch.length) this.send(encodeClient(batch));
+        if (batch.length) { this.send(encodeClient(batch)); sent = true; }
         this.onProgress(this.progress.sent, this.progress.queued);
       }
       if (!this.queue.length) this.progress = { queued: 0, sent: 0 };
-      if (this.changed) {
+      // A render request after every iteration that sent something: also after the later
+      // parts of an upload that the send-buffer limit spread over several iterations, so the
+      // node renders the scene once it is complete.
+      if (this.changed || sent) {
         this.changed = false;
         this.requestRender();
       }

@@ -48,8 +48,9 @@ const until = async (pred) => { for (let i = 0; i < 200 && !pred(); i++) await n
 test('the channel sends the settings after the handshake, and again (with a render request) when they change', async () => {
   const saved = globalThis.WebSocket;
   globalThis.WebSocket = FakeSocket;
+  let ch;
   try {
-    const ch = new SyncChannel({ url: 'ws://x/ws', rate: 100,
+    ch = new SyncChannel({ url: 'ws://x/ws', rate: 100,
       handshake: { renderer: 'raytracer', display: 'jpeg', jpegQuality: 85, maxNodes: 0, width: 8, height: 8 },
       settings: { aoSamples: 8, maxDepth: 5 } });
     const doc = page('<xml3d><mesh><float3 name="position">0 0 -2 1 0 -2 0 1 -2</float3></mesh></xml3d>');
@@ -78,8 +79,44 @@ test('the channel sends the settings after the handshake, and again (with a rend
     await until(() => all().slice(n).some((r) => r.type === 'render'));
     assert.deepEqual(all().slice(n).map((r) => r.type), ['settings', 'render']);
     assert.deepEqual(all()[n], { type: 'settings', aoSamples: 0, maxDepth: 2 });
-    ch.close();
   } finally {
+    if (ch) ch.close();
+    globalThis.WebSocket = saved;
+  }
+});
+
+test('an upload spread over several run-loop iterations by the send-buffer limit ends with a render request', async () => {
+  const saved = globalThis.WebSocket;
+  globalThis.WebSocket = FakeSocket;
+  let ch;
+  try {
+    // highWater 1 byte: each iteration sends one message, then waits for the buffer to drain.
+    ch = new SyncChannel({ url: 'ws://x/ws', rate: 200, highWater: 1, messageBytes: 400,
+      handshake: { renderer: 'raytracer', display: 'jpeg', jpegQuality: 85, maxNodes: 0, width: 8, height: 8 } });
+    const meshes = Array.from({ length: 20 }, (_, i) => `<mesh><float3 name="position">${i} 0 -2 1 0 -2 0 1 -2</float3></mesh>`).join('');
+    ch.setScene(new MarkupReader().read(page(`<xml3d>${meshes}</xml3d>`).querySelector('xml3d')), { width: 8, height: 8 });
+    ch.connect();
+    await until(() => FakeSocket.last && FakeSocket.last.sent.length === 1);
+    const ws = FakeSocket.last;
+    const send = ws.send.bind(ws);
+    ws.send = (bytes) => { send(bytes); ws.bufferedAmount = bytes.length; setTimeout(() => { ws.bufferedAmount = 0; }, 20); };
+    ws.reply([{ type: 'handshake_reply', renderer: 'raytracer', display: 'jpeg', jpegQuality: 85, nodes: 1, width: 8, height: 8,
+      maxMessageBytes: 1 << 20, maxBufferBytes: 1 << 28, serverVersion: 'test' }]);
+    const isScene = (m) => m.some((r) => ['buffer', 'mesh', 'material', 'light'].includes(r.type));
+    await until(() => ws.sent.filter(isScene).length >= 3 && !ch.queue.length);
+    await new Promise((r) => setTimeout(r, 100));
+    // Frames come back (so render requests are not held back by the outstanding limit).
+    let answered = 0;
+    const answer = () => { for (const r of ws.sent.flat().filter((x) => x.type === 'render' && x.frame > answered)) {
+      answered = r.frame; ws.reply([{ type: 'frame', frame: r.frame, width: 8, height: 8, encoding: 'jpeg', timings: {}, payload: new Uint8Array(0) }]); } };
+    answer();
+    await new Promise((r) => setTimeout(r, 100));
+    answer();
+    const last = ws.sent.map(isScene).lastIndexOf(true);
+    assert.ok(ws.sent.slice(last).flat().some((r) => r.type === 'render'), `a render request after the last upload message (${ws.sent.length} messages)`);
+    assert.ok(ws.sent.filter(isScene).length >= 3, 'the upload took several messages');
+  } finally {
+    if (ch) ch.close();
     globalThis.WebSocket = saved;
   }
 });
