@@ -72,11 +72,11 @@ function psnr(a, b) {
   return mse === 0 ? 99 : 10 * Math.log10(255 * 255 / mse);
 }
 
-const frameCount = (page) => page.evaluate(() => window.__frames.length);
+const frameCount = (page) => page.evaluate(() => (window.__frames || []).length);
 const pageState = (page) => page.evaluate(() => ({
   status: document.querySelector('.tessera-status') && document.querySelector('.tessera-status').textContent,
   connection: document.querySelector('.tessera-xml3d') && document.querySelector('.tessera-xml3d').dataset.connection,
-  frames: window.__frames.length,
+  frames: (window.__frames || []).length,
 }));
 
 // Waits until a server frame newer than `after` frames is shown and matches reference k.
