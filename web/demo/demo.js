@@ -1,6 +1,7 @@
 // Shared code of the demo pages: places the view from data-eye / data-target / data-fov on
 // the <view>, and switches between local WebGL and server rendering.
 //   ?server=host:port   render on that Tessera node (default: local WebGL)
+//   ?display=jpeg|s3tc|mjpeg&ao-samples=N&max-depth=D   override the page's <xml3d> attributes
 import { lookAt, toAxisAngle } from '../src/math/Mat4.js';
 import '../src/xml3d.js';
 
@@ -16,6 +17,7 @@ if (view && view.dataset.eye) {
 
 const params = new URLSearchParams(location.search);
 const defaultServer = params.get('server') || `${location.hostname}:${location.port || 80}`;
+for (const a of ['display', 'ao-samples', 'max-depth']) if (params.has(a)) xml3d.setAttribute(a, params.get(a));
 if (params.get('server')) xml3d.setAttribute('server', params.get('server'));
 
 // The switch: toggling the server attribute makes xml3d.js rebuild the backend.
@@ -23,6 +25,7 @@ const bar = document.getElementById('controls');
 if (bar) {
   const box = document.createElement('label');
   box.innerHTML = `<input type="checkbox" id="remote"> render on Tessera node <input id="host" size="18">
+    AO rays <select id="ao">${[0, 1, 2, 4, 8, 16].map((n) => `<option>${n}</option>`).join('')}</select>
     <span id="info"></span>`;
   bar.appendChild(box);
   const remote = box.querySelector('#remote'), host = box.querySelector('#host'), info = box.querySelector('#info');
@@ -32,6 +35,10 @@ if (bar) {
     if (remote.checked) xml3d.setAttribute('server', host.value); else xml3d.removeAttribute('server');
   };
   remote.addEventListener('change', apply);
+  // AO rays per hit on the node (the ao-samples attribute; sent as a settings record).
+  const ao = box.querySelector('#ao');
+  ao.value = xml3d.getAttribute('ao-samples') || '0';
+  ao.addEventListener('change', () => xml3d.setAttribute('ao-samples', ao.value));
   host.addEventListener('change', () => remote.checked && apply());
   let frames = 0, last = performance.now();
   xml3d.addEventListener('framedrawn', () => {

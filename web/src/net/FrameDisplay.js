@@ -79,7 +79,11 @@ export class MjpegDisplay {
     this.element.alt = '';
     this.url = url;
   }
+  // Opened when the session is ready: the node sends each frame to the streams open at that
+  // moment only, so a stream opened after the first frame would stay empty until the next one.
   start() { if (!this.element.src) this.element.src = this.url; }
+  // True once the stream has delivered a picture.
+  get showing() { return this.element.naturalWidth > 0; }
   // The image arrives on the HTTP stream; the WebSocket frame record only carries timings.
   async show() { this.start(); return true; }
   dispose() { this.element.src = ''; this.element.remove(); }

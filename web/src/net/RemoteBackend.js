@@ -1,10 +1,11 @@
 // Server rendering backend: <xml3d server="host:port" renderer="raytracer" display="jpeg|s3tc|mjpeg"
-// nodes="N" sync-rate="30" jpeg-quality="85" ao-samples="0" max-depth="4">. The scene goes to
+// nodes="N" sync-rate="30" jpeg-quality="85" ao-samples="0" max-depth="4"> (RenderSettings.js). The scene goes to
 // the node over the sync channel; frames come back on the same WebSocket and are shown in a
 // display element behind a transparent input canvas (which takes the mouse).
 import { SyncChannel } from './SyncChannel.js';
 import { JpegDisplay, S3tcDisplay, MjpegDisplay } from './FrameDisplay.js';
 import { hasS3TC } from './Features.js';
+import { readRenderSettings } from './RenderSettings.js';
 
 function cssColor(doc, el) {
   const c = doc.defaultView.getComputedStyle(el).backgroundColor || '';
@@ -49,8 +50,7 @@ export class RemoteBackend {
       handshake: { renderer: renderer === 'rasterizer' ? 'rasterizer' : 'raytracer', display,
         jpegQuality: Math.min(100, Math.max(1, int(x, 'jpeg-quality', 85))), maxNodes: Math.max(0, int(x, 'nodes', 0)),
         width: handler.width, height: handler.height },
-      settings: x.hasAttribute('ao-samples') || x.hasAttribute('max-depth')
-        ? { aoSamples: int(x, 'ao-samples', 0), maxDepth: int(x, 'max-depth', 4) } : null,
+      settings: this.readSettings(),
       rate: Math.min(120, Math.max(1, int(x, 'sync-rate', 30))),
       onState: (state, detail) => this.state(state, detail),
       onFrame: (f) => this.frame(f),
@@ -60,6 +60,19 @@ export class RemoteBackend {
         ? `uploading scene: ${Math.round(100 * sent / queued)}% of ${(queued / 1048576).toFixed(1)} MB` : null),
     });
     this.channel.connect();
+  }
+
+  // ao-samples / max-depth from the element; bad values are warned about once and replaced by
+  // the default (also on the status line).
+  readSettings() {
+    const { settings, problems } = readRenderSettings(this.handler.xml3d);
+    const key = problems.join('\n');
+    if (key !== this.settingsProblems) {
+      this.settingsProblems = key;
+      for (const p of problems) console.warn(`XML3D: ${p}`);
+      this.handler.setStatus('settings', problems.length ? `⚠ ${problems.join('; ')}` : null, true);
+    }
+    return settings;
   }
 
   state(state, detail) {
@@ -73,7 +86,10 @@ export class RemoteBackend {
       failed: `⚠ the Tessera node refused the session: ${detail}`,
     }[state];
     h.setStatus('connection', text, state === 'disconnected' || state === 'failed');
-    if (state === 'ready') this.serverInfo = detail;
+    if (state === 'ready') {
+      this.serverInfo = detail;
+      if (this.frameView.start) this.frameView.start();
+    }
   }
 
   async frame(f) {
@@ -87,6 +103,7 @@ export class RemoteBackend {
         this.display = 'jpeg';
       }
       if (!(await this.frameView.show(f))) return;
+      if (this.display === 'mjpeg') this.flushMjpeg(f.frame);
       this.handler.frameDrawn({ frame: f.frame, timeEnd: performance.now(), renderTimeInMilliseconds: f.timings.rendering,
         timings: f.timings, encoding: f.encoding, width: f.width, height: f.height, remote: true });
     } catch (e) {
@@ -94,10 +111,28 @@ export class RemoteBackend {
     }
   }
 
+  // Chromium shows a part of a multipart/x-mixed-replace stream only when the next part's
+  // boundary arrives, and the node writes the boundary in front of each part, so the newest
+  // frame would stay hidden until another one comes. After the last frame of a change the
+  // client therefore asks for one more (identical) frame, which pushes the previous one out;
+  // and while the stream has shown nothing (it connected after the first frames went out) it
+  // asks again, at most 20 times.
+  flushMjpeg(frame) {
+    const ch = this.channel;
+    if (!this.frameView.showing && (this.mjpegRetries = (this.mjpegRetries || 0) + 1) <= 20) {
+      setTimeout(() => { if (!this.frameView.showing) ch.requestRender(); }, 150);
+      return;
+    }
+    if (frame === this.flushFrame || ch.outstanding > 0 || ch.renderWanted || ch.dirty || ch.queue.length) return;
+    ch.requestRender();
+    this.flushFrame = ch.frameNumber;
+  }
+
   update(scene) {
     const h = this.handler;
     this.inputElement.width = h.width;
     this.inputElement.height = h.height;
+    this.channel.setSettings(this.readSettings());
     this.channel.setScene(scene, { width: h.width, height: h.height,
       background: cssColor(h.container.ownerDocument, h.container) });
   }

@@ -1,12 +1,14 @@
 // The sync channel to a Tessera node: one WebSocket speaking the binary protocol. After the
 // handshake, a run loop (rate Hz) collects scene changes, sends them progressively (buffers
 // deflated when CompressionStream exists, rate-controlled on ws.bufferedAmount) and asks for
-// a frame after every iteration that changed something. On connection loss it reconnects
-// with back-off and re-sends the whole scene.
+// a frame after every iteration that changed something. The render settings (AO samples, ray
+// depth) go as a settings record after the handshake and again whenever they change. On
+// connection loss it reconnects with back-off and re-sends the whole scene and the settings.
 import { encodeClient, decodeServer, clientRecordSize, ProtocolError } from './Protocol.js';
 import { SceneSync } from './SceneSync.js';
 import { hasCompressionStream, deflate } from './Features.js';
 import { loadTexture } from './TextureEncoder.js';
+import { sameSettings } from './RenderSettings.js';
 
 const DEFLATE_MIN_BYTES = 256;
 const MAX_OUTSTANDING_RENDERS = 2;
@@ -72,6 +74,14 @@ export class SyncChannel {
     this.dirty = true;
   }
 
+  // New render settings {aoSamples, maxDepth}; sent (with a render request) by the next
+  // run-loop iteration when they differ from the last ones.
+  setSettings(settings) {
+    if (sameSettings(settings, this.settings)) return;
+    this.settings = settings;
+    this.settingsDirty = true;
+  }
+
   receive(data) {
     let records;
     try { records = decodeServer(new Uint8Array(data)); } catch (e) {
@@ -88,7 +98,7 @@ export class SyncChannel {
         this.outstanding = 0;
         this.dirty = true;
         this.setState('ready', `${r.serverVersion || 'Tessera'}, ${r.nodes} node${r.nodes > 1 ? 's' : ''}, ${r.renderer}, ${r.display}`);
-        if (this.settings) this.send(encodeClient([{ type: 'settings', ...this.settings }]));
+        this.settingsDirty = !!this.settings;
         this.timer = setInterval(() => this.tick(), 1000 / this.rate);
         this.tick();
       } else if (r.type === 'frame') {
@@ -125,6 +135,12 @@ export class SyncChannel {
 
   tick() {
     if (this.state !== 'ready') return;
+    if (this.settingsDirty && this.settings) {
+      this.settingsDirty = false;
+      const r = { type: 'settings', aoSamples: this.settings.aoSamples, maxDepth: this.settings.maxDepth };
+      this.queue.push({ size: clientRecordSize(r), record: r });
+      this.changed = true;
+    }
     if (this.dirty && this.scene) {
       this.dirty = false;
       const records = this.sync.diff(this.scene, this.view);
@@ -141,6 +157,7 @@ export class SyncChannel {
   async flush() {
     if (this.flushing) return;
     this.flushing = true;
+    let sent = false;
     try {
       while (this.queue.length && this.ws && this.ws.bufferedAmount < this.highWater) {
         // Pack records into one message up to messageBytes (a larger record goes alone).
@@ -155,11 +172,14 @@ export class SyncChannel {
           this.progress.sent += item.size;
           if (rec) { batch.push(rec); bytes += size; }
         }
-        if (batch.length) this.send(encodeClient(batch));
+        if (batch.length) { this.send(encodeClient(batch)); sent = true; }
         this.onProgress(this.progress.sent, this.progress.queued);
       }
       if (!this.queue.length) this.progress = { queued: 0, sent: 0 };
-      if (this.changed) {
+      // A render request after every iteration that sent something: also after the later
+      // parts of an upload that the send-buffer limit spread over several iterations, so the
+      // node renders the scene once it is complete.
+      if (this.changed || sent) {
         this.changed = false;
         this.requestRender();
       }

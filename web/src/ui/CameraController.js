@@ -41,7 +41,7 @@ export class CameraController {
 
   pose() {
     const scene = this.handler.scene;
-    return scene && scene.camera ? M.multiply(new Float32Array(16), scene.camera.toWorld) : M.identity();
+    return scene && scene.camera ? new Float32Array(scene.camera.toWorld) : M.identity();
   }
 
   examinePoint() {

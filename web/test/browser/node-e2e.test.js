@@ -1,0 +1,226 @@
+// The web client against a REAL Tessera node: `tessera serve` (path in TESSERA_BIN, passed by
+// CTest) serves web/ and renders what the page in headless chromium sends. The page
+// (pages/node.html) shows pages/node-scene.gltf from frame 0 of pages/node-camera-loop.json;
+// its server frames must match `tessera render` of the same glTF and camera (PSNR bound) for
+// each display method, and page scripts that move the camera or the model must produce frames
+// matching the reference of the new view. The scene is unlit (see tools/make-node-test-scene.js)
+// so that the glTF reference (linear colour space) and the XML3D page (colours as given) agree.
+import { test, before, after } from 'node:test';
+import assert from 'node:assert/strict';
+import fs from 'node:fs';
+import os from 'node:os';
+import path from 'node:path';
+import { launch } from './browser.js';
+import { startNode, renderReference, WEB } from '../../tools/tessera-node.js';
+
+const BIN = process.env.TESSERA_BIN;
+const W = 160, H = 120;
+// PSNR bound for "this frame shows that view", per display. Matching frames measure (jpeg q85 /
+// mjpeg) ~27-36 dB and (DXT1) ~23-33 dB on this scene of saturated colours on black (4:2:0
+// chroma and 4x4 blocks with three colours cost the most), a different view ~8-13 dB; each test
+// also checks that the frame is far further from the other views' references.
+const MATCH_DB = { jpeg: 24, mjpeg: 24, s3tc: 19 };
+const PAGES = path.join(WEB, 'test/browser/pages');
+
+let env, node, tmp;
+const refs = [];
+before(async () => {
+  if (!BIN) return;
+  tmp = fs.mkdtempSync(path.join(os.tmpdir(), 'tessera-node-e2e-'));
+  for (const k of [0, 1, 2]) {
+    const out = renderReference(BIN, { scene: path.join(PAGES, 'node-scene.gltf'), loop: path.join(PAGES, 'node-camera-loop.json'),
+      frame: k, width: W, height: H, out: path.join(tmp, `ref${k}.png`) });
+    refs.push(fs.readFileSync(out).toString('base64'));
+  }
+  node = await startNode(BIN, { threads: 2 });
+  env = await launch();
+});
+after(async () => {
+  if (env) await env.close();
+  if (node) await node.close();
+  if (tmp) fs.rmSync(tmp, { recursive: true, force: true });
+});
+
+// RGBA pixels of the frame display (JPEG canvas, S3TC WebGL canvas or MJPEG img), W x H.
+const shown = (page) => page.evaluate(([w, h]) => {
+  const src = document.querySelector('.tessera-display');
+  if (!src || (src.localName === 'img' && !src.naturalWidth) || !src.width) return null;
+  const c = new OffscreenCanvas(w, h), g = c.getContext('2d');
+  g.drawImage(src, 0, 0, w, h);
+  return btoa(String.fromCharCode(...g.getImageData(0, 0, w, h).data));
+}, [W, H]);
+
+// A reference PNG (base64) decoded by the browser to RGBA.
+const decoded = new Map();
+async function reference(page, k) {
+  if (!decoded.has(k)) {
+    decoded.set(k, await page.evaluate(async ([b64, w, h]) => {
+      const bmp = await createImageBitmap(new Blob([Uint8Array.from(atob(b64), (ch) => ch.charCodeAt(0))], { type: 'image/png' }));
+      if (bmp.width !== w || bmp.height !== h) throw new Error(`reference is ${bmp.width}x${bmp.height}`);
+      const c = new OffscreenCanvas(w, h), g = c.getContext('2d');
+      g.drawImage(bmp, 0, 0);
+      return btoa(String.fromCharCode(...g.getImageData(0, 0, w, h).data));
+    }, [refs[k], W, H]));
+  }
+  return Buffer.from(decoded.get(k), 'base64');
+}
+
+function psnr(a, b) {
+  let se = 0;
+  for (let i = 0; i < a.length; i += 4) for (let c = 0; c < 3; c++) { const d = a[i + c] - b[i + c]; se += d * d; }
+  const mse = se / (a.length / 4 * 3);
+  return mse === 0 ? 99 : 10 * Math.log10(255 * 255 / mse);
+}
+
+const frameCount = (page) => page.evaluate(() => (window.__frames || []).length);
+const pageState = (page) => page.evaluate(() => ({
+  status: document.querySelector('.tessera-status') && document.querySelector('.tessera-status').textContent,
+  connection: document.querySelector('.tessera-xml3d') && document.querySelector('.tessera-xml3d').dataset.connection,
+  frames: (window.__frames || []).length,
+}));
+
+// Waits until a server frame newer than `after` frames is shown and matches reference k.
+async function untilMatches(page, k, bound, { after = 0, timeout = 20000 } = {}) {
+  const t0 = Date.now();
+  let last = null;
+  while (Date.now() - t0 < timeout) {
+    if (await frameCount(page) > after) {
+      const img = await shown(page);
+      if (img) {
+        last = psnr(Buffer.from(img, 'base64'), await reference(page, k));
+        if (last >= bound) return { psnr: last, image: Buffer.from(img, 'base64'), ms: Date.now() - t0 };
+      }
+    }
+    await new Promise((r) => setTimeout(r, 50));
+  }
+  const st = await pageState(page);
+  assert.fail(`no server frame matching reference ${k} within ${timeout} ms (last PSNR ${last && last.toFixed(1)} dB, `
+    + `${st.frames} frames, connection ${st.connection}, status "${st.status}")\n${page.logs.join('\n')}\n`
+    + `node log tail:\n${node.log.slice(-10).join('\n')}`);
+}
+
+async function openNodePage(query) {
+  const page = await env.context.newPage();
+  page.logs = [];
+  page.on('console', (m) => page.logs.push(`${m.type()}: ${m.text()}`));
+  page.on('pageerror', (e) => page.logs.push(`pageerror: ${e.message}`));
+  await page.goto(`${node.base}/test/browser/pages/node.html?server=${node.host}:${node.port}&${query}`);
+  return page;
+}
+
+for (const display of ['jpeg', 's3tc', 'mjpeg']) {
+  test(`display=${display}: real-node frames match tessera render; moving the camera or the model gives matching new frames`,
+    { skip: !BIN && 'TESSERA_BIN not set (CTest passes the tessera binary)' }, async () => {
+      const page = await openNodePage(`display=${display}`);
+      const bound = MATCH_DB[display];
+      const start = await untilMatches(page, 0, bound);
+      const info = await page.evaluate(() => ({ display: document.getElementById('x').tessera.backend.display,
+        element: document.querySelector('.tessera-display').localName, encodings: [...new Set(window.__frames.map((f) => f.encoding))] }));
+      assert.equal(info.display, display, 'the page kept the display method it asked for');
+      assert.equal(info.element, display === 'mjpeg' ? 'img' : 'canvas');
+      if (display !== 'mjpeg') assert.deepEqual(info.encodings, [display === 's3tc' ? 'dxt1' : 'jpeg']);
+      const otherView = psnr(start.image, await reference(page, 1));
+      assert.ok(otherView < Math.min(bound, start.psnr - 8), `views are told apart: ${otherView.toFixed(1)} dB against another view`);
+
+      // A page script moves the camera to frame 1 of the loop.
+      let n = await frameCount(page);
+      await page.evaluate(() => window.setCameraFrame(1));
+      const moved = await untilMatches(page, 1, bound, { after: n });
+      // A page script moves the model (by model_shift): the same picture as the camera moved the other way.
+      n = await frameCount(page);
+      await page.evaluate(() => { window.setCameraFrame(0); window.shiftModel(); });
+      const shifted = await untilMatches(page, 2, bound, { after: n });
+      const unshifted = psnr(shifted.image, await reference(page, 0));
+      assert.ok(unshifted < Math.min(bound, shifted.psnr - 6), `the moved model is not the start view: ${unshifted.toFixed(1)} dB`);
+      console.log(`# ${display}: PSNR start ${start.psnr.toFixed(1)} dB (other view ${otherView.toFixed(1)}), camera moved ${moved.psnr.toFixed(1)} dB `
+        + `after ${moved.ms} ms, model moved ${shifted.psnr.toFixed(1)} dB (start view ${unshifted.toFixed(1)}) after ${shifted.ms} ms`);
+      const st = await pageState(page);
+      assert.equal(st.connection, 'ready');
+      assert.ok(!/server:/.test(st.status || ''), `no server errors: ${st.status}`);
+      await page.close();
+    });
+}
+
+test('a mouse drag orbits the camera (examine controller) and the node\'s next frame shows the orbited view',
+  { skip: !BIN && 'TESSERA_BIN not set (CTest passes the tessera binary)' }, async () => {
+    const page = await openNodePage('display=jpeg&controller=examine');
+    await untilMatches(page, 0, MATCH_DB.jpeg);
+    const box = await page.evaluate(() => { const r = document.querySelector('.tessera-xml3d').getBoundingClientRect(); return [r.left + r.width / 2, r.top + r.height / 2]; });
+    const n = await frameCount(page);
+    await page.mouse.move(box[0], box[1]);
+    await page.mouse.down();
+    await page.mouse.move(box[0] + 30, box[1] + 6, { steps: 3 });
+    await page.mouse.up();
+    // The view the page now has (camera to world), as a camera loop for `tessera render`.
+    await page.waitForFunction(() => document.getElementById('x').tessera.scene.camera.toWorld[12] !== 0.5, null, { timeout: 5000 });
+    const m = await page.evaluate(() => [...document.getElementById('x').tessera.scene.camera.toWorld]);
+    const eye = [m[12], m[13], m[14]], target = [m[12] - m[8], m[13] - m[9], m[14] - m[10]];
+    const loop = JSON.parse(fs.readFileSync(path.join(PAGES, 'node-camera-loop.json'), 'utf8'));
+    const centre = [0.05, 0.55, -0.15];  // roughly the scene's middle: an orbit keeps the distance to the examine point
+    const dist = (p) => Math.hypot(p[0] - centre[0], p[1] - centre[1], p[2] - centre[2]);
+    assert.ok(Math.abs(dist(eye) - dist(loop.frames[0].eye)) < 0.5, `orbit, not a jump: eye ${eye.map((v) => v.toFixed(2))}`);
+    fs.writeFileSync(path.join(tmp, 'orbit.json'), JSON.stringify({ fovY_deg: loop.fovY_deg, frames: [{ eye, target, up: [0, 1, 0] }] }));
+    renderReference(BIN, { scene: path.join(PAGES, 'node-scene.gltf'), loop: path.join(tmp, 'orbit.json'), frame: 0, width: W, height: H,
+      out: path.join(tmp, 'ref3.png') });
+    refs[3] = fs.readFileSync(path.join(tmp, 'ref3.png')).toString('base64');
+    const orbited = await untilMatches(page, 3, MATCH_DB.jpeg, { after: n });
+    const before = psnr(orbited.image, await reference(page, 0));
+    assert.ok(before < orbited.psnr - 3, `the frame changed with the drag: ${before.toFixed(1)} dB against the start view, ${orbited.psnr.toFixed(1)} against the orbited one`);
+    console.log(`# drag: orbited view ${orbited.psnr.toFixed(1)} dB (start view ${before.toFixed(1)} dB)`);
+    await page.close();
+  });
+
+const mean = (img) => { let s = 0; for (let i = 0; i < img.length; i += 4) s += img[i] + img[i + 1] + img[i + 2]; return s / (img.length / 4 * 3); };
+async function untilImage(page, pred, { after = 0, timeout = 15000 } = {}, what = '') {
+  const t0 = Date.now();
+  while (Date.now() - t0 < timeout) {
+    if (await frameCount(page) > after) {
+      const b64 = await shown(page);
+      if (b64) { const img = Buffer.from(b64, 'base64'); if (pred(img)) return img; }
+    }
+    await new Promise((r) => setTimeout(r, 50));
+  }
+  const st = await pageState(page);
+  return assert.fail(`${what}: not within ${timeout} ms (${st.frames} frames, status "${st.status}")\n${page.logs.join('\n')}`);
+}
+
+test('ao-samples / max-depth on <xml3d> reach the node: AO darkens the ambient-lit floor, back off restores the frame, bad numbers warn',
+  { skip: !BIN && 'TESSERA_BIN not set (CTest passes the tessera binary)' }, async () => {
+    const page = await openNodePage(`display=jpeg&ambient=${encodeURIComponent('0.7 0.7 0.7')}`);
+    await page.waitForFunction(() => document.getElementById('x').complete, null, { timeout: 20000 });
+    await new Promise((r) => setTimeout(r, 300));  // frames requested while loading have come back
+    const plain = Buffer.from(await shown(page), 'base64');
+    let n = await frameCount(page);
+    assert.ok(mean(plain) > 40, `the floor is lit by the ambient term (mean ${mean(plain).toFixed(1)})`);
+
+    // AO on: the settings record makes the node trace occlusion rays; the floor around the boxes darkens.
+    await page.evaluate(() => document.getElementById('x').setAttribute('ao-samples', '16'));
+    const darker = (img) => { let d = 0; for (let i = 0; i < img.length; i += 4) if (plain[i] + plain[i + 1] + plain[i + 2] - img[i] - img[i + 1] - img[i + 2] > 45) d++; return d; };
+    const ao = await untilImage(page, (img) => darker(img) > W * H * 0.03, { after: n }, 'a frame with ambient occlusion');
+    assert.ok(mean(ao) < mean(plain) - 1, `AO only darkens: mean ${mean(plain).toFixed(1)} -> ${mean(ao).toFixed(1)}`);
+    console.log(`# AO: ${darker(ao)} of ${W * H} pixels darker, mean ${mean(plain).toFixed(1)} -> ${mean(ao).toFixed(1)}`);
+
+    // AO off again (attribute removed: the default, 0): the first picture comes back.
+    n = await frameCount(page);
+    await page.evaluate(() => document.getElementById('x').removeAttribute('ao-samples'));
+    await untilImage(page, (img) => psnr(img, plain) >= 40, { after: n }, 'the AO-free frame again');
+
+    // A depth change is a settings record too, accepted by the node (a new frame, no error).
+    n = await frameCount(page);
+    await page.evaluate(() => document.getElementById('x').setAttribute('max-depth', '2'));
+    await page.waitForFunction((k) => window.__frames.length > k, n, { timeout: 10000 });
+
+    // Bad numbers: a clear console warning and status line; the default is used (no AO, no error from the node).
+    n = await frameCount(page);
+    await page.evaluate(() => { const x = document.getElementById('x'); x.setAttribute('ao-samples', 'lots'); x.setAttribute('max-depth', '-3'); });
+    await page.waitForFunction(() => /ao-samples="lots"/.test(document.querySelector('.tessera-status').textContent), null, { timeout: 5000 });
+    const warnings = page.logs.filter((l) => l.startsWith('warning: XML3D: <xml3d'));
+    assert.ok(warnings.some((w) => /ao-samples="lots">: not a whole number in 0\.\.256 .*using 0/.test(w)), warnings.join('\n'));
+    assert.ok(warnings.some((w) => /max-depth="-3">: not a whole number in 1\.\.64 .*using 4/.test(w)), warnings.join('\n'));
+    await page.waitForFunction((k) => window.__frames.length > k, n, { timeout: 10000 });  // depth 2 -> default 4
+    assert.ok(psnr(Buffer.from(await shown(page), 'base64'), plain) >= 40, 'default settings: no AO');
+    const st = await pageState(page);
+    assert.equal(st.connection, 'ready');
+    assert.ok(!/server:/.test(st.status), `no server errors: ${st.status}`);
+    await page.close();
+  });

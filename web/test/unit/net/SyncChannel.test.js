@@ -1,0 +1,122 @@
+import { test } from 'node:test';
+import assert from 'node:assert/strict';
+import { page } from '../dom.js';
+import { readRenderSettings } from '../../../src/net/RenderSettings.js';
+import { SyncChannel } from '../../../src/net/SyncChannel.js';
+import { MarkupReader } from '../../../src/reader/MarkupReader.js';
+import { encodeServer, decodeClient } from '../../../src/net/Protocol.js';
+
+const read = (attrs) => readRenderSettings(page(`<xml3d ${attrs}></xml3d>`).querySelector('xml3d'));
+
+test('ao-samples and max-depth are read from <xml3d>, with the node\'s defaults when absent', () => {
+  assert.deepEqual(read(''), { settings: { aoSamples: 0, maxDepth: 4 }, problems: [] });
+  assert.deepEqual(read('ao-samples="8" max-depth="6"'), { settings: { aoSamples: 8, maxDepth: 6 }, problems: [] });
+  assert.deepEqual(read('ao-samples=" 256 " max-depth="1"').settings, { aoSamples: 256, maxDepth: 1 });
+  assert.deepEqual(read('ao-samples="0" max-depth="64"').settings, { aoSamples: 0, maxDepth: 64 });
+});
+
+test('bad numbers give a clear problem each and the default is used', () => {
+  for (const [attrs, settings, pattern] of [
+    ['ao-samples="lots"', { aoSamples: 0, maxDepth: 4 }, /<xml3d ao-samples="lots">: not a whole number in 0\.\.256 .*using 0/],
+    ['ao-samples="-1"', { aoSamples: 0, maxDepth: 4 }, /ao-samples="-1"/],
+    ['ao-samples="257"', { aoSamples: 0, maxDepth: 4 }, /ao-samples="257"/],
+    ['ao-samples="4.5"', { aoSamples: 0, maxDepth: 4 }, /ao-samples="4\.5"/],
+    ['ao-samples=""', { aoSamples: 0, maxDepth: 4 }, /ao-samples=""/],
+    ['max-depth="0"', { aoSamples: 0, maxDepth: 4 }, /<xml3d max-depth="0">: not a whole number in 1\.\.64 .*using 4/],
+    ['max-depth="65" ao-samples="2"', { aoSamples: 2, maxDepth: 4 }, /max-depth="65"/],
+    ['max-depth="1e2"', { aoSamples: 0, maxDepth: 4 }, /max-depth="1e2"/],
+  ]) {
+    const r = read(attrs);
+    assert.deepEqual(r.settings, settings, attrs);
+    assert.equal(r.problems.length, 1, attrs);
+    assert.match(r.problems[0], pattern);
+  }
+  assert.equal(read('ao-samples="x" max-depth="y"').problems.length, 2);
+});
+
+// A WebSocket stand-in: records what the channel sends, lets the test answer.
+class FakeSocket {
+  static last = null;
+  constructor(url) { this.url = url; this.readyState = 1; this.bufferedAmount = 0; this.sent = []; FakeSocket.last = this; queueMicrotask(() => this.onopen()); }
+  send(bytes) { this.sent.push(decodeClient(bytes)); }
+  close() { this.readyState = 3; }
+  reply(records) { this.onmessage({ data: encodeServer(records).buffer }); }
+}
+
+const until = async (pred) => { for (let i = 0; i < 200 && !pred(); i++) await new Promise((r) => setTimeout(r, 5)); assert.ok(pred()); };
+
+test('the channel sends the settings after the handshake, and again (with a render request) when they change', async () => {
+  const saved = globalThis.WebSocket;
+  globalThis.WebSocket = FakeSocket;
+  let ch;
+  try {
+    ch = new SyncChannel({ url: 'ws://x/ws', rate: 100,
+      handshake: { renderer: 'raytracer', display: 'jpeg', jpegQuality: 85, maxNodes: 0, width: 8, height: 8 },
+      settings: { aoSamples: 8, maxDepth: 5 } });
+    const doc = page('<xml3d><mesh><float3 name="position">0 0 -2 1 0 -2 0 1 -2</float3></mesh></xml3d>');
+    ch.setScene(new MarkupReader().read(doc.querySelector('xml3d')), { width: 8, height: 8 });
+    ch.connect();
+    await until(() => FakeSocket.last && FakeSocket.last.sent.length === 1);
+    const ws = FakeSocket.last;
+    assert.deepEqual(ws.sent[0].map((r) => r.type), ['handshake']);
+    ws.reply([{ type: 'handshake_reply', renderer: 'raytracer', display: 'jpeg', jpegQuality: 85, nodes: 1, width: 8, height: 8,
+      maxMessageBytes: 1 << 20, maxBufferBytes: 1 << 28, serverVersion: 'test' }]);
+    const all = () => ws.sent.flat();
+    await until(() => all().some((r) => r.type === 'render'));
+    const first = all();
+    const settings = first.filter((r) => r.type === 'settings');
+    assert.deepEqual(settings, [{ type: 'settings', aoSamples: 8, maxDepth: 5 }]);
+    assert.ok(first.indexOf(settings[0]) < first.findIndex((r) => r.type === 'render'), 'settings before the render request');
+
+    // The same settings again: nothing is sent.
+    const n = all().length;
+    ch.setSettings({ aoSamples: 8, maxDepth: 5 });
+    await new Promise((r) => setTimeout(r, 50));
+    assert.equal(all().length, n);
+    // New settings: a settings record, then a render request (answer the outstanding frame first).
+    ws.reply([{ type: 'frame', frame: 1, width: 8, height: 8, encoding: 'jpeg', timings: {}, payload: new Uint8Array(0) }]);
+    ch.setSettings({ aoSamples: 0, maxDepth: 2 });
+    await until(() => all().slice(n).some((r) => r.type === 'render'));
+    assert.deepEqual(all().slice(n).map((r) => r.type), ['settings', 'render']);
+    assert.deepEqual(all()[n], { type: 'settings', aoSamples: 0, maxDepth: 2 });
+  } finally {
+    if (ch) ch.close();
+    globalThis.WebSocket = saved;
+  }
+});
+
+test('an upload spread over several run-loop iterations by the send-buffer limit ends with a render request', async () => {
+  const saved = globalThis.WebSocket;
+  globalThis.WebSocket = FakeSocket;
+  let ch;
+  try {
+    // highWater 1 byte: each iteration sends one message, then waits for the buffer to drain.
+    ch = new SyncChannel({ url: 'ws://x/ws', rate: 200, highWater: 1, messageBytes: 400,
+      handshake: { renderer: 'raytracer', display: 'jpeg', jpegQuality: 85, maxNodes: 0, width: 8, height: 8 } });
+    const meshes = Array.from({ length: 20 }, (_, i) => `<mesh><float3 name="position">${i} 0 -2 1 0 -2 0 1 -2</float3></mesh>`).join('');
+    ch.setScene(new MarkupReader().read(page(`<xml3d>${meshes}</xml3d>`).querySelector('xml3d')), { width: 8, height: 8 });
+    ch.connect();
+    await until(() => FakeSocket.last && FakeSocket.last.sent.length === 1);
+    const ws = FakeSocket.last;
+    const send = ws.send.bind(ws);
+    ws.send = (bytes) => { send(bytes); ws.bufferedAmount = bytes.length; setTimeout(() => { ws.bufferedAmount = 0; }, 20); };
+    ws.reply([{ type: 'handshake_reply', renderer: 'raytracer', display: 'jpeg', jpegQuality: 85, nodes: 1, width: 8, height: 8,
+      maxMessageBytes: 1 << 20, maxBufferBytes: 1 << 28, serverVersion: 'test' }]);
+    const isScene = (m) => m.some((r) => ['buffer', 'mesh', 'material', 'light'].includes(r.type));
+    await until(() => ws.sent.filter(isScene).length >= 3 && !ch.queue.length);
+    await new Promise((r) => setTimeout(r, 100));
+    // Frames come back (so render requests are not held back by the outstanding limit).
+    let answered = 0;
+    const answer = () => { for (const r of ws.sent.flat().filter((x) => x.type === 'render' && x.frame > answered)) {
+      answered = r.frame; ws.reply([{ type: 'frame', frame: r.frame, width: 8, height: 8, encoding: 'jpeg', timings: {}, payload: new Uint8Array(0) }]); } };
+    answer();
+    await new Promise((r) => setTimeout(r, 100));
+    answer();
+    const last = ws.sent.map(isScene).lastIndexOf(true);
+    assert.ok(ws.sent.slice(last).flat().some((r) => r.type === 'render'), `a render request after the last upload message (${ws.sent.length} messages)`);
+    assert.ok(ws.sent.filter(isScene).length >= 3, 'the upload took several messages');
+  } finally {
+    if (ch) ch.close();
+    globalThis.WebSocket = saved;
+  }
+});

@@ -1,0 +1,176 @@
+// Figures of the web client against a real node, as JSON lines (then a summary line with the
+// conditions; --markdown also prints the tables of docs/results/web.md):
+//   node web/tools/web-figures.js --tessera build/app/tessera [--repeat 3] [--steps 15] [--markdown]
+// 1. page load -> first server frame, and -> `load` (every resource uploaded, a frame drawn),
+//    for each shared scene page (/demo/pavilion.html, kitchen.html, living-room.html);
+// 2. bytes uploaded over the WebSocket with and without deflate (CompressionStream removed);
+// 3. input-to-frame latency: a synthesised mouse drag step (examine camera) -> the first frame
+//    whose render request followed the camera record that the step produced.
+// Uses playwright-core with /usr/bin/chromium (headless, software GL) and a fresh `tessera serve`.
+import fs from 'node:fs';
+import os from 'node:os';
+import path from 'node:path';
+import { execFileSync } from 'node:child_process';
+import { chromium } from 'playwright-core';
+import { startNode } from './tessera-node.js';
+import { decodeClient } from '../src/net/Protocol.js';
+
+const argv = process.argv.slice(2);
+const opt = (name, def) => { const i = argv.indexOf(name); return i >= 0 ? argv[i + 1] : def; };
+const BIN = opt('--tessera');
+const REPEAT = Number(opt('--repeat', 3)), STEPS = Number(opt('--steps', 15)), THREADS = Number(opt('--threads', 2));
+const CHROMIUM = process.env.CHROMIUM || '/usr/bin/chromium';
+const PAGES = (opt('--pages', 'pavilion,kitchen,living-room')).split(',');
+const LATENCY_PAGES = (opt('--latency-pages', 'basic,pavilion')).split(',');
+const MARKDOWN = argv.includes('--markdown');
+if (!BIN || !fs.existsSync(BIN)) { console.error('usage: node web/tools/web-figures.js --tessera PATH/TO/tessera [--repeat N] [--steps N] [--markdown]'); process.exit(2); }
+if (!fs.existsSync(CHROMIUM)) { console.error(`${CHROMIUM} not found`); process.exit(2); }
+
+const emit = (o) => console.log(JSON.stringify(o));
+const median = (a) => { const s = [...a].sort((x, y) => x - y); return s.length ? (s.length % 2 ? s[s.length >> 1] : (s[s.length / 2 - 1] + s[s.length / 2]) / 2) : NaN; };
+const pct = (a, p) => { const s = [...a].sort((x, y) => x - y); return s.length ? s[Math.min(s.length - 1, Math.floor(p * s.length))] : NaN; };
+
+// In the page before anything else: frame, load and input times, and every protocol message sent.
+function instrument(noDeflate) {
+  window.__drawn = []; window.__sends = []; window.__inputs = []; window.__load = null;
+  if (noDeflate) { delete window.CompressionStream; }
+  document.addEventListener('framedrawn', (e) => window.__drawn.push({ t: performance.now(), frame: e.detail.frame,
+    rendering: e.detail.timings && e.detail.timings.rendering, pipeline: e.detail.timings && e.detail.timings.pipeline }), true);
+  document.addEventListener('load', (e) => { if (e.target.localName === 'xml3d' && window.__load === null) window.__load = performance.now(); }, true);
+  document.addEventListener('mousemove', () => window.__inputs.push(performance.now()), true);
+  const send = WebSocket.prototype.send;
+  WebSocket.prototype.send = function (data) {
+    const b = data instanceof ArrayBuffer ? new Uint8Array(data) : new Uint8Array(data.buffer, data.byteOffset, data.byteLength);
+    const dv = new DataView(b.buffer, b.byteOffset, b.byteLength);
+    let camera = false, render = null, scene = false, o = 8;
+    for (let i = 0, n = dv.getUint32(4, true); i < n && o + 8 <= b.length; i++) {
+      if (b[o] === 0x04) camera = true;
+      if (b[o] >= 0x10 && b[o] <= 0x14) scene = true;
+      if (b[o] === 0x20) render = dv.getUint32(o + 8, true);
+      o += 8 + dv.getUint32(o + 4, true);
+    }
+    window.__sends.push({ t: performance.now(), camera, render, scene, bytes: b.length });
+    return send.call(this, data);
+  };
+}
+
+async function newContext() {
+  const dir = fs.mkdtempSync(path.join(os.tmpdir(), 'tessera-figures-'));
+  const context = await chromium.launchPersistentContext(dir, { executablePath: CHROMIUM, headless: true,
+    args: ['--no-sandbox', '--disable-gpu', '--disable-background-networking', '--disable-component-update', '--disable-sync',
+      '--no-first-run', '--use-angle=swiftshader', '--enable-unsafe-swiftshader'], viewport: { width: 1280, height: 800 } });
+  return { context, close: async () => { await context.close(); fs.rmSync(dir, { recursive: true, force: true }); } };
+}
+
+// Loads a demo page in server mode; resolves the timings and the upload byte breakdown.
+async function loadPage(node, name, { noDeflate = false, display = 'jpeg' } = {}) {
+  const { context, close } = await newContext();
+  const page = await context.newPage();
+  await page.addInitScript(instrument, noDeflate);
+  const up = { messages: 0, wire: 0, bufferRaw: 0, bufferWire: 0, buffersDeflated: 0, buffers: 0, texture: 0 };
+  let lastSend = Date.now();
+  page.on('websocket', (ws) => ws.on('framesent', (f) => {
+    const bytes = typeof f.payload === 'string' ? Buffer.from(f.payload) : f.payload;
+    up.messages++; up.wire += bytes.length; lastSend = Date.now();
+    for (const r of decodeClient(new Uint8Array(bytes.buffer, bytes.byteOffset, bytes.length))) {
+      if (r.type === 'buffer') { up.buffers++; up.bufferRaw += r.values * 4; up.bufferWire += r.payload.length; if (r.deflate) up.buffersDeflated++; }
+      if (r.type === 'texture') up.texture += r.bytes.length;
+    }
+  }));
+  await page.goto(`${node.base}/demo/${name}.html?server=${node.host}:${node.port}&display=${display}`);
+  await page.waitForFunction(() => window.__load !== null, null, { timeout: 180000, polling: 100 });
+  while (Date.now() - lastSend < 1500) await new Promise((r) => setTimeout(r, 250));  // upload finished
+  await page.waitForFunction(() => {  // the first frame requested after the last scene upload is on screen
+    const last = window.__sends.filter((s) => s.scene).pop();
+    const req = last && window.__sends.find((s) => s.t >= last.t && s.render !== null);
+    const d = req && window.__drawn.find((f) => f.frame >= req.render);
+    if (d) window.__complete = d.t;
+    return !!d;
+  }, null, { timeout: 180000, polling: 100 });
+  const t = await page.evaluate(() => ({ first: window.__drawn.length ? window.__drawn[0].t : null, load: window.__load, complete: window.__complete,
+    nav: performance.getEntriesByType('navigation')[0].domContentLoadedEventEnd, frames: window.__drawn.length }));
+  return { page, close, t, up };
+}
+
+async function latency(node, name, display) {
+  const { page, close } = await loadPage(node, name, { display });
+  await new Promise((r) => setTimeout(r, 1000));
+  const box = await page.evaluate(() => { const r = document.querySelector('.tessera-xml3d').getBoundingClientRect(); return [r.left + r.width / 2, r.top + r.height / 2]; });
+  await page.mouse.move(box[0], box[1]);
+  await page.mouse.down();
+  const out = [];
+  for (let i = 1; i <= STEPS; i++) {
+    const tIn = await page.evaluate(() => performance.now());
+    await page.mouse.move(box[0] + i * 6, box[1] + (i % 2 ? 3 : -3));
+    const r = await page.waitForFunction((t0) => {
+      const inp = window.__inputs.find((t) => t >= t0);
+      if (inp === undefined) return null;
+      const cam = window.__sends.find((s) => s.t >= inp && s.camera);
+      if (!cam) return null;
+      const req = window.__sends.find((s) => s.t >= cam.t && s.render !== null);
+      if (!req) return null;
+      const d = window.__drawn.find((f) => f.t >= req.t && f.frame >= req.render);
+      return d ? { input: inp, camera: cam.t, request: req.t, drawn: d.t, rendering: d.rendering, pipeline: d.pipeline } : null;
+    }, tIn, { timeout: 60000, polling: 'raf' }).catch(async (e) => {
+      const st = await page.evaluate((t0) => ({ t0, inputs: window.__inputs.slice(-3), sends: window.__sends.slice(-5), drawn: window.__drawn.slice(-3),
+        status: document.querySelector('.tessera-status').textContent, view: document.querySelector('view') && document.querySelector('view').outerHTML.slice(0, 200) }), tIn);
+      throw new Error(`${name} ${display} step ${i}: no frame for the input: ${JSON.stringify(st)}\n${e.message}`);
+    });
+    const v = await r.jsonValue();
+    out.push({ total: v.drawn - v.input, toSend: v.request - v.input, sendToFrame: v.drawn - v.request, rendering: v.rendering });
+    await new Promise((res) => setTimeout(res, 250));
+  }
+  await page.mouse.up();
+  const size = await page.evaluate(() => { const x = document.querySelector('xml3d'); return [x.tessera.width, x.tessera.height, x.getAttribute('ao-samples'), x.getAttribute('max-depth')]; });
+  await close();
+  return { out, size };
+}
+
+const node = await startNode(BIN, { threads: THREADS });
+const rows = { load: {}, upload: {}, latency: {} };
+try {
+  for (const name of PAGES) {
+    for (const noDeflate of [false, true]) {
+      for (let k = 0; k < (noDeflate ? 1 : REPEAT); k++) {
+        const { close, t, up } = await loadPage(node, name, { noDeflate });
+        await close();
+        const rec = { page: `/demo/${name}.html`, deflate: !noDeflate, run: k, first_frame_ms: +(t.first ?? NaN).toFixed(0),
+          load_ms: +t.load.toFixed(0), complete_frame_ms: +t.complete.toFixed(0), dom_ready_ms: +t.nav.toFixed(0), frames_until_load: t.frames, upload: up };
+        emit(rec);
+        (rows.upload[name] ||= {})[noDeflate ? 'raw' : 'deflate'] = up;
+        if (!noDeflate) (rows.load[name] ||= []).push(rec);
+      }
+    }
+  }
+  for (const name of LATENCY_PAGES) {
+    for (const display of ['jpeg', 's3tc']) {
+      const { out, size } = await latency(node, name, display);
+      for (const [i, o] of out.entries()) emit({ latency: `/demo/${name}.html`, display, step: i, ...Object.fromEntries(Object.entries(o).map(([k, v]) => [k, +(+v).toFixed(1)])) });
+      rows.latency[`${name} ${display}`] = { out, size };
+    }
+  }
+} finally {
+  await node.close();
+}
+const chromiumVersion = execFileSync(CHROMIUM, ['--version']).toString().trim();
+const summary = { summary: true, cpu: os.cpus()[0].model, cores: os.cpus().length, loadavg: os.loadavg().map((v) => +v.toFixed(2)),
+  node_threads: THREADS, chromium: chromiumVersion, nodejs: process.version, repeat: REPEAT, steps: STEPS, tessera: node.info };
+emit(summary);
+
+if (MARKDOWN) {
+  const ms = (a) => `${median(a).toFixed(0)} (${Math.min(...a).toFixed(0)}–${Math.max(...a).toFixed(0)})`;
+  console.log('\n| page | DOM ready, ms | first server frame, ms | `load` event, ms | first frame of the whole scene, ms |\n| --- | --- | --- | --- | --- |');
+  for (const [name, recs] of Object.entries(rows.load)) {
+    console.log(`| /demo/${name}.html | ${ms(recs.map((r) => r.dom_ready_ms))} | ${ms(recs.map((r) => r.first_frame_ms))} | ${ms(recs.map((r) => r.load_ms))} | ${ms(recs.map((r) => r.complete_frame_ms))} |`);
+  }
+  const mb = (b) => (b / 1048576).toFixed(2);
+  console.log('\n| page | buffers raw, MB | WebSocket bytes with deflate, MB | without deflate, MB | saved | textures, MB | messages |\n| --- | --- | --- | --- | --- | --- | --- |');
+  for (const [name, u] of Object.entries(rows.upload)) {
+    console.log(`| /demo/${name}.html | ${mb(u.raw.bufferRaw)} | ${mb(u.deflate.wire)} | ${mb(u.raw.wire)} | ${(100 * (1 - u.deflate.wire / u.raw.wire)).toFixed(1)} % | ${mb(u.deflate.texture)} | ${u.deflate.messages} / ${u.raw.messages} |`);
+  }
+  console.log('\n| page, display | size, ao-samples | input → frame, ms: median (p10–p90) | input → render request sent | request → frame shown | node rendering_ms |\n| --- | --- | --- | --- | --- | --- |');
+  for (const [key, { out, size }] of Object.entries(rows.latency)) {
+    const col = (k) => `${median(out.map((o) => o[k])).toFixed(1)} (${pct(out.map((o) => o[k]), 0.1).toFixed(1)}–${pct(out.map((o) => o[k]), 0.9).toFixed(1)})`;
+    console.log(`| ${key} | ${size[0]}x${size[1]}, ${size[2] ?? 0} | ${col('total')} | ${col('toSend')} | ${col('sendToFrame')} | ${median(out.map((o) => o.rendering)).toFixed(1)} |`);
+  }
+}
