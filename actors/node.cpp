@@ -15,16 +15,9 @@ std::vector<uint8_t> scene_snapshot_bytes(const SceneSnapshot& s) {
 
 caf::error scene_snapshot_from_bytes(const std::vector<uint8_t>& bytes, SceneSnapshot& out) {
   auto scene = std::make_shared<Scene>();
-  if (!bytes.empty()) {
-    protocol::Limits limits;  // the master validated the scene against its own limits already
-    limits.max_message_bytes = uint32_t(std::min<size_t>(bytes.size(), 0xffffffffu));
-    auto res = protocol::decode_client(bytes.data(), bytes.size(), limits);
-    if (!res) return caf::make_error(caf::sec::invalid_argument, "scene snapshot: " + res.error().message);
-    for (auto& r : res.value()) {
-      auto st = protocol::apply(*scene, std::move(r), limits);
-      if (!st) return caf::make_error(caf::sec::invalid_argument, "scene snapshot: " + st.error().message);
-    }
-  }
+  // The master validated the scene against its own limits already.
+  std::string err = apply_records(*scene, bytes, protocol::Limits{});
+  if (!err.empty()) return caf::make_error(caf::sec::invalid_argument, "scene snapshot: " + err);
   out.scene = std::move(scene);
   return caf::none;
 }

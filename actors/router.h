@@ -33,6 +33,19 @@ std::string check_tile(const TileResult& t, uint32_t frame, const Rect& expected
 // The flattened list of a sub-tree and the JSON of a node list, for log lines.
 std::string nodes_json(const std::vector<NodeInfo>& nodes);
 
+// The task of one node in a batch.
+inline RenderTask task_of(const RenderBatch& b, const Rect& pixels) {
+  RenderTask t;
+  t.frame = b.frame;
+  t.width = b.width;
+  t.height = b.height;
+  t.pixels = pixels;
+  t.ao_samples = b.ao_samples;
+  t.max_depth = b.max_depth;
+  t.renderer = b.renderer;
+  return t;
+}
+
 struct RouterChild {
   std::string name;            // the child's cluster address as this node knows it
   worker_actor worker;
@@ -134,15 +147,7 @@ class Router {
       if (b.tasks[my_at].empty()) {
         join->finish_part(my_part);
       } else {
-        RenderTask t;
-        t.frame = b.frame;
-        t.width = b.width;
-        t.height = b.height;
-        t.pixels = b.tasks[my_at];
-        t.ao_samples = b.ao_samples;
-        t.max_depth = b.max_depth;
-        t.renderer = b.renderer;
-        local(t, [join, my_part, my_at](TileResult&& r) {
+        local(task_of(b, b.tasks[my_at]), [join, my_part, my_at](TileResult&& r) {
           if (join->part_done[my_part]) return;
           if (r.pixels.empty() && r.error.empty()) r.pixels = join->reply.tiles[my_at].pixels;
           join->reply.tiles[my_at] = std::move(r);

@@ -39,6 +39,7 @@ struct session_state {
   node_actor node;
   Router router;
   std::vector<NodeInfo> nodes;  // committed flattened list
+  RenderBatch batch;            // the frame in flight: its settings and one task per node
   std::vector<size_t> used;     // the entries of `nodes` this client renders on
   bool committed = false;
   double last_rendering_ms = 0;
@@ -134,7 +135,7 @@ void maybe_preload(self_ptr self) {
 }
 
 void render_batch(self_ptr self);
-void recover(self_ptr self, BatchReply&& r, std::vector<Rect> tasks);
+void recover(self_ptr self, BatchReply&& r);
 void finish_frame(self_ptr self, std::vector<TileResult>&& tiles, std::vector<double>&& perf);
 
 // The committed node list changed: pick the nodes this client may use (the strongest first,
@@ -209,7 +210,8 @@ void render_local(self_ptr self, const RenderTask& t, std::function<void(TileRes
 
 void render_batch(self_ptr self) {
   auto& st = self->state;
-  RenderBatch batch;
+  RenderBatch& batch = st.batch;  // this frame's tasks, one per node of st.nodes
+  batch = RenderBatch{};
   batch.frame = st.seq;
   batch.width = st.meta.width;
   batch.height = st.meta.height;
@@ -223,14 +225,11 @@ void render_batch(self_ptr self) {
   if (st.used.empty()) {
     // No rendering node at all (a dedicated master whose children are all gone): render the
     // whole frame here rather than show nothing.
-    TileResult lost;
-    lost.frame = seq;
-    lost.pixels = {0, 0, st.meta.width, st.meta.height};
-    lost.error = "no rendering node";
+    batch.tasks = {Rect{0, 0, st.meta.width, st.meta.height}};
     BatchReply r;
-    r.tiles.push_back(lost);
-    const Rect whole = r.tiles[0].pixels;
-    recover(self, std::move(r), {whole});
+    r.tiles.resize(1);
+    r.tiles[0].error = "no rendering node";
+    recover(self, std::move(r));
     return;
   }
   TaskRequest req{st.seq, st.meta.width, st.meta.height, st.layout.w, st.layout.h};
@@ -238,23 +237,22 @@ void render_batch(self_ptr self) {
     auto& st = self->state;
     if (!st.in_flight || st.seq != seq) return;
     st.meta.tiling_ms = tl.tiling_ms;
-    RenderBatch b = batch;
-    for (size_t k = 0; k < tl.tasks.size() && k < st.used.size(); ++k) b.tasks[st.used[k]] = tl.tasks[k];
+    for (size_t k = 0; k < tl.tasks.size() && k < st.used.size(); ++k) st.batch.tasks[st.used[k]] = tl.tasks[k];
     st.meta.nodes = uint32_t(st.used.size());
     auto local = [self](const RenderTask& t, std::function<void(TileResult&&)> cb) { render_local(self, t, cb); };
-    std::vector<Rect> tasks = b.tasks;
-    st.router.dispatch(self, b, local, [self, seq, tasks](BatchReply&& r) {
+    st.router.dispatch(self, st.batch, local, [self, seq](BatchReply&& r) {
       auto& st = self->state;
       if (!st.in_flight || st.seq != seq) return;
-      recover(self, std::move(r), tasks);
+      recover(self, std::move(r));
     });
   });
 }
 
 // Tasks whose node failed (down, too late, impossible tiles) are rendered here, so the frame
 // still completes; the node list is committed again before the next frame.
-void recover(self_ptr self, BatchReply&& r, std::vector<Rect> tasks) {
+void recover(self_ptr self, BatchReply&& r) {
   auto& st = self->state;
+  const std::vector<Rect>& tasks = st.batch.tasks;
   if (r.changed) st.router.changed = true;
   std::vector<size_t> lost;
   for (size_t i = 0; i < r.tiles.size(); ++i)
@@ -277,16 +275,8 @@ void recover(self_ptr self, BatchReply&& r, std::vector<Rect> tasks) {
   auto left = std::make_shared<size_t>(lost.size());
   const uint32_t seq = st.seq;
   for (size_t i : lost) {
-    RenderTask t;
-    t.frame = seq;
-    t.width = st.meta.width;
-    t.height = st.meta.height;
-    t.pixels = tasks[i];
-    t.ao_samples = int32_t(st.render.ao_samples);
-    t.max_depth = int32_t(st.render.max_depth);
-    t.renderer = uint8_t(st.hs.renderer);
     (*perfs)[i] = st.settings->coefficient.single_core_perf;
-    render_local(self, t, [self, seq, i, tiles, perfs, left](TileResult&& res) {
+    render_local(self, task_of(st.batch, tasks[i]), [self, seq, i, tiles, perfs, left](TileResult&& res) {
       (*tiles)[i] = std::move(res);
       if (--*left > 0) return;
       auto& st = self->state;

@@ -122,9 +122,7 @@ int run(const std::vector<std::string>& argv) {
   const Rect space = packet_space(scene.width(), scene.height(), pl);
   std::vector<std::string> warnings;
   for (long f = 0; f < frames; ++f) {
-    size_t k = size_t(f * step) % setup.loop.frames.size();
-    setup.set_frame(k);
-    settings.frame = uint32_t(k);
+    size_t k = setup.replay(f, step, settings);
     warnings.clear();
     rt.sync(scene, warnings);
 

@@ -125,9 +125,7 @@ int run(const std::vector<std::string>& argv) {
   std::vector<double> kernel, rendering, rate, cmp_ms, cmp_ratio, b_primary, b_shadow, b_ao, b_secondary;
   RayCounts total_rays;
   for (long f = 0; f < frames; ++f) {
-    size_t k = size_t(f * step) % setup.loop.frames.size();
-    setup.set_frame(k);
-    settings.frame = uint32_t(k);
+    size_t k = setup.replay(f, step, settings);
     sync();
     // With a same-run comparison, odd frames render the comparison first so that neither
     // side always pays for the first touch after a camera change.

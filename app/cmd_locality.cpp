@@ -87,9 +87,7 @@ int run(const std::vector<std::string>& argv) {
   std::vector<std::vector<double>> tiles_r(thread_list.size() * node_list.size()), warm_r(tiles_r.size()),
       wall_r(tiles_r.size()), cpu_r(tiles_r.size()), per_cpu_r(tiles_r.size()), full_warm_r(tiles_r.size());
   for (long f = 0; f < frames; ++f) {
-    size_t k = size_t(f * step) % setup.loop.frames.size();
-    setup.set_frame(k);
-    settings.frame = uint32_t(k);
+    size_t k = setup.replay(f, step, settings);
     warnings.clear();
     rt.sync(scene, warnings);
     for (size_t ti = 0; ti < thread_list.size(); ++ti) {

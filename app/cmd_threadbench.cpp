@@ -57,9 +57,7 @@ int run(const std::vector<std::string>& argv) {
   std::vector<double> ratio_ws, ratio_q, ratio_kernel_ws, ratio_kernel_q, tile_balance;
   bool all_identical = true;
   for (long f = 0; f < frames; ++f) {
-    size_t k = size_t(f * step) % setup.loop.frames.size();
-    setup.set_frame(k);
-    settings.frame = uint32_t(k);
+    size_t k = setup.replay(f, step, settings);
     warnings.clear();
     rt.sync(scene, warnings);
     const std::vector<Rect> tiles = tile(prev.get(), space, equal);

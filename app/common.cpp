@@ -58,6 +58,13 @@ void SceneSetup::set_frame(size_t k) {
   if (!loop.frames.empty()) loaded.scene.set_camera(loop.camera(k));
 }
 
+size_t SceneSetup::replay(long f, long step, RenderSettings& settings) {
+  const size_t k = size_t(f * step) % loop.frames.size();
+  set_frame(k);
+  settings.frame = uint32_t(k);
+  return k;
+}
+
 SceneSetup load_scene(Args& args, int default_w, int default_h) {
   SceneSetup s;
   s.scene_path = args.required("--scene");

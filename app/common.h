@@ -32,6 +32,9 @@ struct SceneSetup {
   CameraLoop loop;     // empty frames when no loop was given
   std::string scene_path;
   void set_frame(size_t k);  // camera of loop frame k (no-op without a loop)
+  // Replay step f of a loop walked every `step` frames (wrapping): the camera of that loop
+  // frame, and the AO pattern seeded with it. Returns the loop frame. Needs a loop.
+  size_t replay(long f, long step, RenderSettings& settings);
 };
 SceneSetup load_scene(Args& args, int default_w = 1280, int default_h = 720);
 

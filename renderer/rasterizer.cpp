@@ -581,14 +581,8 @@ void Rasterizer::Impl::sync(const Scene& scene, std::vector<std::string>& warnin
   // Geometry per buffer set; instances per mesh.
   for (auto& [k, g] : geoms) g.used = false;
   std::map<Id, GeomKey> mesh_key;
-  for (auto& [id, e] : scene.meshes()) {
-    const Mesh& m = e.value;
-    if (!m.visible) continue;
-    std::string err = scene.validate_mesh(m);
-    if (!err.empty()) {
-      warnings.push_back("mesh " + std::to_string(id) + " not rendered: " + err);
-      continue;
-    }
+  for (auto [id, mesh] : scene.renderable_meshes(warnings)) {
+    const Mesh& m = *mesh;
     GeomKey key{m.positions, m.normals, m.texcoords, m.indices};
     mesh_key[id] = key;
     uint64_t v = 0;

@@ -429,14 +429,8 @@ void RayTracer::Impl::sync(const Scene& scene, std::vector<std::string>& warning
   for (auto& [k, g] : geoms) g.used = false;
   std::map<GeomKey, bool> needs_filter, see_through;
   std::map<Id, GeomKey> mesh_key;
-  for (auto& [id, e] : scene.meshes()) {
-    const Mesh& m = e.value;
-    if (!m.visible) continue;
-    std::string err = scene.validate_mesh(m);
-    if (!err.empty()) {
-      warnings.push_back("mesh " + std::to_string(id) + " not rendered: " + err);
-      continue;
-    }
+  for (auto [id, mesh] : scene.renderable_meshes(warnings)) {
+    const Mesh& m = *mesh;
     GeomKey key{m.positions, m.normals, m.texcoords, m.indices};
     mesh_key[id] = key;
     auto mit = material_index.find(m.material);

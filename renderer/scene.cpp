@@ -11,6 +11,17 @@ bool Texture::has_alpha() const {
   return false;
 }
 
+std::vector<std::pair<Id, const Mesh*>> Scene::renderable_meshes(std::vector<std::string>& warnings) const {
+  std::vector<std::pair<Id, const Mesh*>> out;
+  for (auto& [id, e] : meshes()) {
+    if (!e.value.visible) continue;
+    std::string err = validate_mesh(e.value);
+    if (err.empty()) out.emplace_back(id, &e.value);
+    else warnings.push_back("mesh " + std::to_string(id) + " not rendered: " + err);
+  }
+  return out;
+}
+
 std::string Scene::validate_mesh(const Mesh& m) const {
   const Buffer* pos = buffer(m.positions);
   if (!pos) return "mesh references missing position buffer " + std::to_string(m.positions);

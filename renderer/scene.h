@@ -151,6 +151,9 @@ class Scene {
   // empty string when the mesh can be rendered, else what is wrong. A missing material is
   // not an error (the default material is used until it arrives).
   std::string validate_mesh(const Mesh& m) const;
+  // The meshes a renderer can draw now: visible ones that pass validate_mesh, by id. Why each
+  // other visible mesh is skipped is appended to warnings.
+  std::vector<std::pair<Id, const Mesh*>> renderable_meshes(std::vector<std::string>& warnings) const;
 
   // Triangles over visible meshes, instances counted each time. A mesh counts its index
   // buffer's triangles when it names one (0 while that buffer is missing), else its
