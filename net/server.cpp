@@ -44,15 +44,17 @@ struct MjpegStream : std::enable_shared_from_this<MjpegStream> {
     pending = std::move(jpeg);
     if (!writing) write_next();
   }
+  // Each part ends with the next boundary: a browser shows a part of a multipart stream only
+  // once its end is known, so the newest frame must not wait for the one after it.
   void write_next() {
     if (dead || !pending) return;
     current = std::move(pending);
     pending.reset();
     writing = true;
-    part_header = std::string("--") + kBoundary + "\r\nContent-Type: image/jpeg\r\nContent-Length: " +
-                  std::to_string(current->size()) + "\r\n\r\n";
-    static const char crlf[] = "\r\n";
-    std::vector<asio::const_buffer> bufs{asio::buffer(part_header), asio::buffer(*current), asio::buffer(crlf, 2)};
+    part_header = std::string("Content-Type: image/jpeg\r\nContent-Length: ") + std::to_string(current->size()) +
+                  "\r\n\r\n";
+    static const std::string part_end = std::string("\r\n--") + kBoundary + "\r\n";
+    std::vector<asio::const_buffer> bufs{asio::buffer(part_header), asio::buffer(*current), asio::buffer(part_end)};
     auto self = shared_from_this();
     asio::async_write(con->get_raw_socket(), bufs, [self](const asio::error_code& ec, size_t) {
       self->writing = false;
@@ -62,7 +64,8 @@ struct MjpegStream : std::enable_shared_from_this<MjpegStream> {
   }
   void start() {
     part_header = std::string("HTTP/1.1 200 OK\r\nContent-Type: multipart/x-mixed-replace; boundary=") + kBoundary +
-                  "\r\nCache-Control: no-cache, no-store\r\nPragma: no-cache\r\nConnection: close\r\n\r\n";
+                  "\r\nCache-Control: no-cache, no-store\r\nPragma: no-cache\r\nConnection: close\r\n\r\n--" +
+                  kBoundary + "\r\n";
     writing = true;
     auto self = shared_from_this();
     asio::async_write(con->get_raw_socket(), asio::buffer(part_header), [self](const asio::error_code& ec, size_t) {
@@ -101,6 +104,7 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl> {
   std::map<connection_hdl, Conn, std::owner_less<connection_hdl>> conns;
   std::set<std::string> tokens;
   std::map<std::string, std::vector<std::shared_ptr<MjpegStream>>> mjpeg;
+  std::map<std::string, std::shared_ptr<const std::vector<uint8_t>>> last_mjpeg;  // a viewer that opens late starts with it
   std::set<connection_hdl, std::owner_less<connection_hdl>> pending_opens;  // validated, not yet opened
 
   Impl(caf::actor_system& s, std::shared_ptr<const NodeSettings> st, ServerOptions o)
@@ -113,6 +117,7 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl> {
   void on_message(connection_hdl h, WsServer::message_ptr msg);
   void on_http(connection_hdl h);
   void end_mjpeg(const std::string& token) {
+    last_mjpeg.erase(token);
     auto it = mjpeg.find(token);
     if (it == mjpeg.end()) return;
     for (auto& s : it->second) s->shutdown();
@@ -146,6 +151,8 @@ struct Sink : ClientSink {
   void send_mjpeg(std::shared_ptr<const std::vector<uint8_t>> jpeg) override {
     auto t = tok;
     post([t, jpeg](Server::Impl& i) {
+      if (!i.tokens.count(t)) return;  // the session's client has gone
+      i.last_mjpeg[t] = jpeg;
       auto it = i.mjpeg.find(t);
       if (it == i.mjpeg.end()) return;
       auto& v = it->second;
@@ -245,6 +252,7 @@ void Server::Impl::on_http(connection_hdl h) {
     s->con = con;
     mjpeg[token].push_back(s);
     s->start();
+    if (auto last = last_mjpeg.find(token); last != last_mjpeg.end()) s->push(last->second);
     return;
   }
   if (path == "/ws") {
@@ -335,6 +343,7 @@ void Server::stop() {
     for (auto& [t, v] : i.mjpeg)
       for (auto& s : v) s->shutdown();
     i.mjpeg.clear();
+    i.last_mjpeg.clear();
     done.set_value();
   });
   done.get_future().wait_for(std::chrono::seconds(2));
