@@ -41,6 +41,20 @@ std::string check_tile(const TileResult& t, uint32_t frame, const Rect& expected
   return {};
 }
 
+std::string check_nodes(const std::vector<NodeInfo>& nodes) {
+  if (nodes.size() > 65536) return std::to_string(nodes.size()) + " nodes";
+  for (const NodeInfo& n : nodes) {
+    bool printable = !n.name.empty() && n.name.size() <= 256;
+    for (unsigned char c : n.name) printable &= c >= 0x20 && c != '"' && c != '\\';
+    if (!printable) return "a node without a usable name";
+    if (n.logical_cores < 1 || n.logical_cores > 65536)
+      return "node " + n.name + " claims " + std::to_string(n.logical_cores) + " logical cores";
+    if (!std::isfinite(n.single_core_perf) || n.single_core_perf <= 0 || n.single_core_perf > 1000)
+      return "node " + n.name + " claims a single-core performance of " + std::to_string(n.single_core_perf);
+  }
+  return {};
+}
+
 std::string nodes_json(const std::vector<NodeInfo>& nodes) {
   std::string s = "[";
   for (size_t i = 0; i < nodes.size(); ++i) {

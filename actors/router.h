@@ -30,6 +30,10 @@ namespace tessera {
 std::string check_tile(const TileResult& t, uint32_t frame, const Rect& expected, PacketLayout layout, int32_t width,
                        int32_t height);
 
+// Why a sub-tree's node list cannot be used (empty string: it can): every node needs a name,
+// 1..65536 logical cores and a finite single-core performance in (0, 1000].
+std::string check_nodes(const std::vector<NodeInfo>& nodes);
+
 // The flattened list of a sub-tree and the JSON of a node list, for log lines.
 std::string nodes_json(const std::vector<NodeInfo>& nodes);
 
@@ -261,6 +265,11 @@ class Router {
       self->request(c.worker, std::chrono::milliseconds(timeout_ms), nodes_atom::value)
           .then(
               [=](std::vector<NodeInfo>& nodes) {
+                if (std::string bad = check_nodes(nodes); !bad.empty()) {
+                  child_failed(addr, "impossible node list: " + bad);
+                  finish();
+                  return;
+                }
                 for (auto& x : children)
                   if (x.worker.address() == addr) {
                     x.nodes = std::move(nodes);

@@ -8,7 +8,10 @@
 
 #include <memory>
 
+#include <cmath>
+
 #include "actors/node.h"
+#include "actors/router.h"
 #include "net/protocol.h"
 #include "net/scene_records.h"
 #include "renderer/sat.h"
@@ -23,7 +26,7 @@ namespace {
 constexpr int kSize = 16;
 
 // What a fake child does with its tasks.
-enum class Mode { liar, hang, straggler };
+enum class Mode { liar, hang, straggler, bad_info };
 
 struct FakeLog {
   std::vector<RenderBatch> batches;
@@ -62,7 +65,10 @@ worker_actor::behavior_type fake_worker(worker_actor::pointer self, Mode mode, s
         }
         return r;
       },
-      [=](nodes_atom) { return std::vector<NodeInfo>{NodeInfo{"fake", 1, 1.0}}; },
+      [=](nodes_atom) {
+        // bad_info: a node that claims an impossible coefficient (it would get all the work).
+        return std::vector<NodeInfo>{mode == Mode::bad_info ? NodeInfo{"fake", -3, 1e300} : NodeInfo{"fake", 1, 1.0}};
+      },
       [=](tick_atom) {},
   };
 }
@@ -236,4 +242,69 @@ CAF_TEST(the cost maps of a straggler shift its share away in the next frame) {
   CAF_CHECK_EQUAL(sink->all<ErrorReply>().size(), 0u);
 }
 
+CAF_TEST(a child that claims an impossible node list is dropped and the master renders alone) {
+  auto log = std::make_shared<FakeLog>();
+  auto last = std::make_shared<worker_actor>();
+  add_child("boast:1", caf::actor_cast<caf::actor>(sys.spawn(fake_node, Mode::bad_info, log, last)));
+  start();
+  auto replies = sink->all<HandshakeReply>();
+  CAF_REQUIRE_EQUAL(replies.size(), 1u);
+  CAF_CHECK_EQUAL(replies[0].nodes, 1u);
+  CAF_CHECK_EQUAL(logged("impossible node list: node fake claims -3 logical cores"), 1u);
+  request_frame(1);
+  sched.run();
+  CAF_CHECK_EQUAL(frames_sent(), std::vector<uint32_t>{1});
+  CAF_CHECK(log->batches.empty());
+}
+
 CAF_TEST_FIXTURE_SCOPE_END()
+
+// The checks a parent applies to what its children send.
+CAF_TEST(check_tile and check_nodes reject impossible tiles and node lists) {
+  const PacketLayout pl{2, 2};
+  const Rect task{4, 2, 10, 8};
+  TileResult ok;
+  ok.frame = 7;
+  ok.pixels = task;
+  ok.rgba.assign(size_t(task.area()) * 4, 0);
+  CostMap cm;
+  cm.packets = {2, 1, 5, 4};
+  cm.cost.assign(size_t(cm.packets.area()), 10);
+  Sat::from_cost_map(cm).serialize_into(ok.sat);
+  CAF_CHECK_EQUAL(check_tile(ok, 7, task, pl, kSize, kSize), "");
+  auto bad = [&](auto mutate) {
+    TileResult t = ok;
+    mutate(t);
+    return !check_tile(t, 7, task, pl, kSize, kSize).empty();
+  };
+  CAF_CHECK(bad([](TileResult& t) { t.frame = 6; }));
+  CAF_CHECK(bad([](TileResult& t) { t.pixels = {4, 2, 10, 9}; }));
+  CAF_CHECK(bad([](TileResult& t) { t.rgba.pop_back(); }));
+  CAF_CHECK(bad([](TileResult& t) { t.kernel_ms = std::nan(""); }));
+  CAF_CHECK(bad([](TileResult& t) { t.rendering_ms = -1; }));
+  CAF_CHECK(bad([](TileResult& t) { t.sat.resize(t.sat.size() - 8); }));
+  CAF_CHECK(bad([](TileResult& t) {
+    CostMap other;
+    other.packets = {0, 0, 3, 3};
+    other.cost.assign(9, 1);
+    Sat::from_cost_map(other).serialize_into(t.sat);  // a SAT of other packets
+  }));
+  CAF_CHECK_EQUAL(check_nodes({NodeInfo{"a:1", 4, 1.5}}), "");
+  CAF_CHECK(!check_nodes({NodeInfo{"a:1", 0, 1}}).empty());
+  CAF_CHECK(!check_nodes({NodeInfo{"a:1", 1, std::nan("")}}).empty());
+  CAF_CHECK(!check_nodes({NodeInfo{"a:1", 1, 0}}).empty());
+  CAF_CHECK(!check_nodes({NodeInfo{"", 1, 1}}).empty());
+  CAF_CHECK(!check_nodes({NodeInfo{"a\"b", 1, 1}}).empty());
+}
+
+// What a worker does with forwarded scene records it cannot decode or apply.
+CAF_TEST(apply_records reports broken forwarded updates) {
+  Scene scene;
+  CAF_CHECK_EQUAL(apply_records(scene, encode(tiny_scene()), Limits{}), "");
+  CAF_CHECK_EQUAL(scene.meshes().size(), 1u);
+  CAF_CHECK(!apply_records(scene, std::vector<uint8_t>{'T', 'S', 1, 0, 5, 0, 0, 0, 1}, Limits{}).empty());
+  SetMesh bad;
+  bad.id = 30;
+  bad.mesh.positions = 2;  // the u32 index buffer as positions
+  CAF_CHECK(!apply_records(scene, encode(std::vector<ClientRecord>{bad}), Limits{}).empty());
+}

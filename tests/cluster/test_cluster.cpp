@@ -138,3 +138,23 @@ TEST_CASE("A hub relays a sub-tree; when it dies its sub-tree leaves and the res
   CHECK(m.p->err_count("\"used\": 2") >= 1);  // master and w5 only
   CHECK(m.p->err_count("\"error\"") == 0);
 }
+
+TEST_CASE("Bad cluster settings end serve with a clear error", "[cluster]") {
+  auto refused = [](std::vector<std::string> extra, const std::string& message) {
+    std::vector<std::string> a{TESSERA_BINARY, "serve", "--port", "0"};
+    a.insert(a.end(), extra.begin(), extra.end());
+    Process p(a);
+    auto status = p.wait(20000);
+    INFO("args: " << a.back() << "; stderr: " << p.err());
+    REQUIRE(status);
+    CHECK(WIFEXITED(*status));
+    CHECK(WEXITSTATUS(*status) != 0);
+    CHECK(p.err().find(message) != std::string::npos);
+  };
+  refused({"--children", "nonsense"}, "child node 'nonsense' is not host:port");
+  refused({"--children", "127.0.0.1:99999"}, "is not host:port");
+  refused({"--tessera.task-timeout-ms=10"}, "task-timeout-ms must be >= 50");
+  refused({"--cluster-port", "70000"}, "cluster-port must be in -1..65535");
+  Node w = worker("taken");
+  refused({"--no-http", "--cluster-port", std::to_string(w.cluster)}, "cannot publish the node on 127.0.0.1:");
+}
