@@ -37,11 +37,26 @@ PacketLayout detect_packet_layout() {
   return {2, 2};
 }
 
+// Which copy of the kernel runs: the packet width's own instruction set where this CPU has
+// it (16 lanes: AVX-512, 8 lanes: AVX2 with FMA), else the SSE2 copy, which every x86-64 runs.
+static bool cpu_avx512() {
+  static const bool yes = __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") &&
+                          __builtin_cpu_supports("avx512dq") && __builtin_cpu_supports("avx512bw") &&
+                          __builtin_cpu_supports("avx512cd") && __builtin_cpu_supports("avx2") &&
+                          __builtin_cpu_supports("fma") && __builtin_cpu_supports("bmi2");
+  return yes;
+}
+static bool cpu_avx2() {
+  static const bool yes = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma") &&
+                          __builtin_cpu_supports("bmi2") && __builtin_cpu_supports("f16c");
+  return yes;
+}
+
 const char* isa_name(PacketLayout p) {
   switch (p.size()) {
-    case 16: return "AVX-512 (ray16)";
-    case 8: return "AVX2 (ray8)";
-    default: return "SSE (ray4)";
+    case 16: return cpu_avx512() ? "AVX-512 (ray16)" : "SSE2 (ray16)";
+    case 8: return cpu_avx2() ? "AVX2 (ray8)" : "SSE2 (ray8)";
+    default: return "SSE2 (ray4)";
   }
 }
 
@@ -169,9 +184,11 @@ inline float max_abs(const Vec3& p) { return std::fmax(std::fabs(p.x), std::fmax
 struct RayTracer::Impl {
   struct Tex {
     int32_t w = 0, h = 0;
-    std::vector<uint8_t> rgba;
-    Sampler sampler;
-    bool srgb = true;
+    // RGBA, 16 bits a channel (low to high), colour already as shading uses it (decoded from
+    // sRGB for glTF scenes), so a lookup is one 64-bit load per texel and no table.
+    std::vector<uint64_t> texels;
+    bool repeat_s = true, repeat_t = true, nearest = false;
+    bool decoded = false;  // colour channels decoded from sRGB
     uint64_t version = 0;
   };
   struct Geom {
@@ -210,6 +227,23 @@ struct RayTracer::Impl {
   std::vector<const Tex*> mat_diffuse_tex, mat_specular_tex, mat_emissive_tex;
   std::map<Id, int> material_index;
   std::vector<Light> lights;
+  // What the shading kernel reads per lane and per light, prepared once per sync.
+  struct ShadeMat {
+    Vec3 diffuse, specular, emissive;
+    float ambient = 0, exponent = 1, opacity = 1, reflection = 0, refraction = 0, ior = 1;
+    bool lit = true;         // not matte
+    bool phong = false;      // has a specular highlight
+    bool alpha_mask = false;
+    bool textured = false;   // some texture of it is loaded
+  };
+  std::vector<ShadeMat> shade_mats;  // by material index
+  struct LightConst {
+    Light::Type type;
+    Vec3 position, direction, to_light, radiance, attenuation;
+    float cos_outer = 0, inv_edge = 0;  // spot: smoothstep from cos_outer over 1 / inv_edge
+    bool hard_edge = true;
+  };
+  std::vector<LightConst> light_consts;
   Camera camera;
   Environment env;
   int32_t width = 0, height = 0;
@@ -254,54 +288,44 @@ struct RayTracer::Impl {
     const std::vector<Rect>* tiles;
     int threads;
   };
-  template <int N, unsigned F>
-  void render_task(const Rect& pixels, const RenderSettings& s, TaskResult& out, const SchedulePlan* plan = nullptr);
-  template <int N>
-  double trace_primary(const Rect& pixels, uint64_t* rays);
 };
 
 // ---------------------------------------------------------------------------------------
 // Alpha masks: an Embree filter function rejects hits where the mask is transparent.
 // ---------------------------------------------------------------------------------------
-namespace {
-}  // namespace
+// max/min as the vector instructions compute them (the second operand when either is NaN),
+// so that lane loops vectorise: std::fmax is a library call on baseline x86-64.
+inline float fmaxf_(float a, float b) { return a > b ? a : b; }
+inline float fminf_(float a, float b) { return a < b ? a : b; }
 
+// One texture lookup (bilinear, or nearest as bilinear with one weight), branch-free so that
+// a loop over lanes sharing a texture vectorises into gathers. The scalar paths (lanes that
+// hit different textures, alpha masks) call it too, so a pixel never depends on its packet.
 template <class Tex>
-static inline void sample_texture(const Tex& t, float u, float v, bool linear, float out[4]) {
-  auto wrap = [](float c, Sampler::Wrap w) {
-    if (w == Sampler::Wrap::repeat) return c - std::floor(c);
-    return std::fmin(std::fmax(c, 0.0f), 1.0f);
-  };
-  if (!std::isfinite(u)) u = 0;
-  if (!std::isfinite(v)) v = 0;
-  u = wrap(u, t.sampler.wrap_s);
-  v = wrap(v, t.sampler.wrap_t);
-  const auto& lut = srgb_lut().to_linear;
-  auto texel = [&](int x, int y, float w, float acc[4]) {
-    if (t.sampler.wrap_s == Sampler::Wrap::repeat) x = ((x % t.w) + t.w) % t.w;
-    else x = std::min(std::max(x, 0), t.w - 1);
-    if (t.sampler.wrap_t == Sampler::Wrap::repeat) y = ((y % t.h) + t.h) % t.h;
-    else y = std::min(std::max(y, 0), t.h - 1);
-    const uint8_t* p = &t.rgba[(size_t(y) * t.w + x) * 4];
-    if (linear && t.srgb) {
-      acc[0] += w * lut[p[0]]; acc[1] += w * lut[p[1]]; acc[2] += w * lut[p[2]];
-    } else {
-      acc[0] += w * p[0] * (1 / 255.0f); acc[1] += w * p[1] * (1 / 255.0f); acc[2] += w * p[2] * (1 / 255.0f);
-    }
-    acc[3] += w * p[3] * (1 / 255.0f);
-  };
-  out[0] = out[1] = out[2] = out[3] = 0;
-  float x = u * t.w - 0.5f, y = v * t.h - 0.5f;
-  if (t.sampler.filter == Sampler::Filter::nearest) {
-    texel(int(std::floor(x + 0.5f)), int(std::floor(y + 0.5f)), 1.0f, out);
-    return;
+__attribute__((always_inline)) inline void sample_texture(const Tex& t, float u, float v, float out[4]) {
+  u = u - u == 0.0f ? u : 0.0f;  // NaN and infinities sample the origin
+  v = v - v == 0.0f ? v : 0.0f;
+  u = t.repeat_s ? u - std::floor(u) : fminf_(fmaxf_(u, 0.0f), 1.0f);  // [0, 1]
+  v = t.repeat_t ? v - std::floor(v) : fminf_(fmaxf_(v, 0.0f), 1.0f);
+  const float x = u * float(t.w) - (t.nearest ? 0.0f : 0.5f), y = v * float(t.h) - (t.nearest ? 0.0f : 0.5f);
+  const float xf = std::floor(x), yf = std::floor(y);
+  const float fx = t.nearest ? 0.0f : x - xf, fy = t.nearest ? 0.0f : y - yf;
+  // Texel columns and rows in [-1, size + 1]; across the edge: the other side (repeat) or
+  // the edge texel (clamp). The second texel of a nearest lookup has weight 0.
+  int x0 = int(xf), y0 = int(yf), x1 = x0 + 1, y1 = y0 + 1;
+  auto wrap = [](int i, int n, bool repeat) { return i < 0 ? (repeat ? n - 1 : 0) : (i >= n ? (repeat ? 0 : n - 1) : i); };
+  x0 = wrap(x0, t.w, t.repeat_s); x1 = wrap(x1, t.w, t.repeat_s);
+  y0 = wrap(y0, t.h, t.repeat_t); y1 = wrap(y1, t.h, t.repeat_t);
+  const uint64_t* texels = t.texels.data();
+  const uint64_t p00 = texels[y0 * t.w + x0], p10 = texels[y0 * t.w + x1];
+  const uint64_t p01 = texels[y1 * t.w + x0], p11 = texels[y1 * t.w + x1];
+  const float w00 = (1 - fx) * (1 - fy) * (1 / 65535.0f), w10 = fx * (1 - fy) * (1 / 65535.0f);
+  const float w01 = (1 - fx) * fy * (1 / 65535.0f), w11 = fx * fy * (1 / 65535.0f);
+  for (int c = 0; c < 4; ++c) {
+    const int sh = 16 * c;
+    out[c] = w00 * float(int((p00 >> sh) & 0xFFFF)) + w10 * float(int((p10 >> sh) & 0xFFFF)) +
+             w01 * float(int((p01 >> sh) & 0xFFFF)) + w11 * float(int((p11 >> sh) & 0xFFFF));
   }
-  int x0 = int(std::floor(x)), y0 = int(std::floor(y));
-  float fx = x - x0, fy = y - y0;
-  texel(x0, y0, (1 - fx) * (1 - fy), out);
-  texel(x0 + 1, y0, fx * (1 - fy), out);
-  texel(x0, y0 + 1, (1 - fx) * fy, out);
-  texel(x0 + 1, y0 + 1, fx * fy, out);
 }
 
 template <bool kOcclusion>
@@ -330,7 +354,7 @@ static void alpha_filter(const RTCFilterFunctionNArguments* args) {
       const float* t2 = &g->texcoords[size_t(tri[2]) * 2];
       float w = 1 - u - v;
       float rgba[4];
-      sample_texture(*tex, w * t0[0] + u * t1[0] + v * t2[0], w * t0[1] + u * t1[1] + v * t2[1], false, rgba);
+      sample_texture(*tex, w * t0[0] + u * t1[0] + v * t2[0], w * t0[1] + u * t1[1] + v * t2[1], rgba);
       alpha *= rgba[3];
     }
     if (alpha < m.alpha_cutoff) args->valid[i] = 0;
@@ -375,20 +399,38 @@ void RayTracer::Impl::build_geom(const Scene& scene, const GeomKey& key, Geom& g
 
 void RayTracer::Impl::sync(const Scene& scene, std::vector<std::string>& warnings) {
   stats = {};
-  // Textures.
+  env = scene.environment();
+  // Textures, converted once to what shading reads (Tex::texels).
   for (auto it = textures.begin(); it != textures.end();)
     it = scene.textures().count(it->first) ? std::next(it) : textures.erase(it);
+  const auto& to_linear = srgb_lut().to_linear;
   for (auto& [id, e] : scene.textures()) {
     Tex& t = textures[id];
-    if (t.version == e.version) continue;
     const Texture& src = e.value;
-    if (src.width <= 0 || src.height <= 0 || src.rgba.size() != size_t(src.width) * src.height * 4) {
-      warnings.push_back("texture " + std::to_string(id) + " has inconsistent size; ignored");
+    const bool decode = env.linear && src.srgb;
+    if (t.version == e.version && t.decoded == decode) continue;
+    // Texel indices are 32-bit ints in the kernel.
+    if (src.width <= 0 || src.height <= 0 || int64_t(src.width) * src.height > (int64_t(1) << 30) ||
+        src.rgba.size() != size_t(src.width) * src.height * 4) {
+      warnings.push_back("texture " + std::to_string(id) + " has an inconsistent or too large size; ignored");
       t = Tex{};
       t.version = e.version;
       continue;
     }
-    t.w = src.width; t.h = src.height; t.rgba = src.rgba; t.sampler = src.sampler; t.srgb = src.srgb; t.version = e.version;
+    t.w = src.width; t.h = src.height;
+    t.repeat_s = src.sampler.wrap_s == Sampler::Wrap::repeat;
+    t.repeat_t = src.sampler.wrap_t == Sampler::Wrap::repeat;
+    t.nearest = src.sampler.filter == Sampler::Filter::nearest;
+    t.decoded = decode;
+    t.version = e.version;
+    t.texels.resize(size_t(t.w) * size_t(t.h));
+    for (size_t i = 0; i < t.texels.size(); ++i) {
+      const uint8_t* p = &src.rgba[i * 4];
+      uint64_t v = uint64_t(p[3]) * 257 << 48;
+      for (int c = 0; c < 3; ++c)
+        v |= uint64_t(decode ? std::lround(to_linear[p[c]] * 65535.0f) : p[c] * 257) << (16 * c);
+      t.texels[i] = v;
+    }
   }
   // Materials (rebuilt whole: they are small).
   materials.assign(1, default_material());
@@ -520,7 +562,40 @@ void RayTracer::Impl::sync(const Scene& scene, std::vector<std::string>& warning
     if (l.type != Light::Type::point && length(l.direction) == 0) continue;
     lights.push_back(l);
   }
-  env = scene.environment();
+  light_consts.clear();
+  for (const Light& l : lights) {
+    LightConst c;
+    c.type = l.type;
+    c.position = l.position;
+    c.direction = l.direction;
+    c.to_light = -l.direction;
+    c.radiance = l.color * l.intensity;
+    c.attenuation = l.attenuation;
+    c.cos_outer = std::cos(l.cutoff);
+    const float cos_inner = std::cos(l.cutoff * (1.0f - std::fmin(std::fmax(l.softness, 0.0f), 1.0f)));
+    c.hard_edge = !(cos_inner > c.cos_outer);
+    c.inv_edge = c.hard_edge ? 0.0f : 1.0f / (cos_inner - c.cos_outer);
+    light_consts.push_back(c);
+  }
+  shade_mats.clear();
+  for (size_t i = 0; i < materials.size(); ++i) {
+    const Material& m = materials[i];
+    ShadeMat c;
+    c.diffuse = m.diffuse_color;
+    c.specular = m.specular_color;
+    c.emissive = m.emissive_color;
+    c.ambient = m.ambient_intensity;
+    c.exponent = std::fmax(m.shininess * 128.0f, 1.0f);
+    c.opacity = m.alpha_mask ? 1.0f : m.opacity;  // the filter already removed the cut-out parts
+    c.reflection = m.reflection;
+    c.refraction = m.refraction;
+    c.ior = m.ior;
+    c.lit = m.model != Material::Model::matte;
+    c.phong = m.model == Material::Model::phong;
+    c.alpha_mask = m.alpha_mask;
+    c.textured = mat_diffuse_tex[i] || mat_specular_tex[i] || mat_emissive_tex[i];
+    shade_mats.push_back(c);
+  }
   width = scene.width();
   height = scene.height();
 
@@ -535,543 +610,32 @@ void RayTracer::Impl::sync(const Scene& scene, std::vector<std::string>& warning
 }
 
 // ---------------------------------------------------------------------------------------
-// The packet kernel
+// The packet kernel, compiled once per instruction set (renderer/raytracer_kernel.inc)
 // ---------------------------------------------------------------------------------------
-namespace {
+// No FMA contraction in any copy: a fused multiply-add rounds once where the SSE2 copy rounds
+// twice, so contracted copies would give a pixel different values on AVX2 and AVX-512 nodes
+// of one heterogeneous cluster, and the AO pattern, seeded by the hit position's bits, would
+// change between them. With contraction off every copy computes the same IEEE operations.
+#pragma GCC push_options
+#pragma GCC optimize("fp-contract=off")
+namespace isa_sse {
+#include "renderer/raytracer_kernel.inc"
+}  // namespace isa_sse
 
-template <int N>
-struct alignas(64) Lanes {
-  int valid[N];  // first member of an alignas(64) struct: aligned as Embree needs
-  float ox[N], oy[N], oz[N], dx[N], dy[N], dz[N];
-  float weight[N];  // throughput of this path (for culling)
+#pragma GCC push_options
+#pragma GCC target("avx2,fma,bmi,bmi2,lzcnt,popcnt,f16c")
+namespace isa_avx2 {
+#include "renderer/raytracer_kernel.inc"
+}  // namespace isa_avx2
+#pragma GCC pop_options
 
-  void set(int i, const Vec3& o, const Vec3& d, float w) {
-    valid[i] = -1;
-    ox[i] = o.x; oy[i] = o.y; oz[i] = o.z;
-    dx[i] = d.x; dy[i] = d.y; dz[i] = d.z;
-    weight[i] = w;
-  }
-};
-
-// Primary rays of a pinhole camera through pixel centres (shared by the shading kernel and
-// the bare-kernel benchmark, so both trace exactly the same rays). Directions are not
-// normalised: Embree does not need it, and hit positions are o + t d either way.
-struct PrimaryCamera {
-  Vec3 origin, cx, cy, cz;
-  float sx_scale = 1, sy_scale = 1;
-  int32_t width = 1, height = 1;
-
-  PrimaryCamera(const Camera& camera, const Vec3& rebase, int32_t w, int32_t h) : width(w), height(h) {
-    // Vertical field of view clamped away from 0 and 180 degrees.
-    float tan_half = std::tan(std::fmin(std::fmax(camera.fov_y, 1e-6f), kPi - 1e-4f) * 0.5f);
-    origin = camera.to_world.transform_point({0, 0, 0}) - rebase;
-    cx = camera.to_world.transform_vector({1, 0, 0});
-    cy = camera.to_world.transform_vector({0, 1, 0});
-    cz = camera.to_world.transform_vector({0, 0, -1});
-    sx_scale = tan_half * (float(w) / float(h));
-    sy_scale = tan_half;
-  }
-  Vec3 direction(int x, int y) const {
-    float sx = (2.0f * (x + 0.5f) / float(width) - 1.0f) * sx_scale;
-    float sy = (1.0f - 2.0f * (y + 0.5f) / float(height)) * sy_scale;
-    return cz + cx * sx + cy * sy;
-  }
-};
-
-template <int N>
-struct Colors {
-  float r[N], g[N], b[N];
-};
-
-// Everything shading needs about one hit.
-struct Hit {
-  Vec3 p, n, ng, v;  // position, shading normal, geometric normal (both facing the viewer), to viewer
-  bool entering;     // the ray hit the geometric front side
-  int material = 0;
-  float uv[2] = {0, 0};
-  bool has_uv = false;
-};
-
-inline Vec3 reflect(const Vec3& d, const Vec3& n) { return d - n * (2 * dot(d, n)); }
-
-}  // namespace
-
-template <int N, unsigned F>
-struct Kernel {
-  using P = Packet<N>;
-  const RayTracer::Impl& s;
-  const RenderSettings& cfg;
-  RayCounts& rays;
-  float ao_dist;
-
-  // Scale-aware offset for a secondary ray's origin.
-  float eps(const Vec3& p) const { return 1e-4f * std::fmax(max_abs(p), 1e-3f * s.extent) + 1e-30f; }
-
-  void trace(Lanes<N>& in, int depth, Colors<N>& out, bool primary) {
-    alignas(64) typename P::RayHit rh;
-    for (int i = 0; i < N; ++i) {
-      rh.ray.org_x[i] = in.ox[i]; rh.ray.org_y[i] = in.oy[i]; rh.ray.org_z[i] = in.oz[i];
-      rh.ray.dir_x[i] = in.dx[i]; rh.ray.dir_y[i] = in.dy[i]; rh.ray.dir_z[i] = in.dz[i];
-      rh.ray.tnear[i] = 0.0f;
-      rh.ray.tfar[i] = in.valid[i] ? std::numeric_limits<float>::infinity() : -std::numeric_limits<float>::infinity();
-      rh.ray.time[i] = 0; rh.ray.mask[i] = 0xFFFFFFFFu; rh.ray.id[i] = 0; rh.ray.flags[i] = 0;
-      rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
-      rh.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
-      out.r[i] = out.g[i] = out.b[i] = 0;
-    }
-    RTCIntersectContext ctx;
-    rtcInitIntersectContext(&ctx);
-    ctx.flags = primary ? RTC_INTERSECT_CONTEXT_FLAG_COHERENT : RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
-    P::intersect(in.valid, s.top, &ctx, &rh);
-    int count = 0;
-    for (int i = 0; i < N; ++i) count += in.valid[i] != 0;
-    if (primary) rays.primary += count; else rays.secondary += count;
-    shade(in, rh, depth, out);
-  }
-
-  // Fills hit records for the valid lanes that hit something; misses get the background.
-  void shade(Lanes<N>& in, typename P::RayHit& rh, int depth, Colors<N>& out) {
-    Hit hits[N];
-    bool hit_mask[N];
-    const Environment& env = s.env;
-    for (int i = 0; i < N; ++i) {
-      hit_mask[i] = false;
-      if (!in.valid[i]) continue;
-      unsigned inst_id = rh.hit.instID[0][i];
-      if (rh.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID || inst_id >= s.inst_by_rtc.size() || !s.inst_by_rtc[inst_id]) {
-        out.r[i] = env.background.x; out.g[i] = env.background.y; out.b[i] = env.background.z;
-        continue;
-      }
-      hit_mask[i] = true;
-      const auto& inst = *s.inst_by_rtc[inst_id];
-      const auto& g = *inst.g;
-      Hit& h = hits[i];
-      h.material = inst.material;
-      Vec3 d{in.dx[i], in.dy[i], in.dz[i]};
-      float t = rh.ray.tfar[i];
-      h.p = Vec3{in.ox[i], in.oy[i], in.oz[i]} + d * t;
-      h.v = normalize(-d);
-      Vec3 ng = normalize(inst.normal_matrix.transform_vector({rh.hit.Ng_x[i], rh.hit.Ng_y[i], rh.hit.Ng_z[i]}) * inst.det_sign);
-      unsigned prim = rh.hit.primID[i];
-      float u = rh.hit.u[i], v = rh.hit.v[i], w = 1 - u - v;
-      const uint32_t* tri = &g.indices[size_t(prim) * 3];
-      Vec3 n = ng;
-      if (!g.normals.empty()) {
-        const float* n0 = &g.normals[size_t(tri[0]) * 3];
-        const float* n1 = &g.normals[size_t(tri[1]) * 3];
-        const float* n2 = &g.normals[size_t(tri[2]) * 3];
-        Vec3 on{w * n0[0] + u * n1[0] + v * n2[0], w * n0[1] + u * n1[1] + v * n2[1], w * n0[2] + u * n1[2] + v * n2[2]};
-        Vec3 wn = normalize(inst.normal_matrix.transform_vector(on));
-        if (finite(wn) && length(wn) > 0.5f) n = wn;
-      }
-      h.entering = dot(ng, d) < 0;
-      if (!h.entering) ng = -ng;
-      if (dot(n, ng) < 0) n = -n;  // shading normal on the viewer's side of the surface
-      h.n = n;
-      h.ng = ng;
-      if constexpr ((F & kTextures) != 0) {
-        if (!g.texcoords.empty() && (s.mat_diffuse_tex[h.material] || s.mat_specular_tex[h.material] ||
-                                     s.mat_emissive_tex[h.material])) {
-          const float* t0 = &g.texcoords[size_t(tri[0]) * 2];
-          const float* t1 = &g.texcoords[size_t(tri[1]) * 2];
-          const float* t2 = &g.texcoords[size_t(tri[2]) * 2];
-          h.uv[0] = w * t0[0] + u * t1[0] + v * t2[0];
-          h.uv[1] = w * t0[1] + u * t1[1] + v * t2[1];
-          h.has_uv = true;
-        }
-      }
-    }
-
-    // Local shading inputs per lane.
-    Vec3 diffuse[N], specular[N], color[N];
-    float opacity[N];
-    for (int i = 0; i < N; ++i) {
-      if (!hit_mask[i]) continue;
-      const Hit& h = hits[i];
-      const Material& m = s.materials[h.material];
-      Vec3 dc = m.diffuse_color, sc = m.specular_color, ec = m.emissive_color;
-      float op = m.opacity;
-      if constexpr ((F & kTextures) != 0) {
-        if (h.has_uv) {
-          float rgba[4];
-          if (const auto* t = s.mat_diffuse_tex[h.material]) {
-            sample_texture(*t, h.uv[0], h.uv[1], env.linear, rgba);
-            dc = dc * Vec3{rgba[0], rgba[1], rgba[2]};
-            if (!m.alpha_mask) op *= rgba[3];
-          }
-          if (const auto* t = s.mat_specular_tex[h.material]) {
-            sample_texture(*t, h.uv[0], h.uv[1], env.linear, rgba);
-            sc = sc * Vec3{rgba[0], rgba[1], rgba[2]};
-          }
-          if (const auto* t = s.mat_emissive_tex[h.material]) {
-            sample_texture(*t, h.uv[0], h.uv[1], env.linear, rgba);
-            ec = ec * Vec3{rgba[0], rgba[1], rgba[2]};
-          }
-        }
-      }
-      if (m.alpha_mask) op = 1.0f;  // the filter already removed the cut-out parts
-      diffuse[i] = dc;
-      specular[i] = sc;
-      opacity[i] = op;
-      if (m.model == Material::Model::matte) color[i] = dc;  // unlit
-      else color[i] = ec + dc * m.ambient_intensity;
-    }
-
-    // Direct light with shadows: one occlusion packet per light.
-    for (const Light& light : s.lights) {
-      alignas(64) typename P::Ray sr;
-      alignas(64) int valid[N];  // Embree needs the mask aligned to the packet width
-      Vec3 contrib[N];
-      int count = 0;
-      for (int i = 0; i < N; ++i) {
-        valid[i] = 0;
-        if (!hit_mask[i] || s.materials[hits[i].material].model == Material::Model::matte) continue;
-        const Hit& h = hits[i];
-        Vec3 l;
-        float dist = std::numeric_limits<float>::infinity(), atten = 1.0f;
-        if (light.type == Light::Type::directional) {
-          l = -light.direction;
-        } else {
-          Vec3 to = light.position - h.p;
-          dist = length(to);
-          if (!(dist > 0)) continue;
-          l = to / dist;
-          float den = light.attenuation.x + light.attenuation.y * dist + light.attenuation.z * dist * dist;
-          atten = den > 0 ? 1.0f / den : 0.0f;
-          if (light.type == Light::Type::spot) {
-            float c = dot(-l, light.direction);
-            float cos_outer = std::cos(light.cutoff);
-            float cos_inner = std::cos(light.cutoff * (1.0f - std::fmin(std::fmax(light.softness, 0.0f), 1.0f)));
-            atten *= smoothstep(cos_outer, cos_inner, c);
-          }
-        }
-        float ndl = dot(h.n, l);
-        if (ndl <= 0 || atten <= 0 || dot(h.ng, l) <= 0) continue;
-        Vec3 e = light.color * (light.intensity * atten);
-        Vec3 c = diffuse[i] * (ndl * (s.env.linear ? 1.0f / kPi : 1.0f));
-        const Material& m = s.materials[h.material];
-        if (m.model == Material::Model::phong && max_component(specular[i]) > 0) {
-          float rv = dot(reflect(-l, h.n), h.v);
-          if (rv > 0) c += specular[i] * std::pow(rv, std::fmax(m.shininess * 128.0f, 1.0f));
-        }
-        contrib[i] = c * e;
-        if (!cfg.shadows) {
-          color[i] += contrib[i];
-          continue;
-        }
-        Vec3 o = h.p + h.ng * eps(h.p);
-        sr.org_x[i] = o.x; sr.org_y[i] = o.y; sr.org_z[i] = o.z;
-        sr.dir_x[i] = l.x; sr.dir_y[i] = l.y; sr.dir_z[i] = l.z;
-        sr.tnear[i] = 0;
-        sr.tfar[i] = std::isfinite(dist) ? dist * (1 - 1e-4f) : std::numeric_limits<float>::infinity();
-        sr.time[i] = 0; sr.mask[i] = 0xFFFFFFFFu; sr.id[i] = 0; sr.flags[i] = 0;
-        valid[i] = -1;
-        ++count;
-      }
-      if (!count || !cfg.shadows) continue;
-      for (int i = 0; i < N; ++i)
-        if (!valid[i]) { sr.tnear[i] = 0; sr.tfar[i] = -1; sr.org_x[i] = sr.org_y[i] = sr.org_z[i] = 0; sr.dir_x[i] = sr.dir_y[i] = 0; sr.dir_z[i] = 1; }
-      RTCIntersectContext ctx;
-      rtcInitIntersectContext(&ctx);
-      ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
-      P::occluded(valid, s.top, &ctx, &sr);
-      rays.shadow += count;
-      for (int i = 0; i < N; ++i)
-        if (valid[i] && sr.tfar[i] >= 0) color[i] += contrib[i];
-    }
-
-    // Sky ambient, occluded by ambient occlusion.
-    bool ambient = max_component(env.ambient) > 0;
-    float ao[N];
-    for (int i = 0; i < N; ++i) ao[i] = 1.0f;
-    if constexpr ((F & kAO) != 0) {
-      if (ambient && cfg.ao_samples > 0) occlusion(hits, hit_mask, ao);
-    }
-    if (ambient)
-      for (int i = 0; i < N; ++i)
-        if (hit_mask[i] && s.materials[hits[i].material].model != Material::Model::matte)
-          color[i] += diffuse[i] * env.ambient * ao[i];
-
-    // Reflection, refraction and see-through, each as a packet of secondary rays.
-    if constexpr ((F & kSecondary) != 0) {
-      if (!s.features.secondary) {
-        // No material reflects, refracts or is see-through: nothing to trace.
-      } else if (depth + 1 < cfg.max_depth) {
-        secondary(in, hits, hit_mask, opacity, color, depth);
-      } else {
-        // At the depth limit, see-through surfaces show the background.
-        for (int i = 0; i < N; ++i)
-          if (hit_mask[i]) {
-            float keep = opacity[i] * (1.0f - s.materials[hits[i].material].refraction);
-            color[i] = color[i] * keep + env.background * (1 - keep);
-          }
-      }
-    } else {
-      (void)opacity;
-    }
-    for (int i = 0; i < N; ++i)
-      if (hit_mask[i]) { out.r[i] = color[i].x; out.g[i] = color[i].y; out.b[i] = color[i].z; }
-  }
-
-  void occlusion(const Hit* hits, const bool* hit_mask, float* ao) {
-    const int S = cfg.ao_samples;
-    int open[N] = {};
-    uint32_t rot[N];
-    Vec3 t[N], b[N];
-    for (int i = 0; i < N; ++i)
-      if (hit_mask[i]) {
-        basis(hits[i].n, t[i], b[i]);
-        // Per-hit rotation of the sample pattern (Cranley-Patterson), decorrelated per frame.
-        uint32_t hx, hy, hz;
-        std::memcpy(&hx, &hits[i].p.x, 4); std::memcpy(&hy, &hits[i].p.y, 4); std::memcpy(&hz, &hits[i].p.z, 4);
-        rot[i] = hash32(hx ^ hash32(hy ^ hash32(hz ^ (cfg.frame * 0x9E3779B9u))));
-      }
-    for (int k = 0; k < S; ++k) {
-      alignas(64) typename P::Ray r;
-      alignas(64) int valid[N];  // Embree needs the mask aligned to the packet width
-      int count = 0;
-      for (int i = 0; i < N; ++i) {
-        valid[i] = 0;
-        r.tnear[i] = 0; r.tfar[i] = -1; r.time[i] = 0; r.mask[i] = 0xFFFFFFFFu; r.id[i] = 0; r.flags[i] = 0;
-        r.org_x[i] = r.org_y[i] = r.org_z[i] = 0; r.dir_x[i] = r.dir_y[i] = 0; r.dir_z[i] = 1;
-        if (!hit_mask[i]) continue;
-        // Cosine-weighted hemisphere sample from a rotated Hammersley point.
-        float u1 = (k + 0.5f) / S + (rot[i] & 0xFFFF) * (1.0f / 65536.0f);
-        float u2 = radical_inverse2(uint32_t(k)) + (rot[i] >> 16) * (1.0f / 65536.0f);
-        u1 -= std::floor(u1); u2 -= std::floor(u2);
-        float rad = std::sqrt(u1), phi = 2 * kPi * u2;
-        float x = rad * std::cos(phi), y = rad * std::sin(phi), z = std::sqrt(std::fmax(0.0f, 1 - u1));
-        Vec3 d = t[i] * x + b[i] * y + hits[i].n * z;
-        if (dot(d, hits[i].ng) <= 0) continue;  // below the geometric surface: counts as occluded
-        Vec3 o = hits[i].p + hits[i].ng * eps(hits[i].p);
-        r.org_x[i] = o.x; r.org_y[i] = o.y; r.org_z[i] = o.z;
-        r.dir_x[i] = d.x; r.dir_y[i] = d.y; r.dir_z[i] = d.z;
-        r.tfar[i] = ao_dist;
-        valid[i] = -1;
-        ++count;
-      }
-      if (!count) continue;
-      RTCIntersectContext ctx;
-      rtcInitIntersectContext(&ctx);
-      ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
-      P::occluded(valid, s.top, &ctx, &r);
-      rays.ao += count;
-      for (int i = 0; i < N; ++i)
-        if (valid[i] && r.tfar[i] >= 0) ++open[i];
-    }
-    for (int i = 0; i < N; ++i)
-      if (hit_mask[i]) ao[i] = float(open[i]) / float(S);
-  }
-
-  void secondary(const Lanes<N>& in, const Hit* hits, const bool* hit_mask, const float* opacity, Vec3* color, int depth) {
-    // Up to three child packets: reflected, refracted, and straight through (opacity < 1).
-    Lanes<N> refl{}, refr{}, thru{};
-    float w_refl[N] = {}, w_refr[N] = {}, w_thru[N] = {}, keep[N];
-    bool any_refl = false, any_refr = false, any_thru = false;
-    for (int i = 0; i < N; ++i) {
-      keep[i] = 1.0f;
-      if (!hit_mask[i]) continue;
-      const Hit& h = hits[i];
-      const Material& m = s.materials[h.material];
-      Vec3 d = -h.v;
-      float op = opacity[i];
-      float kr = m.reflection, kt = m.refraction;
-      float fres_r = 0, fres_t = 0;
-      Vec3 tdir;
-      if (kt > 0) {
-        // Dielectric Fresnel; the shading normal faces the viewer, so eta depends on the side hit.
-        float eta = h.entering ? 1.0f / m.ior : m.ior;
-        float cosi = std::fmin(std::fmax(dot(h.n, h.v), 0.0f), 1.0f);
-        float sin2t = eta * eta * (1 - cosi * cosi);
-        if (sin2t >= 1.0f) {
-          fres_r = 1.0f;  // total internal reflection
-        } else {
-          float cost = std::sqrt(1 - sin2t);
-          float rs = (eta * cosi - cost) / (eta * cosi + cost);
-          float rp = (cosi - eta * cost) / (cosi + eta * cost);
-          fres_r = 0.5f * (rs * rs + rp * rp);
-          fres_t = 1 - fres_r;
-          tdir = normalize(d * eta + h.n * (eta * cosi - cost));
-        }
-      }
-      float wr = op * (kr + kt * fres_r);
-      float wt = op * kt * fres_t;
-      float wthru = 1 - op;
-      keep[i] = op * (1 - kt);  // local shading share
-      float base = in.weight[i];
-      if (wr * base > 1e-3f) {
-        Vec3 rd = normalize(reflect(d, h.n));
-        if (dot(rd, h.ng) < 0) rd = normalize(reflect(d, h.ng));
-        refl.set(i, h.p + h.ng * eps(h.p), rd, base * wr);
-        w_refl[i] = wr;
-        any_refl = true;
-      }
-      if (wt * base > 1e-3f) {
-        refr.set(i, h.p - h.ng * eps(h.p), tdir, base * wt);
-        w_refr[i] = wt;
-        any_refr = true;
-      }
-      if (wthru * base > 1e-3f) {
-        thru.set(i, h.p - h.ng * eps(h.p), d, base * wthru);
-        w_thru[i] = wthru;
-        any_thru = true;
-      }
-    }
-    for (int i = 0; i < N; ++i)
-      if (hit_mask[i]) color[i] = color[i] * keep[i];
-    auto add = [&](Lanes<N>& l, const float* w) {
-      Colors<N> c;
-      trace(l, depth + 1, c, false);
-      for (int i = 0; i < N; ++i)
-        if (l.valid[i]) color[i] += Vec3{c.r[i], c.g[i], c.b[i]} * w[i];
-    };
-    if (any_refl) add(refl, w_refl);
-    if (any_refr) add(refr, w_refr);
-    if (any_thru) add(thru, w_thru);
-  }
-};
-
-template <int N, unsigned F>
-void RayTracer::Impl::render_task(const Rect& requested, const RenderSettings& cfg, TaskResult& out, const SchedulePlan* plan) {
-  Rect pixels = intersect(requested, {0, 0, width, height});
-  out.pixels = pixels;
-  out.image = Image(pixels.width(), pixels.height());
-  out.rays = {};
-  out.kernel_ms = 0;
-  out.cost = {};
-  auto t0 = std::chrono::steady_clock::now();
-  if (pixels.empty()) {
-    out.rendering_ms = 0;
-    return;
-  }
-  const int pw = layout.w, ph = layout.h;
-  Rect packets{pixels.x0 / pw, pixels.y0 / ph, (pixels.x1 + pw - 1) / pw, (pixels.y1 + ph - 1) / ph};
-  out.cost.packets = packets;
-  out.cost.cost.assign(size_t(packets.area()), 0);
-
-  const PrimaryCamera cam(camera, origin, width, height);
-  float ao_dist = cfg.ao_distance > 0 ? cfg.ao_distance : 0.1f * extent;
-  const double ns_per_tick = 1e6 / tsc_khz();
-  const float exposure = env.exposure;
-  const bool linear = env.linear;
-  const SrgbEncodeLut& enc = srgb_encode_lut();
-
-  // Renders the packets [x0, x1) x [y0, y1) of the task, counting rays into rc.
-  auto render_block = [&](int y0, int y1, int x0, int x1, RayCounts& rc) {
-    Kernel<N, F> k{*this, cfg, rc, ao_dist};
-    for (int py = y0; py != y1; ++py)
-      for (int px = x0; px != x1; ++px) {
-        uint64_t c0 = cfg.cost_map ? __rdtsc() : 0;
-        Lanes<N> lanes;
-        int xs[N], ys[N];
-        for (int i = 0; i < N; ++i) {
-          int x = px * pw + i % pw, y = py * ph + i / pw;
-          xs[i] = x; ys[i] = y;
-          lanes.set(i, cam.origin, cam.direction(x, y), 1.0f);
-          lanes.valid[i] = pixels.contains(x, y) ? -1 : 0;
-        }
-        Colors<N> c;
-        k.trace(lanes, 0, c, true);
-        for (int i = 0; i < N; ++i) {
-          if (!lanes.valid[i]) continue;
-          uint8_t* p = out.image.pixel(xs[i] - pixels.x0, ys[i] - pixels.y0);
-          float r_ = c.r[i] * exposure, g_ = c.g[i] * exposure, b_ = c.b[i] * exposure;
-          if (linear) { p[0] = encode_srgb(r_, enc); p[1] = encode_srgb(g_, enc); p[2] = encode_srgb(b_, enc); }
-          else { p[0] = encode_linear(r_); p[1] = encode_linear(g_); p[2] = encode_linear(b_); }
-          p[3] = 255;
-        }
-        if (cfg.cost_map) {
-          uint64_t ticks = __rdtsc() - c0;
-          double ns = double(ticks) * ns_per_tick;
-          out.cost.cost[size_t(py - packets.y0) * packets.width() + size_t(px - packets.x0)] =
-              uint32_t(std::fmin(ns, 4294967295.0));
-        }
-      }
-  };
-  if (!plan || plan->schedule == ThreadSchedule::work_stealing) {
-    tbb::combinable<RayCounts> counts;
-    tbb::parallel_for(tbb::blocked_range2d<int>(packets.y0, packets.y1, 1, packets.x0, packets.x1, 8),
-                      [&](const tbb::blocked_range2d<int>& r) {
-                        render_block(r.rows().begin(), r.rows().end(), r.cols().begin(), r.cols().end(), counts.local());
-                      });
-    out.rays = counts.combine([](const RayCounts& a, const RayCounts& b) { RayCounts s = a; s += b; return s; });
-  } else {
-    // One std::thread per worker (the calling thread is worker 0); each counts its own rays.
-    const bool tiles = plan->schedule == ThreadSchedule::static_tiles;
-    const size_t workers = tiles ? plan->tiles->size() : size_t(plan->threads);
-    if (tiles) {  // the tiles must cover the task's packets exactly once
-      int64_t covered = 0;
-      for (size_t i = 0; i < workers; ++i) {
-        Rect a = intersect((*plan->tiles)[i], packets);
-        covered += a.area();
-        for (size_t j = 0; j < i; ++j)
-          if (!intersect(a, intersect((*plan->tiles)[j], packets)).empty())
-            throw std::invalid_argument("static tiles overlap");
-      }
-      if (covered != packets.area()) throw std::invalid_argument("static tiles do not cover the task");
-    }
-    std::vector<RayCounts> rc(workers);
-    std::atomic<int> next_row{packets.y0};
-    auto work = [&](size_t w) {
-      if (tiles) {
-        Rect t = intersect((*plan->tiles)[w], packets);
-        if (!t.empty()) render_block(t.y0, t.y1, t.x0, t.x1, rc[w]);
-      } else {
-        for (int py; (py = next_row.fetch_add(1, std::memory_order_relaxed)) < packets.y1;)
-          render_block(py, py + 1, packets.x0, packets.x1, rc[w]);
-      }
-    };
-    std::vector<std::thread> pool;
-    pool.reserve(workers);
-    for (size_t w = 1; w < workers; ++w) pool.emplace_back(work, w);
-    if (workers > 0) work(0);
-    for (std::thread& t : pool) t.join();
-    for (const RayCounts& c : rc) out.rays += c;
-  }
-  out.rendering_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-  if (cfg.cost_map) out.kernel_ms = double(out.cost.total()) * 1e-6;
-  else out.cost = {};
-}
-
-template <int N>
-double RayTracer::Impl::trace_primary(const Rect& requested, uint64_t* rays) {
-  Rect pixels = intersect(requested, {0, 0, width, height});
-  if (rays) *rays = 0;
-  if (pixels.empty()) return 0;
-  const int pw = layout.w, ph = layout.h;
-  Rect packets{pixels.x0 / pw, pixels.y0 / ph, (pixels.x1 + pw - 1) / pw, (pixels.y1 + ph - 1) / ph};
-  const PrimaryCamera cam(camera, origin, width, height);
-  tbb::combinable<uint64_t> count;
-  auto t0 = std::chrono::steady_clock::now();
-  tbb::parallel_for(tbb::blocked_range2d<int>(packets.y0, packets.y1, 1, packets.x0, packets.x1, 8),
-                    [&](const tbb::blocked_range2d<int>& r) {
-                      uint64_t& n = count.local();
-                      for (int py = r.rows().begin(); py != r.rows().end(); ++py)
-                        for (int px = r.cols().begin(); px != r.cols().end(); ++px) {
-                          alignas(64) typename Packet<N>::RayHit rh;
-                          alignas(64) int valid[N];  // Embree needs the mask aligned to the packet width
-                          for (int i = 0; i < N; ++i) {
-                            int x = px * pw + i % pw, y = py * ph + i / pw;
-                            valid[i] = pixels.contains(x, y) ? -1 : 0;
-                            Vec3 d = cam.direction(x, y);
-                            rh.ray.org_x[i] = cam.origin.x; rh.ray.org_y[i] = cam.origin.y; rh.ray.org_z[i] = cam.origin.z;
-                            rh.ray.dir_x[i] = d.x; rh.ray.dir_y[i] = d.y; rh.ray.dir_z[i] = d.z;
-                            rh.ray.tnear[i] = 0; rh.ray.tfar[i] = std::numeric_limits<float>::infinity();
-                            rh.ray.time[i] = 0; rh.ray.mask[i] = 0xFFFFFFFFu; rh.ray.id[i] = 0; rh.ray.flags[i] = 0;
-                            rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
-                            rh.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;  // required with instancing
-                            n += valid[i] != 0;
-                          }
-                          RTCIntersectContext ctx;
-                          rtcInitIntersectContext(&ctx);
-                          ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
-                          Packet<N>::intersect(valid, top, &ctx, &rh);
-                        }
-                    });
-  double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-  if (rays) *rays = count.combine([](uint64_t a, uint64_t b) { return a + b; });
-  return ms;
-}
+#pragma GCC push_options
+#pragma GCC target("avx512f,avx512vl,avx512dq,avx512bw,avx512cd,avx2,fma,bmi,bmi2,lzcnt,popcnt,f16c")
+namespace isa_avx512 {
+#include "renderer/raytracer_kernel.inc"
+}  // namespace isa_avx512
+#pragma GCC pop_options
+#pragma GCC pop_options
 
 // ---------------------------------------------------------------------------------------
 // Public interface
@@ -1091,25 +655,31 @@ SceneFeatures RayTracer::features() const { return impl_->features; }
 float RayTracer::scene_extent() const { return impl_->extent; }
 RayTracer::SyncStats RayTracer::last_sync() const { return impl_->stats; }
 
-// Calls f with the packet width as a compile-time constant.
-template <class F>
-static decltype(auto) dispatch_width(int rays_per_packet, F&& f) {
-  switch (rays_per_packet) {
-    case 16: return f(std::integral_constant<int, 16>{});
-    case 8: return f(std::integral_constant<int, 8>{});
-    default: return f(std::integral_constant<int, 4>{});
+template <unsigned F>
+static void render_dispatch(const RayTracer::Impl& impl, const Rect& pixels, const RenderSettings& settings,
+                            TaskResult& out, const RayTracer::Impl::SchedulePlan* plan = nullptr) {
+  switch (impl.layout.size()) {
+    case 16:
+      if (cpu_avx512()) return isa_avx512::render_task<16, F>(impl, pixels, settings, out, plan);
+      return isa_sse::render_task<16, F>(impl, pixels, settings, out, plan);
+    case 8:
+      if (cpu_avx2()) return isa_avx2::render_task<8, F>(impl, pixels, settings, out, plan);
+      return isa_sse::render_task<8, F>(impl, pixels, settings, out, plan);
+    default:
+      return isa_sse::render_task<4, F>(impl, pixels, settings, out, plan);
   }
 }
 
+
 void RayTracer::render(const Rect& pixels, const RenderSettings& settings, TaskResult& out) {
-  dispatch_width(impl_->layout.size(), [&](auto n) { impl_->render_task<decltype(n)::value, kAll>(pixels, settings, out); });
+  render_dispatch<kAll>(*impl_, pixels, settings, out);
 }
 
 void RayTracer::render_specialised(const Rect& pixels, const RenderSettings& settings, TaskResult& out) {
   const SceneFeatures& f = impl_->features;
   if (f.secondary || f.textures || f.alpha_masks || settings.ao_samples > 0)
     throw std::invalid_argument("the specialised kernel renders only scenes without AO, secondary rays, textures and alpha masks");
-  dispatch_width(impl_->layout.size(), [&](auto n) { impl_->render_task<decltype(n)::value, kNone>(pixels, settings, out); });
+  render_dispatch<kNone>(*impl_, pixels, settings, out);
 }
 
 const char* schedule_name(ThreadSchedule s) {
@@ -1127,12 +697,17 @@ void RayTracer::render_scheduled(const Rect& pixels, const RenderSettings& setti
   if (schedule == ThreadSchedule::shared_queue && threads < 1)
     throw std::invalid_argument("shared_queue needs at least one thread");
   const Impl::SchedulePlan plan{schedule, &tiles, threads};
-  dispatch_width(impl_->layout.size(),
-                 [&](auto n) { impl_->render_task<decltype(n)::value, kAll>(pixels, settings, out, &plan); });
+  render_dispatch<kAll>(*impl_, pixels, settings, out, &plan);
 }
 
 double RayTracer::trace_primary_only(const Rect& pixels, uint64_t* rays) {
-  return dispatch_width(impl_->layout.size(), [&](auto n) { return impl_->trace_primary<decltype(n)::value>(pixels, rays); });
+  // The same instruction set as the shading kernel, so the comparison is like for like.
+  const RayTracer::Impl& impl = *impl_;
+  switch (impl.layout.size()) {
+    case 16: return cpu_avx512() ? isa_avx512::trace_primary<16>(impl, pixels, rays) : isa_sse::trace_primary<16>(impl, pixels, rays);
+    case 8: return cpu_avx2() ? isa_avx2::trace_primary<8>(impl, pixels, rays) : isa_sse::trace_primary<8>(impl, pixels, rays);
+    default: return isa_sse::trace_primary<4>(impl, pixels, rays);
+  }
 }
 
 }  // namespace tessera

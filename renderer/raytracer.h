@@ -19,6 +19,7 @@ struct SceneFeatures {
 
 // The packet layout for the widest ISA this CPU and Embree both support natively.
 PacketLayout detect_packet_layout();
+// The instruction set of the kernel copy that runs packets of this size, and the size.
 const char* isa_name(PacketLayout p);
 // The time-stamp counter's frequency in kHz (read from the kernel or calibrated once).
 double tsc_khz();

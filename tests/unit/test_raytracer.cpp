@@ -639,6 +639,9 @@ TEST_CASE("a sub-rectangle renders exactly the same pixels as the full image", "
   CHECK(tiled.rgba == full.image.rgba);
 }
 
+// Each layout runs its own copy of the kernel where the CPU has the instruction set (2x2:
+// SSE2, 4x2: AVX2, 4x4: AVX-512), with vector loops for packets that hit one instance and
+// lane-by-lane code for mixed ones: all of them must agree to the byte.
 TEST_CASE("packet layouts 2x2, 4x2 and 4x4 give identical images", "[raytracer][packets]") {
   const int W = 61, H = 37;
   Scene scene = busy_scene(W, H);
