@@ -144,12 +144,6 @@ inline uint8_t encode_srgb(float c, const SrgbEncodeLut& lut) {
 }
 inline uint8_t encode_linear(float c) { return uint8_t(std::fmin(std::fmax(c, 0.0f), 1.0f) * 255.0f + 0.5f); }
 
-inline float smoothstep(float e0, float e1, float x) {
-  if (e1 <= e0) return x >= e0 ? 1.0f : 0.0f;
-  float t = std::fmin(std::fmax((x - e0) / (e1 - e0), 0.0f), 1.0f);
-  return t * t * (3 - 2 * t);
-}
-
 // Integer hash for per-pixel sample rotations (deterministic per frame).
 inline uint32_t hash32(uint32_t x) {
   x ^= x >> 16; x *= 0x7feb352dU; x ^= x >> 15; x *= 0x846ca68bU; x ^= x >> 16;
@@ -226,7 +220,6 @@ struct RayTracer::Impl {
   std::vector<Material> materials;  // [0] = the default material
   std::vector<const Tex*> mat_diffuse_tex, mat_specular_tex, mat_emissive_tex;
   std::map<Id, int> material_index;
-  std::vector<Light> lights;
   // What the shading kernel reads per lane and per light, prepared once per sync.
   struct ShadeMat {
     Vec3 diffuse, specular, emissive;
@@ -553,17 +546,13 @@ void RayTracer::Impl::sync(const Scene& scene, std::vector<std::string>& warning
   extent = insts.empty() ? 1.0f : length(Vec3{b.upper_x - b.lower_x, b.upper_y - b.lower_y, b.upper_z - b.lower_z});
   if (!(extent > 0) || !std::isfinite(extent)) extent = 1.0f;
 
-  lights.clear();
+  light_consts.clear();
   for (auto& [id, e] : scene.lights()) {
     Light l = e.value;
     if (!l.on || !finite(l.position) || !finite(l.direction) || !finite(l.color) || !std::isfinite(l.intensity)) continue;
     l.position = l.position - origin;
     l.direction = normalize(l.direction);
     if (l.type != Light::Type::point && length(l.direction) == 0) continue;
-    lights.push_back(l);
-  }
-  light_consts.clear();
-  for (const Light& l : lights) {
     LightConst c;
     c.type = l.type;
     c.position = l.position;
@@ -600,7 +589,7 @@ void RayTracer::Impl::sync(const Scene& scene, std::vector<std::string>& warning
   height = scene.height();
 
   features = {};
-  features.lights = !lights.empty();
+  features.lights = !light_consts.empty();
   for (auto& [id, inst] : insts) {
     const Material& m = materials[inst.material];
     if (m.reflection > 0 || m.refraction > 0 || (m.opacity < 1 && !m.alpha_mask)) features.secondary = true;
