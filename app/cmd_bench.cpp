@@ -132,14 +132,19 @@ int run(const std::vector<std::string>& argv) {
     sync();
     // With a same-run comparison, odd frames render the comparison first so that neither
     // side always pays for the first touch after a camera change.
-    bool alternate = (compare == "specialised" || compare == "costmap") && (f % 2 == 1);
-    TaskResult pre;
-    if (alternate) {
+    // specialised and costmap compare against the same frame rendered another way.
+    const bool against_variant = compare == "specialised" || compare == "costmap";
+    auto variant = [&] {
+      TaskResult t;
       RenderSettings off = settings;
       off.cost_map = false;
-      if (compare == "specialised") rt.render_specialised(full, settings, pre);
-      else rt.render(full, off, pre);
-    }
+      if (compare == "specialised") rt.render_specialised(full, settings, t);
+      else rt.render(full, off, t);
+      return t;
+    };
+    const bool alternate = against_variant && (f % 2 == 1);
+    TaskResult pre;
+    if (alternate) pre = variant();
     TaskResult r;
     rt.render(full, settings, r);
     kernel.push_back(r.kernel_ms);
@@ -169,22 +174,15 @@ int run(const std::vector<std::string>& argv) {
       cmp_ratio.push_back(bare > 0 ? ours / bare : 0);
       std::printf(", \"bare_ms\": %.3f, \"bare_mrays_per_s\": %.3f, \"primary_mrays_per_s\": %.3f, \"ours_over_bare\": %.4f", ms, bare,
                   ours, cmp_ratio.back());
-    } else if (compare == "specialised") {
-      TaskResult s = pre;
-      if (!alternate) rt.render_specialised(full, settings, s);
-      best(r.rendering_ms, s.rendering_ms, [&] { TaskResult t; rt.render_specialised(full, settings, t); return t.rendering_ms; });
-      cmp_ms.push_back(s.rendering_ms);
-      cmp_ratio.push_back(s.rendering_ms > 0 ? r.rendering_ms / s.rendering_ms : 0);
-      std::printf(", \"specialised_rendering_ms\": %.3f, \"general_over_specialised\": %.4f", s.rendering_ms, cmp_ratio.back());
-    } else if (compare == "costmap") {
-      RenderSettings off = settings;
-      off.cost_map = false;
-      TaskResult s = pre;
-      if (!alternate) rt.render(full, off, s);
-      best(r.rendering_ms, s.rendering_ms, [&] { TaskResult t; rt.render(full, off, t); return t.rendering_ms; });
-      cmp_ms.push_back(s.rendering_ms);
-      cmp_ratio.push_back(s.rendering_ms > 0 ? r.rendering_ms / s.rendering_ms : 0);
-      std::printf(", \"no_costmap_rendering_ms\": %.3f, \"with_over_without\": %.4f", s.rendering_ms, cmp_ratio.back());
+    } else if (against_variant) {
+      TaskResult v = alternate ? pre : variant();
+      best(r.rendering_ms, v.rendering_ms, [&] { return variant().rendering_ms; });
+      cmp_ms.push_back(v.rendering_ms);
+      cmp_ratio.push_back(v.rendering_ms > 0 ? r.rendering_ms / v.rendering_ms : 0);
+      if (compare == "specialised")
+        std::printf(", \"specialised_rendering_ms\": %.3f, \"general_over_specialised\": %.4f", v.rendering_ms, cmp_ratio.back());
+      else
+        std::printf(", \"no_costmap_rendering_ms\": %.3f, \"with_over_without\": %.4f", v.rendering_ms, cmp_ratio.back());
     } else if (compare == "breakdown") {
       // Marginal throughput: each configuration adds one kind of ray to the previous one.
       RenderSettings c = settings;

@@ -186,3 +186,17 @@ TEST_CASE("tessera locality: one line per frame, thread count and node count, gr
   CHECK(r.lines[12]["summary"] == true);
   CHECK(run_tessera("locality --scene " + kScene + "/scene.gltf --camera-loop " + kScene + "/camera-loop.json --nodes 0").rc != 0);
 }
+
+TEST_CASE("tessera bench --reps: best-of-R comparisons, bad counts rejected", "[bench]") {
+  Run r = run_tessera("bench " + base_args() + " --compare costmap --reps 2");
+  REQUIRE(r.rc == 0);
+  REQUIRE(!r.lines.empty());
+  const json& summary = r.lines.back();
+  CHECK(summary.at("summary") == true);
+  CHECK(summary.at("reps") == 2);
+  CHECK(summary.at("compare_ratio").get<double>() > 0);
+  for (const char* bad : {"--reps 0", "--reps 101", "--reps x"}) {
+    INFO(bad);
+    CHECK(run_tessera("bench " + base_args() + " --compare bare " + bad).rc != 0);
+  }
+}

@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <tuple>
 
 #include "renderer/raytracer.h"
 #include "scene_builders.h"
@@ -637,6 +638,28 @@ TEST_CASE("a sub-rectangle renders exactly the same pixels as the full image", "
       blit(tiled, r.image, r.pixels.x0, r.pixels.y0);
     }
   CHECK(tiled.rgba == full.image.rgba);
+}
+
+TEST_CASE("textures with inconsistent or oversized dimensions are ignored with a warning", "[raytracer][textures]") {
+  const int W = 32, H = 24;
+  for (auto [w, h, texels] : {std::tuple<int32_t, int32_t, size_t>{4, 4, 15}, {1 << 16, 1 << 15, 0}, {0, 4, 0}, {-4, 4, 16}}) {
+    Scene scene = busy_scene(W, H);
+    Texture bad;
+    bad.width = w;
+    bad.height = h;
+    bad.rgba.assign(texels * 4, 200);
+    scene.set_texture(1, bad);  // the alpha-masked leaf's texture
+    RayTracer rt;
+    std::vector<std::string> warnings;
+    rt.sync(scene, warnings);
+    INFO("texture " << w << "x" << h << " with " << texels << " texels");
+    REQUIRE(warnings.size() == 1);
+    CHECK(warnings[0].find("texture 1") != std::string::npos);
+    CHECK(rt.features().alpha_masks);  // the mask filter stays; it finds no texture to sample
+    TaskResult r;
+    rt.render({0, 0, W, H}, busy_settings(), r);
+    CHECK(r.image.width == W);
+  }
 }
 
 // Each layout runs its own copy of the kernel where the CPU has the instruction set (2x2:
