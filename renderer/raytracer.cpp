@@ -408,6 +408,7 @@ void RayTracer::Impl::sync(const Scene& scene, std::vector<std::string>& warning
       warnings.push_back("texture " + std::to_string(id) + " has an inconsistent or too large size; ignored");
       t = Tex{};
       t.version = e.version;
+      t.decoded = decode;  // warned once: not again at every sync
       continue;
     }
     t.w = src.width; t.h = src.height;

@@ -642,8 +642,12 @@ TEST_CASE("a sub-rectangle renders exactly the same pixels as the full image", "
 
 TEST_CASE("textures with inconsistent or oversized dimensions are ignored with a warning", "[raytracer][textures]") {
   const int W = 32, H = 24;
-  for (auto [w, h, texels] : {std::tuple<int32_t, int32_t, size_t>{4, 4, 15}, {1 << 16, 1 << 15, 0}, {0, 4, 0}, {-4, 4, 16}}) {
+  for (auto [w, h, texels] : {std::tuple<int32_t, int32_t, size_t>{4, 4, 15}, {1 << 16, 1 << 15, 0}, {0, 4, 0}, {-4, 4, 16}})
+  for (bool linear : {false, true}) {  // linear: sRGB textures are decoded when synced
     Scene scene = busy_scene(W, H);
+    Environment env = scene.environment();
+    env.linear = linear;
+    scene.set_environment(env);
     Texture bad;
     bad.width = w;
     bad.height = h;
@@ -652,10 +656,12 @@ TEST_CASE("textures with inconsistent or oversized dimensions are ignored with a
     RayTracer rt;
     std::vector<std::string> warnings;
     rt.sync(scene, warnings);
-    INFO("texture " << w << "x" << h << " with " << texels << " texels");
+    INFO("texture " << w << "x" << h << " with " << texels << " texels, linear " << linear);
     REQUIRE(warnings.size() == 1);
     CHECK(warnings[0].find("texture 1") != std::string::npos);
     CHECK(rt.features().alpha_masks);  // the mask filter stays; it finds no texture to sample
+    rt.sync(scene, warnings);
+    CHECK(warnings.size() == 1);  // an unchanged bad texture is not reported again
     TaskResult r;
     rt.render({0, 0, W, H}, busy_settings(), r);
     CHECK(r.image.width == W);
