@@ -97,6 +97,12 @@ struct worker_state {
   std::vector<std::pair<std::vector<uint8_t>, bool>> cached;  // updates that arrived while rendering
   bool in_flight = false;
   std::string broken;  // an update this node could not apply: its tiles would be wrong
+  // A parent that adopts this worker (the open's reply reached it in time) sends it an empty
+  // update at once, then the scene; one whose open request timed out never will (see the
+  // tick handler).
+  bool adopted = false;
+  std::chrono::steady_clock::time_point opened_at = std::chrono::steady_clock::now();
+  bool committed = false;  // the first node list (for the open reply) was committed
   renderer_actor renderer;
   Router router;
   static inline const char* name = "tessera.worker";
@@ -172,6 +178,8 @@ worker_actor::behavior_type worker_impl(worker_ptr self, std::shared_ptr<const N
   return {
       [=](update_atom, std::vector<uint8_t>& bytes, bool reset) {
         auto& st = self->state;
+        st.adopted = true;
+        if (bytes.empty() && !reset) return;  // the parent's notice that it adopted this worker
         st.router.forward(self, bytes, reset);
         if (st.in_flight) st.cached.emplace_back(std::move(bytes), reset);
         else worker_apply(self, bytes, reset);
@@ -211,12 +219,30 @@ worker_actor::behavior_type worker_impl(worker_ptr self, std::shared_ptr<const N
         return rp;
       },
       [=](nodes_atom) -> caf::result<std::vector<NodeInfo>> {
+        auto& st = self->state;
         auto rp = self->make_response_promise<std::vector<NodeInfo>>();
-        self->state.router.commit(self, self->state.settings->task_timeout_ms,
-                                  [rp](std::vector<NodeInfo> l) mutable { rp.deliver(std::move(l)); });
+        // The first list (the open reply) waits for the children being opened; the parent's
+        // later commits do not (router.h, commit).
+        const bool first = !st.committed;
+        st.committed = true;
+        st.router.commit(
+            self, st.settings->task_timeout_ms, [rp](std::vector<NodeInfo> l) mutable { rp.deliver(std::move(l)); },
+            first);
         return rp;
       },
       [=](tick_atom) {
+        auto& st = self->state;
+        // An orphan: the open request reached this node after its parent had given up on it
+        // (a link that was cut and came back delivers the requests it held), so the reply was
+        // dropped and nobody will ever use this worker. It would live as long as the session.
+        // The parent's timeout has passed since this worker was opened; one more is allowed
+        // for its adoption notice (an empty update, sent before the scene) to arrive.
+        if (!st.adopted && st.req.timeout_ms > 0 &&
+            std::chrono::steady_clock::now() - st.opened_at > std::chrono::milliseconds(2 * uint64_t(st.req.timeout_ms))) {
+          worker_log(self, "\"orphaned\": true");
+          self->quit(caf::exit_reason::user_shutdown);
+          return;
+        }
         join();
         self->delayed_send(self, std::chrono::milliseconds(self->state.settings->reconnect_ms), tick_atom::value);
       },

@@ -6,13 +6,17 @@
 //   node_actor   (one per process, published)
 //     open      -> a worker for one session on this node's sub-tree, with its flattened
 //                  node list (renderer coefficients of every rendering node below, this node
-//                  first if it renders); recursive: the worker opens workers on the children
+//                  first if it renders); recursive: the worker opens workers on the children.
+//                  The request says how long the parent waits (OpenRequest::timeout_ms): a
+//                  worker that gets no update within twice that was opened after its parent
+//                  gave up (a cut link delivering what it held) and ends itself ("orphaned").
 //     links     -> the children this node is connected to now (used by its own workers to
 //                  notice children that came back)
 //   worker_actor (one per session per node)
 //     update    -> encoded client-protocol scene records (net/scene_records.h); reset=true
 //                  replaces the whole scene (a node that joins a running session). Applied at
 //                  once, or cached while this node renders, and forwarded to the children.
+//                  Empty and reset=false: the parent adopted this worker (its first message).
 //     render    -> BatchReply: renders its own task, relays the others, validates what the
 //                  children return, fails the tasks of a child that is down or too late.
 //     nodes     -> commits membership changes (dead children out, rejoined children in) and

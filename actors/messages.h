@@ -235,10 +235,11 @@ struct OpenRequest {
   uint64_t session = 0;
   std::string master;        // for log lines
   int32_t packet_w = 4, packet_h = 4;  // the master's packet layout (one packet space per cluster)
+  uint32_t timeout_ms = 0;   // how long the parent waits for the reply (0: not said)
 };
 template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, OpenRequest& x) {
-  return f(caf::meta::type_name("tessera::open_request"), x.session, x.master, x.packet_w, x.packet_h);
+  return f(caf::meta::type_name("tessera::open_request"), x.session, x.master, x.packet_w, x.packet_h, x.timeout_ms);
 }
 struct OpenReply {
   caf::actor worker;            // a worker_actor

@@ -95,7 +95,7 @@ class Router {
       if (c.routed) out.insert(out.end(), c.nodes.begin(), c.nodes.end());
     return out;
   }
-  bool busy() const { return opening_ > 0 || committing_; }
+  bool committing() const { return committing_; }
   size_t alive_children() const {
     size_t n = 0;
     for (auto& c : children) n += c.alive;
@@ -230,11 +230,17 @@ class Router {
   }
 
   // Commits membership: dead children leave, joined children enter, and every live child
-  // commits its own sub-tree; `done` gets the new flattened list. Waits for joins in flight.
+  // commits its own sub-tree; `done` gets the new flattened list. Waits for a commit in
+  // flight, and with wait_joins for the joins in flight too (the first list of a session or
+  // worker should have its children). Later commits must not: a child that is cut off but
+  // still connected has a join in flight almost always (each lasting the timeout, retried
+  // every reconnect period), so every frame would wait for it. A join that completes sets
+  // `changed`, and the next commit takes it in.
   template <class Self>
-  void commit(Self* self, uint32_t timeout_ms, std::function<void(std::vector<NodeInfo>)> done) {
-    if (busy()) {
-      after_.push_back([=] { commit(self, timeout_ms, done); });
+  void commit(Self* self, uint32_t timeout_ms, std::function<void(std::vector<NodeInfo>)> done,
+              bool wait_joins = true) {
+    if (committing_ || (wait_joins && opening_ > 0)) {
+      after_.push_back([=] { commit(self, timeout_ms, done, wait_joins); });
       return;
     }
     std::vector<RouterChild> keep;
@@ -290,6 +296,8 @@ class Router {
   void join_children(Self* self, const node_actor& node, const OpenRequest& req, uint32_t timeout_ms,
                      std::function<std::vector<std::pair<std::vector<uint8_t>, bool>>()> snapshot) {
     if (!node) return;
+    OpenRequest open = req;
+    open.timeout_ms = timeout_ms;  // a worker opened later than that is an orphan (cluster.cpp)
     ++opening_;
     self->request(node, std::chrono::milliseconds(timeout_ms), links_atom::value)
         .then(
@@ -302,13 +310,16 @@ class Router {
                 ++opening_;
                 const std::string name = l.name;
                 self->request(caf::actor_cast<node_actor>(l.node), std::chrono::milliseconds(timeout_ms),
-                              open_atom::value, req)
+                              open_atom::value, open)
                     .then(
                         [=](OpenReply& r) {
                           joining_.erase(name);
                           auto w = caf::actor_cast<worker_actor>(r.worker);
                           if (w) {
                             self->monitor(w);
+                            // First an empty update, the worker's sign that it was adopted: it
+                            // arrives at once, however long the scene takes (cluster.cpp).
+                            self->send(w, update_atom::value, std::vector<uint8_t>{}, false);
                             for (auto& [bytes, reset] : snapshot()) self->send(w, update_atom::value, bytes, reset);
                             RouterChild c;
                             c.name = name;
@@ -369,8 +380,10 @@ class Router {
   void opened() {
     if (--opening_ == 0) run_after();
   }
+  // Runs what waited for the router to be idle (a commit that waits for joins defers itself
+  // again while joins are in flight).
   void run_after() {
-    if (busy()) return;
+    if (committing_) return;
     auto a = std::move(after_);
     after_.clear();
     for (auto& f : a) f();

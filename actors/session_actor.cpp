@@ -178,12 +178,19 @@ void start_frame(self_ptr self, uint32_t client_frame) {
   st.meta.dropped = st.dropped;  // for the display channel's Stats record
   st.meta.scene_bytes = scene_bytes(*st.scene);
   st.meta.triangles = st.scene->triangle_count();
-  // Membership changes (lost nodes, nodes that joined) are committed between frames only.
-  if (!st.committed || st.router.changed || st.router.busy()) {
-    st.router.commit(self, st.settings->task_timeout_ms, [self](std::vector<NodeInfo> nodes) {
-      on_nodes(self, std::move(nodes));
-      render_batch(self);
-    });
+  // Membership changes (lost nodes, nodes that joined) are committed between frames only,
+  // without waiting for joins in flight (router.h, commit) once the session has its first
+  // list: before that (a render request in the handshake's message), the frame waits, after
+  // the handshake's commit, so that the reply still comes first.
+  if (!st.committed || st.router.changed || st.router.committing()) {
+    const bool first = !st.committed;
+    st.router.commit(
+        self, st.settings->task_timeout_ms,
+        [self](std::vector<NodeInfo> nodes) {
+          on_nodes(self, std::move(nodes));
+          render_batch(self);
+        },
+        /*wait_joins=*/first);
     return;
   }
   render_batch(self);

@@ -6,7 +6,9 @@
 #include <caf/test/dsl.hpp>
 #include <caf/test/unit_test_impl.hpp>
 
+#include <chrono>
 #include <memory>
+#include <thread>
 
 #include <cmath>
 
@@ -37,7 +39,9 @@ struct FakeLog {
 // A worker that answers (or not) as its mode says; one node named `name`.
 worker_actor::behavior_type fake_worker(worker_actor::pointer self, Mode mode, std::shared_ptr<FakeLog> log) {
   return {
-      [=](update_atom, std::vector<uint8_t>&, bool) { log->updates++; },
+      [=](update_atom, std::vector<uint8_t>& bytes, bool reset) {
+        if (!bytes.empty() || reset) log->updates++;  // not the adoption notice
+      },
       [=](render_atom, RenderBatch& b) -> caf::result<BatchReply> {
         log->batches.push_back(b);
         if (mode == Mode::hang) {
@@ -80,6 +84,19 @@ node_actor::behavior_type fake_node(node_actor::pointer self, Mode mode, std::sh
       [=](open_atom, const OpenRequest&) {
         *last = self->spawn<caf::linked>(fake_worker, mode, log);  // ends with its node
         return OpenReply{caf::actor_cast<caf::actor>(*last), {NodeInfo{"fake", 1, 1.0}}};
+      },
+      [=](links_atom) { return std::vector<ChildLink>{}; },
+      [=](tick_atom) {},
+  };
+}
+
+// A node that is connected but never answers an open: its link was cut and the connection has
+// not noticed (the requests wait in the socket).
+node_actor::behavior_type deaf_node(node_actor::pointer self, std::shared_ptr<FakeLog> log) {
+  return {
+      [=](open_atom, const OpenRequest&) -> caf::result<OpenReply> {
+        log->held.push_back(self->make_response_promise());
+        return caf::delegated<OpenReply>{};
       },
       [=](links_atom) { return std::vector<ChildLink>{}; },
       [=](tick_atom) {},
@@ -255,6 +272,52 @@ CAF_TEST(a child that claims an impossible node list is dropped and the master r
   sched.run();
   CAF_CHECK_EQUAL(frames_sent(), std::vector<uint32_t>{1});
   CAF_CHECK(log->batches.empty());
+}
+
+CAF_TEST(frames do not wait for a child whose opens are never answered) {
+  auto log = std::make_shared<FakeLog>(), deaf = std::make_shared<FakeLog>();
+  auto last = std::make_shared<worker_actor>();
+  add_child("slow:2", caf::actor_cast<caf::actor>(sys.spawn(fake_node, Mode::straggler, log, last)));
+  add_child("deaf:1", caf::actor_cast<caf::actor>(sys.spawn(deaf_node, deaf)));
+  settings->reconnect_ms = 60000;  // retries only when the test sends a tick
+  start();
+  // The handshake waits for the first joins, the deaf one until its timeout.
+  CAF_CHECK(sink->all<HandshakeReply>().empty());
+  sched.advance_time(std::chrono::milliseconds(settings->task_timeout_ms));
+  sched.run();
+  auto replies = sink->all<HandshakeReply>();
+  CAF_REQUIRE_EQUAL(replies.size(), 1u);
+  CAF_CHECK_EQUAL(replies[0].nodes, 2u);  // this node and slow:2
+  CAF_CHECK_EQUAL(logged("\"join_failed\": \"deaf:1\""), 1u);
+  // The session retries it every reconnect period; each attempt waits for the timeout. Frames
+  // meanwhile must not wait for the attempt in flight (they did, a timeout per frame).
+  self->send(session, tick_atom::value);
+  sched.run();
+  CAF_REQUIRE_EQUAL(deaf->held.size(), 2u);
+  for (uint32_t f = 1; f <= 2; ++f) {
+    request_frame(f);
+    sched.run();
+  }
+  CAF_CHECK_EQUAL(frames_sent(), (std::vector<uint32_t>{1, 2}));
+  CAF_CHECK_EQUAL(logged("\"join_failed\": \"deaf:1\""), 1u);  // still in flight
+  CAF_CHECK_EQUAL(sink->all<ErrorReply>().size(), 0u);
+}
+
+CAF_TEST(a worker whose parent gave up on its open ends itself after twice the timeout of its parent) {
+  OpenRequest req{7, "master", 2, 2};
+  req.timeout_ms = 1;
+  auto orphan = spawn_worker(sys, settings, node_actor{}, req, caf::actor_cast<caf::strong_actor_ptr>(self));
+  auto adopted = spawn_worker(sys, settings, node_actor{}, req, caf::actor_cast<caf::strong_actor_ptr>(self));
+  sched.run();
+  self->send(adopted, update_atom::value, std::vector<uint8_t>{}, false);  // the adoption notice
+  sched.run();
+  std::this_thread::sleep_for(std::chrono::milliseconds(5));  // past 2 x 1 ms (a real clock)
+  self->send(orphan, tick_atom::value);
+  self->send(adopted, tick_atom::value);
+  sched.run();
+  CAF_CHECK_EQUAL(logged("\"orphaned\": true"), 1u);
+  self->send_exit(adopted, caf::exit_reason::user_shutdown);
+  sched.run();
 }
 
 CAF_TEST_FIXTURE_SCOPE_END()
