@@ -133,11 +133,16 @@ Material convert_material(const tinygltf::Material& gm, const std::map<int, Id>&
   Vec3 base{float(pbr.baseColorFactor[0]), float(pbr.baseColorFactor[1]), float(pbr.baseColorFactor[2])};
   float alpha = float(pbr.baseColorFactor[3]);
   float metallic = float(pbr.metallicFactor), rough = float(pbr.roughnessFactor);
-  if (pbr.baseColorTexture.index >= 0) {
-    auto it = texture_ids.find(pbr.baseColorTexture.index);
-    if (it != texture_ids.end()) mat.diffuse_texture = it->second;
-    else warnings.push_back(file + ": material '" + gm.name + "' references missing texture " + std::to_string(pbr.baseColorTexture.index));
-  }
+  auto texture = [&](int index, Id& slot) {
+    if (index < 0) return;
+    auto it = texture_ids.find(index);
+    if (it != texture_ids.end()) slot = it->second;
+    else warnings.push_back(file + ": material '" + gm.name + "' references missing texture " + std::to_string(index));
+  };
+  texture(pbr.baseColorTexture.index, mat.diffuse_texture);
+  // glTF: emission = emissiveFactor (default black) times the emissive texture (sRGB), as the
+  // model's emissive colour times its emissive texture.
+  texture(gm.emissiveTexture.index, mat.emissive_texture);
   float transmission = 0, ior = 1.5f;
   if (auto it = gm.extensions.find("KHR_materials_transmission"); it != gm.extensions.end())
     transmission = float(number_or(it->second, "transmissionFactor", 0));

@@ -2,6 +2,7 @@
 // broken files throw std::runtime_error naming the file, never crash.
 #include <catch2/catch.hpp>
 
+#include <algorithm>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
@@ -11,6 +12,7 @@
 #include <unistd.h>
 
 #include "renderer/gltf_loader.h"
+#include "renderer/image.h"
 
 using namespace tessera;
 
@@ -225,6 +227,49 @@ TEST_CASE("a minimal glTF loads, instancing one mesh through two nodes (one mirr
   CHECK(ls.bounds.lo.x == Approx(0));
   CHECK(ls.bounds.hi.x == Approx(3));
   CHECK_FALSE(ls.has_camera);
+}
+
+TEST_CASE("glTF emissiveTexture becomes the material's emissive texture, times emissiveFactor", "[gltf]") {
+  TempDir dir;
+  dir.write("tri.bin", tri_bin());
+  Image img(2, 1);
+  const uint8_t texels[8] = {200, 30, 40, 255, 10, 220, 90, 255};
+  std::copy(texels, texels + 8, img.rgba.begin());
+  write_png(dir.path + "/glow.png", img);
+  std::string j = tri_gltf();
+  j.pop_back();  // reopen the top-level object
+  j += R"(,"images":[{"uri":"glow.png"}],"textures":[{"source":0}],)"
+       R"("materials":[{"name":"lamp","emissiveFactor":[1,0.5,0.25],"emissiveTexture":{"index":0}},)"
+       R"({"name":"broken","emissiveFactor":[1,1,1],"emissiveTexture":{"index":5}}]})";
+  // The first mesh's primitive uses material 0.
+  const std::string prim = R"("indices":1})";
+  j.replace(j.find(prim), prim.size(), R"("indices":1,"material":0})");
+  LoadedScene ls = load_gltf(dir.write("glow.gltf", j));
+  REQUIRE(ls.scene.textures().size() == 1);
+  const Texture& tex = ls.scene.textures().begin()->second.value;
+  CHECK(tex.width == 2);
+  CHECK(tex.srgb);
+  CHECK(std::equal(texels, texels + 8, tex.rgba.begin()));
+  const Id tex_id = ls.scene.textures().begin()->first;
+  int lamps = 0, broken = 0;
+  for (const auto& [id, e] : ls.scene.materials()) {
+    const Material& m = e.value;
+    if (m.emissive_texture == tex_id) {
+      ++lamps;
+      CHECK(m.emissive_color.x == Approx(1));
+      CHECK(m.emissive_color.y == Approx(0.5));
+      CHECK(m.emissive_color.z == Approx(0.25));
+      CHECK(m.diffuse_texture == kNoId);
+    } else if (m.emissive_color.x == Approx(1) && m.emissive_color.y == Approx(1)) {
+      ++broken;
+      CHECK(m.emissive_texture == kNoId);  // a missing texture is left out with a warning
+    }
+  }
+  CHECK(lamps == 1);
+  CHECK(broken == 1);
+  bool warned = false;
+  for (const std::string& w : ls.warnings) warned = warned || (w.find("broken") != std::string::npos && w.find("texture 5") != std::string::npos);
+  CHECK(warned);
 }
 
 TEST_CASE("broken glTF files throw std::runtime_error naming the file", "[gltf][broken]") {

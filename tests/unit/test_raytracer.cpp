@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstring>
 #include <tuple>
+#include <utility>
 
 #include "renderer/raytracer.h"
 #include "scene_builders.h"
@@ -226,7 +227,7 @@ TEST_CASE("instances of one geometry appear at their exact offsets; moving one o
 // ---------------------------------------------------------------------------------------
 // Textures
 // ---------------------------------------------------------------------------------------
-TEST_CASE("a 2x2 nearest texture on a quad facing the camera shows its texels exactly", "[raytracer][texture]") {
+TEST_CASE("a 2x2 nearest texture on a quad facing the camera shows its texels exactly (diffuse and emissive)", "[raytracer][texture]") {
   Scene scene;
   const int W = 64, H = 64;
   scene.set_resolution(W, H);
@@ -239,15 +240,20 @@ TEST_CASE("a 2x2 nearest texture on a quad facing the camera shows its texels ex
   for (int i = 0; i < 16; ++i) tex.rgba[size_t(i)] = texels[i / 4][i % 4];
   tex.sampler.filter = Sampler::Filter::nearest;
   scene.set_texture(7, tex);
-  Material m = matte({1, 1, 1});
-  m.diffuse_texture = 7;
-  scene.set_material(1, m);
   // Quad [-1,1]^2 at z = 0; its top-left corner has texcoord (0, 0).
   add_object(scene, 100, quad({-1, -1, 0}, {2, 0, 0}, {0, 2, 0}), 1);
   Camera cam = look({0, 0, 3}, {0, 0, 0}, 60 * kDeg);
   scene.set_camera(cam);
 
-  for (bool linear : {false, true}) {
+  // An unlit matte material shows its diffuse texture; a lit material without diffuse colour
+  // and without lights shows its emissive colour (white) times its emissive texture.
+  Material textured_matte = matte({1, 1, 1});
+  textured_matte.diffuse_texture = 7;
+  Material emissive = diffuse({0, 0, 0});
+  emissive.emissive_color = {1, 1, 1};
+  emissive.emissive_texture = 7;
+  for (auto [linear, slot] : std::initializer_list<std::pair<bool, int>>{{false, 0}, {true, 0}, {false, 1}, {true, 1}}) {
+    scene.set_material(1, slot == 0 ? textured_matte : emissive);
     Environment env = plain_env({0, 0, 0});
     env.linear = linear;  // sRGB decode on lookup, sRGB encode on output: the texel comes back
     scene.set_environment(env);
@@ -262,7 +268,7 @@ TEST_CASE("a 2x2 nearest texture on a quad facing the camera shows its texels ex
       for (int dy = -2; dy <= 2; ++dy)
         for (int dx = -2; dx <= 2; ++dx) {
           Rgb p = px(img, int(std::lround(fx)) + dx, int(std::lround(fy)) + dy);
-          INFO("linear " << linear << " texel " << q << " got " << str(p));
+          INFO((slot == 0 ? "diffuse" : "emissive") << " linear " << linear << " texel " << q << " got " << str(p));
           int tol = linear ? 1 : 0;  // sRGB round trip through float
           CHECK(std::abs(p.r - texels[q][0]) <= tol);
           CHECK(std::abs(p.g - texels[q][1]) <= tol);
