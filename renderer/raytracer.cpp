@@ -291,34 +291,56 @@ struct RayTracer::Impl {
 inline float fmaxf_(float a, float b) { return a > b ? a : b; }
 inline float fminf_(float a, float b) { return a < b ? a : b; }
 
-// One texture lookup (bilinear, or nearest as bilinear with one weight), branch-free so that
-// a loop over lanes sharing a texture vectorises into gathers. The scalar paths (lanes that
-// hit different textures, alpha masks) call it too, so a pixel never depends on its packet.
+// One texture lookup (bilinear, or nearest as bilinear with one weight) in three steps that a
+// loop over lanes sharing a texture can run as three loops: texel_coords and texel_blend are
+// branch-free and vectorise, the loads in between are scalar. sample_texture chains the same
+// steps for the scalar paths (lanes that hit different textures, alpha masks), so a pixel
+// never depends on its packet.
+struct TexelCoords {
+  int i00, i10, i01, i11;  // texel indices of the 2x2 footprint
+  float fx, fy;            // weights of the second column and row
+};
 template <class Tex>
-__attribute__((always_inline)) inline void sample_texture(const Tex& t, float u, float v, float out[4]) {
+__attribute__((always_inline)) inline TexelCoords texel_coords(const Tex& t, float u, float v) {
   u = u - u == 0.0f ? u : 0.0f;  // NaN and infinities sample the origin
   v = v - v == 0.0f ? v : 0.0f;
   u = t.repeat_s ? u - std::floor(u) : fminf_(fmaxf_(u, 0.0f), 1.0f);  // [0, 1]
   v = t.repeat_t ? v - std::floor(v) : fminf_(fmaxf_(v, 0.0f), 1.0f);
   const float x = u * float(t.w) - (t.nearest ? 0.0f : 0.5f), y = v * float(t.h) - (t.nearest ? 0.0f : 0.5f);
   const float xf = std::floor(x), yf = std::floor(y);
-  const float fx = t.nearest ? 0.0f : x - xf, fy = t.nearest ? 0.0f : y - yf;
+  TexelCoords c;
+  c.fx = t.nearest ? 0.0f : x - xf;
+  c.fy = t.nearest ? 0.0f : y - yf;
   // Texel columns and rows in [-1, size + 1]; across the edge: the other side (repeat) or
   // the edge texel (clamp). The second texel of a nearest lookup has weight 0.
   int x0 = int(xf), y0 = int(yf), x1 = x0 + 1, y1 = y0 + 1;
   auto wrap = [](int i, int n, bool repeat) { return i < 0 ? (repeat ? n - 1 : 0) : (i >= n ? (repeat ? 0 : n - 1) : i); };
   x0 = wrap(x0, t.w, t.repeat_s); x1 = wrap(x1, t.w, t.repeat_s);
   y0 = wrap(y0, t.h, t.repeat_t); y1 = wrap(y1, t.h, t.repeat_t);
-  const uint64_t* texels = t.texels.data();
-  const uint64_t p00 = texels[y0 * t.w + x0], p10 = texels[y0 * t.w + x1];
-  const uint64_t p01 = texels[y1 * t.w + x0], p11 = texels[y1 * t.w + x1];
+  c.i00 = y0 * t.w + x0; c.i10 = y0 * t.w + x1;
+  c.i01 = y1 * t.w + x0; c.i11 = y1 * t.w + x1;
+  return c;
+}
+// The bilinear blend of four texels, each given as its two 32-bit halves (RG and BA, 16 bits a
+// channel), so that the vector loop needs no 64-bit arithmetic.
+__attribute__((always_inline)) inline void texel_blend(const uint32_t (&lo)[4], const uint32_t (&hi)[4], float fx, float fy,
+                                                     float out[4]) {
   const float w00 = (1 - fx) * (1 - fy) * (1 / 65535.0f), w10 = fx * (1 - fy) * (1 / 65535.0f);
   const float w01 = (1 - fx) * fy * (1 / 65535.0f), w11 = fx * fy * (1 / 65535.0f);
-  for (int c = 0; c < 4; ++c) {
-    const int sh = 16 * c;
-    out[c] = w00 * float(int((p00 >> sh) & 0xFFFF)) + w10 * float(int((p10 >> sh) & 0xFFFF)) +
-             w01 * float(int((p01 >> sh) & 0xFFFF)) + w11 * float(int((p11 >> sh) & 0xFFFF));
-  }
+  auto ch = [&](int k, int c) {
+    const uint32_t half = c < 2 ? lo[k] : hi[k];
+    return float(int((c & 1) ? half >> 16 : half & 0xFFFFu));
+  };
+  for (int c = 0; c < 4; ++c) out[c] = w00 * ch(0, c) + w10 * ch(1, c) + w01 * ch(2, c) + w11 * ch(3, c);
+}
+template <class Tex>
+__attribute__((always_inline)) inline void sample_texture(const Tex& t, float u, float v, float out[4]) {
+  const TexelCoords c = texel_coords(t, u, v);
+  const uint64_t* texels = t.texels.data();
+  const int idx[4] = {c.i00, c.i10, c.i01, c.i11};
+  uint32_t lo[4], hi[4];
+  for (int k = 0; k < 4; ++k) { lo[k] = uint32_t(texels[idx[k]]); hi[k] = uint32_t(texels[idx[k]] >> 32); }
+  texel_blend(lo, hi, c.fx, c.fy, out);
 }
 
 template <bool kOcclusion>
