@@ -628,8 +628,9 @@ void RayTracer::Impl::sync(const Scene& scene, std::vector<std::string>& warning
 // twice, so contracted copies would give a pixel different values on AVX2 and AVX-512 nodes
 // of one heterogeneous cluster, and the AO pattern, seeded by the hit position's bits, would
 // change between them. With contraction off every copy computes the same IEEE operations.
-#pragma GCC push_options
-#pragma GCC optimize("fp-contract=off")
+// It is off for this whole file by a compile flag (renderer/CMakeLists.txt), not by
+// `#pragma GCC optimize`: that pragma also dropped -fno-trapping-math inside its region, which
+// kept GCC from vectorising loops with masked divisions or conversions.
 namespace isa_sse {
 #include "renderer/raytracer_kernel.inc"
 }  // namespace isa_sse
@@ -646,7 +647,6 @@ namespace isa_avx2 {
 namespace isa_avx512 {
 #include "renderer/raytracer_kernel.inc"
 }  // namespace isa_avx512
-#pragma GCC pop_options
 #pragma GCC pop_options
 
 // ---------------------------------------------------------------------------------------
