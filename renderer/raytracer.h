@@ -43,7 +43,11 @@ class RayTracer final : public Renderer {
 
   const char* name() const override { return "raytracer"; }
   void sync(const Scene& scene, std::vector<std::string>& warnings) override;
+  // Renders with the kernel the scene and settings need: the one with AO, secondary rays and
+  // textures compiled out when none of them is used (see plain_kernel), else the general one.
   void render(const Rect& pixels, const RenderSettings& settings, TaskResult& out) override;
+  // Whether render() picks the kernel with AO, secondary rays and textures compiled out.
+  bool plain_kernel(const RenderSettings& settings) const;
   PacketLayout packet_layout() const override;
 
   SceneFeatures features() const;
@@ -57,6 +61,9 @@ class RayTracer final : public Renderer {
   // Benchmark hooks. A "specialised" kernel has AO, secondary rays, textures and alpha
   // filters compiled out; it renders only scenes that need none of them (else it throws).
   void render_specialised(const Rect& pixels, const RenderSettings& settings, TaskResult& out);
+  // The general kernel (every feature compiled in) whatever the scene needs: what render()
+  // would cost without picking a kernel per scene.
+  void render_general(const Rect& pixels, const RenderSettings& settings, TaskResult& out);
   // The physical limit: the same camera rays in the same packets, traced with no shading
   // and no timing. Returns wall milliseconds; rays traced in *rays.
   double trace_primary_only(const Rect& pixels, uint64_t* rays);

@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <stdexcept>
 #include <tuple>
 #include <utility>
 
@@ -840,4 +841,42 @@ TEST_CASE("render_scheduled: every schedule gives render()'s image and a full co
                                       {{0, 0, space.x1, space.y1}, {0, 0, 1, 1}}, 0, r), std::invalid_argument);  // overlap
   CHECK_THROWS_AS(rt.render_scheduled(full, busy_settings(), ThreadSchedule::static_tiles, {}, 0, r), std::invalid_argument);
   CHECK_THROWS_AS(rt.render_scheduled(full, busy_settings(), ThreadSchedule::shared_queue, {}, 0, r), std::invalid_argument);
+}
+
+TEST_CASE("a scene without AO, secondary rays and textures runs the kernel with them compiled out, with the same bytes",
+          "[raytracer][features]") {
+  Scene scene;
+  const int W = 48, H = 32;
+  scene.set_resolution(W, H);
+  scene.set_environment(plain_env({0.1f, 0.2f, 0.3f}, {0.2f, 0.2f, 0.2f}));
+  scene.set_material(1, diffuse({0.8f, 0.6f, 0.4f}));
+  add_object(scene, 100, sphere(1.0f, 32), 1);
+  add_object(scene, 200, quad({-5, -1, 5}, {10, 0, 0}, {0, 0, -10}), 1);
+  scene.set_light(1, directional({0, -1, -1}));
+  scene.set_camera(look({0, 1, 5}, {0, 0, 0}, 40 * kDeg));
+  const Rect all{0, 0, W, H};
+
+  RayTracer rt;
+  Image img = render_full(rt, scene, no_ao());
+  REQUIRE(rt.plain_kernel(no_ao()));
+  TaskResult general, specialised;
+  rt.render_general(all, no_ao(), general);
+  rt.render_specialised(all, no_ao(), specialised);
+  CHECK(general.image.rgba == img.rgba);
+  CHECK(specialised.image.rgba == img.rgba);
+  CHECK(general.rays.primary == specialised.rays.primary);
+  CHECK(general.rays.shadow == specialised.rays.shadow);
+
+  // AO asked for, a reflecting material or a texture: the general kernel, and the specialised
+  // one refuses the scene.
+  RenderSettings ao = no_ao();
+  ao.ao_samples = 4;
+  CHECK_FALSE(rt.plain_kernel(ao));
+  CHECK_THROWS_AS(rt.render_specialised(all, ao, specialised), std::invalid_argument);
+  Material mirror = diffuse({0.8f, 0.6f, 0.4f});
+  mirror.reflection = 0.5f;
+  scene.set_material(1, mirror);
+  render_full(rt, scene, no_ao());
+  CHECK_FALSE(rt.plain_kernel(no_ao()));
+  CHECK_THROWS_AS(rt.render_specialised(all, no_ao(), specialised), std::invalid_argument);
 }
