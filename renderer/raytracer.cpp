@@ -138,11 +138,16 @@ const SrgbEncodeLut& srgb_encode_lut() {
   static const SrgbEncodeLut lut;
   return lut;
 }
-inline uint8_t encode_srgb(float c, const SrgbEncodeLut& lut) {
-  c = c > 0.0f ? (c < 1.0f ? c : 1.0f) : 0.0f;  // also maps NaN to 0
-  return lut.table[int(c * 4096.0f + 0.5f)];
+// Output encoding in two steps, so that a loop over lanes vectorises the first: a channel,
+// clamped to [0, 1] (NaN to 0), to its table index (sRGB) or straight to its byte (linear);
+// then encode_byte.
+inline int encode_step(float c, bool srgb) {
+  c = c > 0.0f ? (c < 1.0f ? c : 1.0f) : 0.0f;
+  return srgb ? int(c * 4096.0f + 0.5f) : int(c * 255.0f + 0.5f);
 }
-inline uint8_t encode_linear(float c) { return uint8_t(std::fmin(std::fmax(c, 0.0f), 1.0f) * 255.0f + 0.5f); }
+inline uint8_t encode_byte(int step, bool srgb, const SrgbEncodeLut& lut) {
+  return srgb ? lut.table[size_t(step)] : uint8_t(step);
+}
 
 // Integer hash for per-pixel sample rotations (deterministic per frame).
 inline uint32_t hash32(uint32_t x) {
@@ -691,9 +696,15 @@ bool RayTracer::plain_kernel(const RenderSettings& settings) const {
 // A scene that needs no AO, secondary rays or textures runs the kernel with them compiled out:
 // the general kernel's unused branches cost such scenes about 2% (`tessera bench --plain
 // --compare specialised` measures it), and both kernels give the same bytes.
+static void render_for_scene(const RayTracer& rt, const RayTracer::Impl& impl, const Rect& pixels,
+                             const RenderSettings& settings, TaskResult& out,
+                             const RayTracer::Impl::SchedulePlan* plan = nullptr) {
+  if (rt.plain_kernel(settings)) render_dispatch<kNone>(impl, pixels, settings, out, plan);
+  else render_dispatch<kAll>(impl, pixels, settings, out, plan);
+}
+
 void RayTracer::render(const Rect& pixels, const RenderSettings& settings, TaskResult& out) {
-  if (plain_kernel(settings)) render_dispatch<kNone>(*impl_, pixels, settings, out);
-  else render_dispatch<kAll>(*impl_, pixels, settings, out);
+  render_for_scene(*this, *impl_, pixels, settings, out);
 }
 
 void RayTracer::render_general(const Rect& pixels, const RenderSettings& settings, TaskResult& out) {
@@ -721,7 +732,7 @@ void RayTracer::render_scheduled(const Rect& pixels, const RenderSettings& setti
   if (schedule == ThreadSchedule::shared_queue && threads < 1)
     throw std::invalid_argument("shared_queue needs at least one thread");
   const Impl::SchedulePlan plan{schedule, &tiles, threads};
-  render_dispatch<kAll>(*impl_, pixels, settings, out, &plan);
+  render_for_scene(*this, *impl_, pixels, settings, out, &plan);
 }
 
 double RayTracer::trace_primary_only(const Rect& pixels, uint64_t* rays) {
