@@ -174,6 +174,24 @@ inline void basis(const Vec3& n, Vec3& t, Vec3& b) {
 
 inline float max_abs(const Vec3& p) { return std::fmax(std::fabs(p.x), std::fmax(std::fabs(p.y), std::fabs(p.z))); }
 
+// A texture's addressing (size, wrap modes, filter) as plain numbers, fixed when the texture
+// is converted, for texel_coords: GCC 12 leaves a lane loop scalar when it selects on a bool
+// or nests two selects of one value, and selects on these numbers vectorise.
+struct TexelAddressing {
+  int32_t w = 1, h = 1;
+  float fw = 1, fh = 1;
+  float shift = 0.5f;                  // texel centres: 0.5 bilinear, 0 nearest
+  float filter = 1;                    // 1 bilinear; 0 nearest (the second texel gets weight 0)
+  int32_t repeat_s = 1, repeat_t = 1;  // 1 repeat, 0 clamp
+  int32_t below_x = 0, above_x = 0, below_y = 0, above_y = 0;  // column (row) for -1 and w (h)
+
+  TexelAddressing() = default;
+  TexelAddressing(int32_t width, int32_t height, bool rs, bool rt, bool nearest)
+      : w(width), h(height), fw(float(width)), fh(float(height)), shift(nearest ? 0.0f : 0.5f),
+        filter(nearest ? 0.0f : 1.0f), repeat_s(rs), repeat_t(rt), below_x(rs ? width - 1 : 0),
+        above_x(rs ? 0 : width - 1), below_y(rt ? height - 1 : 0), above_y(rt ? 0 : height - 1) {}
+};
+
 }  // namespace
 
 // ---------------------------------------------------------------------------------------
@@ -186,7 +204,7 @@ struct RayTracer::Impl {
     // RGBA, 16 bits a channel (low to high), colour already as shading uses it (decoded from
     // sRGB for glTF scenes), so a lookup is one 64-bit load per texel and no table.
     std::vector<uint64_t> texels;
-    bool repeat_s = true, repeat_t = true, nearest = false;
+    TexelAddressing addr;  // size, wrap modes and filter
     bool decoded = false;  // colour channels decoded from sRGB
     uint64_t version = 0;
   };
@@ -305,23 +323,28 @@ struct TexelCoords {
   int i00, i10, i01, i11;  // texel indices of the 2x2 footprint
   float fx, fy;            // weights of the second column and row
 };
-template <class Tex>
-__attribute__((always_inline)) inline TexelCoords texel_coords(const Tex& t, float u, float v) {
+__attribute__((always_inline)) inline TexelCoords texel_coords(const TexelAddressing& t, float u, float v) {
   u = u - u == 0.0f ? u : 0.0f;  // NaN and infinities sample the origin
   v = v - v == 0.0f ? v : 0.0f;
-  u = t.repeat_s ? u - std::floor(u) : fminf_(fmaxf_(u, 0.0f), 1.0f);  // [0, 1]
-  v = t.repeat_t ? v - std::floor(v) : fminf_(fmaxf_(v, 0.0f), 1.0f);
-  const float x = u * float(t.w) - (t.nearest ? 0.0f : 0.5f), y = v * float(t.h) - (t.nearest ? 0.0f : 0.5f);
+  const float u_repeat = u - std::floor(u), u_clamp = fminf_(fmaxf_(u, 0.0f), 1.0f);  // [0, 1]
+  const float v_repeat = v - std::floor(v), v_clamp = fminf_(fmaxf_(v, 0.0f), 1.0f);
+  u = t.repeat_s != 0 ? u_repeat : u_clamp;
+  v = t.repeat_t != 0 ? v_repeat : v_clamp;
+  const float x = u * t.fw - t.shift, y = v * t.fh - t.shift;
   const float xf = std::floor(x), yf = std::floor(y);
   TexelCoords c;
-  c.fx = t.nearest ? 0.0f : x - xf;
-  c.fy = t.nearest ? 0.0f : y - yf;
+  c.fx = (x - xf) * t.filter;
+  c.fy = (y - yf) * t.filter;
   // Texel columns and rows in [-1, size + 1]; across the edge: the other side (repeat) or
-  // the edge texel (clamp). The second texel of a nearest lookup has weight 0.
+  // the edge texel (clamp). The second texel of a nearest lookup has weight 0. One of the two
+  // selects' results is 0, so their sum is the wrapped index (nested selects stay scalar).
+  auto wrap = [](int i, int n, int below, int above) {
+    const int inside = i < 0 ? below : i;
+    return (i >= n ? above : 0) + (i >= n ? 0 : inside);
+  };
   int x0 = int(xf), y0 = int(yf), x1 = x0 + 1, y1 = y0 + 1;
-  auto wrap = [](int i, int n, bool repeat) { return i < 0 ? (repeat ? n - 1 : 0) : (i >= n ? (repeat ? 0 : n - 1) : i); };
-  x0 = wrap(x0, t.w, t.repeat_s); x1 = wrap(x1, t.w, t.repeat_s);
-  y0 = wrap(y0, t.h, t.repeat_t); y1 = wrap(y1, t.h, t.repeat_t);
+  x0 = wrap(x0, t.w, t.below_x, t.above_x); x1 = wrap(x1, t.w, t.below_x, t.above_x);
+  y0 = wrap(y0, t.h, t.below_y, t.above_y); y1 = wrap(y1, t.h, t.below_y, t.above_y);
   c.i00 = y0 * t.w + x0; c.i10 = y0 * t.w + x1;
   c.i01 = y1 * t.w + x0; c.i11 = y1 * t.w + x1;
   return c;
@@ -340,7 +363,7 @@ __attribute__((always_inline)) inline void texel_blend(const uint32_t (&lo)[4], 
 }
 template <class Tex>
 __attribute__((always_inline)) inline void sample_texture(const Tex& t, float u, float v, float out[4]) {
-  const TexelCoords c = texel_coords(t, u, v);
+  const TexelCoords c = texel_coords(t.addr, u, v);
   const uint64_t* texels = t.texels.data();
   const int idx[4] = {c.i00, c.i10, c.i01, c.i11};
   uint32_t lo[4], hi[4];
@@ -439,9 +462,8 @@ void RayTracer::Impl::sync(const Scene& scene, std::vector<std::string>& warning
       continue;
     }
     t.w = src.width; t.h = src.height;
-    t.repeat_s = src.sampler.wrap_s == Sampler::Wrap::repeat;
-    t.repeat_t = src.sampler.wrap_t == Sampler::Wrap::repeat;
-    t.nearest = src.sampler.filter == Sampler::Filter::nearest;
+    t.addr = TexelAddressing(t.w, t.h, src.sampler.wrap_s == Sampler::Wrap::repeat,
+                             src.sampler.wrap_t == Sampler::Wrap::repeat, src.sampler.filter == Sampler::Filter::nearest);
     t.decoded = decode;
     t.version = e.version;
     t.texels.resize(size_t(t.w) * size_t(t.h));
