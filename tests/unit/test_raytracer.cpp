@@ -880,3 +880,63 @@ TEST_CASE("a scene without AO, secondary rays and textures runs the kernel with 
   CHECK_FALSE(rt.plain_kernel(no_ao()));
   CHECK_THROWS_AS(rt.render_specialised(all, no_ao(), specialised), std::invalid_argument);
 }
+
+TEST_CASE("a spot light lights its cone on a plane: a hard edge at the cutoff, a smoothstep over the soft edge",
+          "[raytracer][lights]") {
+  // A white diffuse plane y = 0 seen from straight above, a spot light 2 units over its centre
+  // pointing down, constant attenuation: a pixel's value is 255 (N.L) (L.axis) times the
+  // edge factor, all computed here from the plane point the pixel's ray hits.
+  Scene scene;
+  const int W = 64, H = 64;
+  scene.set_resolution(W, H);
+  scene.set_environment(plain_env());
+  scene.set_material(1, diffuse({1, 1, 1}));
+  add_object(scene, 100, quad({-5, 0, 5}, {10, 0, 0}, {0, 0, -10}), 1);
+  const Camera cam = look({0, 4, 0}, {0, 0, 0}, 60 * kDeg, {0, 0, -1});
+  scene.set_camera(cam);
+  const Vec3 light_pos{0, 2, 0};
+  const float cutoff = 30 * kDeg;
+  for (float softness : {0.0f, 0.5f}) {
+    Light spot;
+    spot.type = Light::Type::spot;
+    spot.position = light_pos;
+    spot.direction = {0, -1, 0};
+    spot.attenuation = {1, 0, 0};
+    spot.cutoff = cutoff;
+    spot.softness = softness;
+    scene.set_light(1, spot);
+    RayTracer rt;
+    const Image img = render_full(rt, scene, no_ao());
+    const float cos_outer = std::cos(cutoff), cos_inner = std::cos(cutoff * (1 - softness));
+    int lit = 0, dark = 0, partial = 0, bad = 0;
+    for (int y = 0; y < H; ++y)
+      for (int x = 0; x < W; ++x) {
+        const Vec3 d = pixel_dir(cam, W, H, float(x), float(y));
+        const Vec3 eye = cam_pos(cam), p = eye + d * (-eye.y / d.y);
+        const Vec3 l = normalize(light_pos - p);
+        const float c = l.y;  // cosine to the spot's axis; also N.L on the plane
+        float edge;
+        if (softness == 0) {
+          edge = c >= cos_outer ? 1.0f : 0.0f;
+          if (std::fabs(c - cos_outer) < 2e-3f) continue;  // a pixel on the edge itself
+        } else {
+          const float t = std::fmin(std::fmax((c - cos_outer) / (cos_inner - cos_outer), 0.0f), 1.0f);
+          edge = t * t * (3 - 2 * t);
+        }
+        const int expect = int(std::lround(255 * c * edge));
+        const Rgb got = px(img, x, y);
+        if (std::abs(got.r - expect) > 2 || got.g != got.r || got.b != got.r) {
+          if (bad < 6) WARN("px " << x << "," << y << " got " << str(got) << " expected " << expect << " c " << c);
+          ++bad;
+        }
+        (expect == 0 ? dark : expect >= int(std::lround(255 * c)) ? lit : partial)++;
+      }
+    INFO("softness " << softness << ": " << lit << " fully lit, " << partial << " on the soft edge, " << dark
+                     << " dark, " << bad << " off the prediction by more than 2");
+    CHECK(bad == 0);
+    CHECK(lit > 100);
+    CHECK(dark > 1000);
+    if (softness == 0) CHECK(partial == 0);
+    else CHECK(partial > 100);
+  }
+}
