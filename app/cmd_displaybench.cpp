@@ -50,7 +50,7 @@ int run(const std::vector<std::string>& argv) {
   if (args.flag("--help")) { std::fputs(kHelp, stdout); return 0; }
   int threads = 0;
   auto limit = limit_threads(args, &threads);
-  SceneSetup setup = load_scene(args, 1280, 720);
+  SceneSetup setup = load_scene(args, 1280, 720, LoopOption::required);
   const long frame_count = args.integer("--frame-count", 3);
   const long ao = args.integer("--ao", 4);
   const long depth = args.integer("--depth", 4);
@@ -62,7 +62,6 @@ int run(const std::vector<std::string>& argv) {
     qualities.push_back(int(q));
   }
   args.finish();
-  if (setup.loop.frames.empty()) throw std::invalid_argument("--camera-loop is required");
   if (frame_count < 1 || reps < 1 || ao < 0 || depth < 1 || cluster_frames < 0)
     throw std::invalid_argument("--frame-count >= 1, --reps >= 1, --ao >= 0, --depth >= 1, --cluster-frames >= 0");
   const int W = setup.loaded.scene.width(), H = setup.loaded.scene.height();

@@ -47,8 +47,7 @@ int run(const std::vector<std::string>& argv) {
   }
   int threads = 0;
   auto limit = limit_threads(args, &threads);
-  SceneSetup setup = load_scene(args, 1280, 720);
-  if (setup.loop.frames.empty()) throw std::invalid_argument("--camera-loop is required");
+  SceneSetup setup = load_scene(args, 1280, 720, LoopOption::required);
   const int clients = int(args.integer("--clients", 1));
   const std::string display = args.str("--display", "jpeg");
   const double seconds = double(args.integer("--seconds", 20));

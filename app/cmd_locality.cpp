@@ -62,8 +62,7 @@ double sum_kernels(RayTracer& rt, const std::vector<Rect>& tasks, PacketLayout p
 int run(const std::vector<std::string>& argv) {
   Args args(argv);
   if (args.flag("--help")) { std::fputs(kHelp, stdout); return 0; }
-  SceneSetup setup = load_scene(args, 640, 360);
-  if (setup.loop.frames.empty()) throw std::invalid_argument("--camera-loop is required");
+  SceneSetup setup = load_scene(args, 640, 360, LoopOption::required);
   std::vector<double> node_list = parse_number_list("--nodes", args.str("--nodes", "4,16,64"));
   std::vector<double> thread_list = parse_number_list("--thread-counts", args.str("--thread-counts", "1,2"));
   long step = args.integer("--step", 1);

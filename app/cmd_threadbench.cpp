@@ -36,8 +36,7 @@ int run(const std::vector<std::string>& argv) {
   if (args.flag("--help")) { std::fputs(kHelp, stdout); return 0; }
   int threads = 0;
   auto limit = limit_threads(args, &threads);
-  SceneSetup setup = load_scene(args, 640, 360);
-  if (setup.loop.frames.empty()) throw std::invalid_argument("--camera-loop is required");
+  SceneSetup setup = load_scene(args, 640, 360, LoopOption::required);
   long step = args.integer("--step", 1);
   long frames = args.integer("--frames", long(setup.loop.frames.size()) / std::max(1L, step));
   long reps = args.integer("--reps", 3);

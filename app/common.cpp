@@ -65,12 +65,13 @@ size_t SceneSetup::replay(long f, long step, RenderSettings& settings) {
   return k;
 }
 
-SceneSetup load_scene(Args& args, int default_w, int default_h) {
+SceneSetup load_scene(Args& args, int default_w, int default_h, LoopOption loop_option) {
   SceneSetup s;
   s.scene_path = args.required("--scene");
   long w = args.integer("--size", default_w, 0), h = args.integer("--size", default_h, 1);
   if (w < 0 || h < 0 || w > 16384 || h > 16384) throw std::invalid_argument("--size must be within 0..16384");
   std::string loop = args.str("--camera-loop");
+  if (loop_option == LoopOption::required && loop.empty()) throw std::invalid_argument("--camera-loop is required");
   bool plain = args.flag("--plain");
   s.loaded = load_gltf(s.scene_path);
   if (plain) {  // strip every optional shading feature (for kernel comparisons)

@@ -36,7 +36,9 @@ struct SceneSetup {
   // frame, and the AO pattern seeded with it. Returns the loop frame. Needs a loop.
   size_t replay(long f, long step, RenderSettings& settings);
 };
-SceneSetup load_scene(Args& args, int default_w = 1280, int default_h = 720);
+enum class LoopOption { optional, required };  // required: no --camera-loop is an error
+SceneSetup load_scene(Args& args, int default_w = 1280, int default_h = 720,
+                      LoopOption loop_option = LoopOption::optional);
 
 // "1,2,4" -> {1, 2, 4}; throws std::invalid_argument naming the option on a bad number.
 std::vector<double> parse_number_list(const std::string& option, const std::string& text);
