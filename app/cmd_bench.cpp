@@ -20,7 +20,10 @@ const char* kHelp =
     "kernel_ms (sum of the cost map), rendering_ms (wall), rays by kind and Mrays/s, then a summary\n"
     "line with medians and conditions. --compare adds, in the same run and per frame (with --reps R\n"
     "both sides run R times in turn and the fastest of each is compared):\n"
-    "  bare        a bare Embree loop tracing the same camera rays in the same packets, no shading\n"
+    "  bare        a bare Embree loop tracing the same camera rays in the same packets, no shading;\n"
+    "              then one more run of each with Embree's intersection calls timed: intersect_ms\n"
+    "              (ours) and bare_intersect_ms, after_hit_ms (the rest of our kernel) and\n"
+    "              after_hit_budget_ms (what ours/bare >= 0.8 leaves it: 1.25 x bare - ours inside Embree)\n"
     "  specialised the kernel with AO, secondary rays, textures and filters compiled out, against the\n"
     "              general kernel (render itself runs the specialised one where the scene allows:\n"
     "              \"kernel\" in the summary says which)\n"
@@ -133,6 +136,7 @@ int run(const std::vector<std::string>& argv) {
   for (long i = 0; i < warmup; ++i) { TaskResult r; ours(r); }
 
   std::vector<double> kernel, rendering, rate, cmp_ms, cmp_ratio, b_primary, b_shadow, b_ao, b_secondary;
+  std::vector<double> isect, bare_isects, after_hit;  // --compare bare: the split of our time
   RayCounts total_rays;
   for (long f = 0; f < frames; ++f) {
     size_t k = setup.replay(f, step, settings);
@@ -181,6 +185,22 @@ int run(const std::vector<std::string>& argv) {
       cmp_ratio.push_back(bare > 0 ? ours / bare : 0);
       std::printf(", \"bare_ms\": %.3f, \"bare_mrays_per_s\": %.3f, \"primary_mrays_per_s\": %.3f, \"ours_over_bare\": %.4f", ms, bare,
                   ours, cmp_ratio.back());
+      // Where our time goes, from one more run of each side with Embree's primary-ray
+      // intersection calls timed (CPU ms): inside them, and everything else of our kernel
+      // (ray set-up, shading, output, cost map). The 0.8 target allows the latter
+      // 1.25 x bare - ours inside Embree (more than the bare loop when shading evicts its data).
+      RenderSettings timed = settings;
+      timed.time_intersections = true;
+      timed.cost_map = true;
+      TaskResult ti;
+      rt.render(full, timed, ti);
+      double bare_isect = 0;
+      rt.trace_primary_only(full, nullptr, &bare_isect);
+      isect.push_back(ti.primary_intersect_ms);
+      bare_isects.push_back(bare_isect);
+      after_hit.push_back(ti.kernel_ms - ti.primary_intersect_ms);
+      std::printf(", \"intersect_ms\": %.3f, \"bare_intersect_ms\": %.3f, \"after_hit_ms\": %.3f, \"after_hit_budget_ms\": %.3f",
+                  isect.back(), bare_isect, after_hit.back(), 1.25 * bare_isect - isect.back());
     } else if (against_variant) {
       TaskResult v = alternate ? pre : variant();
       best(r.rendering_ms, v.rendering_ms, [&] { return variant().rendering_ms; });
@@ -226,6 +246,9 @@ int run(const std::vector<std::string>& argv) {
   if (!cmp_ratio.empty())
     std::printf(", \"compare\": %s, \"reps\": %ld, \"compare_ms\": %.3f, \"compare_ratio\": %.4f", json_str(compare).c_str(), reps, median(cmp_ms),
                 median(cmp_ratio));
+  if (!isect.empty())
+    std::printf(", \"intersect_ms\": %.3f, \"bare_intersect_ms\": %.3f, \"after_hit_ms\": %.3f, \"after_hit_budget_ms\": %.3f",
+                median(isect), median(bare_isects), median(after_hit), 1.25 * median(bare_isects) - median(isect));
   if (!b_primary.empty())
     std::printf(", \"breakdown_mrays_per_s\": {\"primary\": %.3f, \"shadow\": %.3f, \"ao\": %.3f, \"secondary\": %.3f}",
                 median(b_primary), median(b_shadow), median(b_ao), median(b_secondary));

@@ -757,13 +757,17 @@ void RayTracer::render_scheduled(const Rect& pixels, const RenderSettings& setti
   render_for_scene(*this, *impl_, pixels, settings, out, &plan);
 }
 
-double RayTracer::trace_primary_only(const Rect& pixels, uint64_t* rays) {
+double RayTracer::trace_primary_only(const Rect& pixels, uint64_t* rays, double* intersect_ms) {
   // The same instruction set as the shading kernel, so the comparison is like for like.
   const RayTracer::Impl& impl = *impl_;
   switch (impl.layout.size()) {
-    case 16: return cpu_avx512() ? isa_avx512::trace_primary<16>(impl, pixels, rays) : isa_sse::trace_primary<16>(impl, pixels, rays);
-    case 8: return cpu_avx2() ? isa_avx2::trace_primary<8>(impl, pixels, rays) : isa_sse::trace_primary<8>(impl, pixels, rays);
-    default: return isa_sse::trace_primary<4>(impl, pixels, rays);
+    case 16:
+      return cpu_avx512() ? isa_avx512::trace_primary<16>(impl, pixels, rays, intersect_ms)
+                          : isa_sse::trace_primary<16>(impl, pixels, rays, intersect_ms);
+    case 8:
+      return cpu_avx2() ? isa_avx2::trace_primary<8>(impl, pixels, rays, intersect_ms)
+                        : isa_sse::trace_primary<8>(impl, pixels, rays, intersect_ms);
+    default: return isa_sse::trace_primary<4>(impl, pixels, rays, intersect_ms);
   }
 }
 

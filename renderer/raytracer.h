@@ -65,8 +65,9 @@ class RayTracer final : public Renderer {
   // would cost without picking a kernel per scene.
   void render_general(const Rect& pixels, const RenderSettings& settings, TaskResult& out);
   // The physical limit: the same camera rays in the same packets, traced with no shading
-  // and no timing. Returns wall milliseconds; rays traced in *rays.
-  double trace_primary_only(const Rect& pixels, uint64_t* rays);
+  // and no timing. Returns wall milliseconds; rays traced in *rays. With intersect_ms, the
+  // intersection calls are timed as time_intersections times render()'s (summed over threads).
+  double trace_primary_only(const Rect& pixels, uint64_t* rays, double* intersect_ms = nullptr);
   // The same kernel, cost map and image as render(), with the task's packets scheduled over
   // threads as `schedule` says. static_tiles: tiles[i] (absolute packet coordinates, clipped
   // to the task) is rendered by thread i, all tiles together must cover the task's packets;

@@ -612,6 +612,36 @@ TEST_CASE("the cost map covers exactly the task's packets and sums to the kernel
     rt.render({0, 0, W, H}, s, r);
     CHECK(r.cost.cost.empty());
     CHECK(r.kernel_ms == 0);
+    CHECK(r.primary_intersect_ms == 0);  // not asked for
+  }
+}
+
+// The bench's split of the kernel time (tessera bench --compare bare): the time inside Embree's
+// primary-ray intersections is part of the packets' time, and the bare loop times its own
+// calls the same way.
+TEST_CASE("timed primary intersections are a part of the kernel time, in render() and in the bare loop",
+          "[raytracer][cost]") {
+  const int W = 61, H = 37;
+  Scene scene = busy_scene(W, H);
+  for (PacketLayout layout : {PacketLayout{2, 2}, PacketLayout{4, 4}}) {
+    RayTracer rt(layout);
+    std::vector<std::string> warnings;
+    rt.sync(scene, warnings);
+    RenderSettings s = busy_settings();
+    s.time_intersections = true;
+    TaskResult timed, plain;
+    rt.render({0, 0, W, H}, s, timed);
+    rt.render({0, 0, W, H}, busy_settings(), plain);
+    INFO("layout " << layout.w << "x" << layout.h << ": intersections " << timed.primary_intersect_ms << " ms of "
+                   << timed.kernel_ms << " ms");
+    CHECK(timed.primary_intersect_ms > 0);
+    CHECK(timed.primary_intersect_ms < timed.kernel_ms);  // busy_scene shades, shadows and reflects too
+    CHECK(timed.image.rgba == plain.image.rgba);          // timing changes nothing else
+    uint64_t rays = 0;
+    double bare_isect = 0;
+    rt.trace_primary_only({0, 0, W, H}, &rays, &bare_isect);
+    CHECK(rays == uint64_t(W * H));
+    CHECK(bare_isect > 0);
   }
 }
 
