@@ -31,6 +31,7 @@ struct session_state {
   display_actor display;
   // Frame pipeline.
   std::vector<ClientRecord> cached;  // scene updates that arrived while a frame was rendering
+  PendingBytes cached_bytes;         // their buffers and textures count against max_client_bytes
   bool in_flight = false;
   std::optional<uint32_t> pending;   // the latest render request that arrived while rendering
   uint32_t seq = 0, dropped = 0, errors = 0;
@@ -112,6 +113,7 @@ void apply_cached(self_ptr self) {
   auto& st = self->state;
   auto cached = std::move(st.cached);
   st.cached.clear();
+  st.cached_bytes.clear();
   for (auto& r : cached) {
     if (st.closed) return;
     apply_update(self, std::move(r), kNoRecord);  // deferred: the record index is no longer meaningful
@@ -410,6 +412,14 @@ void on_client(self_ptr self, std::vector<uint8_t>& bytes) {
         st.pending = rr->frame;
       }
     } else if (st.in_flight) {
+      // Waiting updates count against the client's byte limit now: one that would exceed it
+      // is refused (as it would be when applied) instead of held until the frame ends.
+      if (Status room = st.cached_bytes.admit(*st.scene, rec, st.settings->limits); !room) {
+        Error e = room.error();
+        e.record = i;
+        fail(self, e);
+        continue;
+      }
       st.cached.push_back(std::move(rec));
     } else {
       apply_update(self, std::move(rec), i);

@@ -1029,6 +1029,50 @@ Status check_session_order(bool handshake_done, const std::vector<ClientRecord>&
 
 uint64_t scene_bytes(const Scene& scene) { return scene.held_bytes(); }
 
+uint64_t PendingBytes::size_of(const Scene& scene, RecordType what, Id id) const {
+  if (auto it = latest_.find({what, id}); it != latest_.end()) return it->second;
+  if (what == RecordType::buffer) {
+    const Buffer* b = scene.buffer(id);
+    return b ? b->bytes() : 0;
+  }
+  const Texture* t = scene.texture(id);
+  return t ? t->rgba.size() : 0;
+}
+
+Status PendingBytes::admit(const Scene& scene, const ClientRecord& record, const Limits& limits) {
+  RecordType what;
+  Id id;
+  uint64_t bytes = 0;
+  if (const auto* b = std::get_if<SetBuffer>(&record)) {
+    what = RecordType::buffer, id = b->id, bytes = b->buffer.bytes();
+  } else if (const auto* t = std::get_if<SetTexture>(&record)) {
+    what = RecordType::texture, id = t->id, bytes = t->texture.rgba.size();
+  } else if (const auto* r = std::get_if<Remove>(&record);
+             r && (r->what == RecordType::buffer || r->what == RecordType::texture)) {
+    what = r->what, id = r->id;  // frees what it removes
+  } else {
+    return Ok{};  // holds no bytes
+  }
+  const uint64_t old = size_of(scene, what, id);
+  // Held once everything admitted so far is applied; freed_ never exceeds what is held.
+  const uint64_t held = scene_bytes(scene) + added_ - freed_ - old;
+  const uint64_t limit = limits.max_client_bytes;
+  if (bytes > limit || held > limit - bytes)
+    return message_error(ErrorCode::limit_exceeded,
+                       std::string(record_name(what)) + " " + std::to_string(id) +
+                           ": with the updates waiting for the frame in flight, the scene's buffers and textures would "
+                           "exceed the limit of " + std::to_string(limit) + " bytes");
+  latest_[{what, id}] = bytes;
+  added_ += bytes;
+  freed_ += old;
+  return Ok{};
+}
+
+void PendingBytes::clear() {
+  latest_.clear();
+  added_ = freed_ = 0;
+}
+
 bool is_scene_update(const ClientRecord& r) {
   return !(std::holds_alternative<Handshake>(r) || std::holds_alternative<Settings>(r) ||
            std::holds_alternative<RenderRequest>(r));

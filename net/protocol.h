@@ -10,6 +10,7 @@
 // depends on the scene (mesh consistency, per-client totals).
 #include <cstddef>
 #include <cstdint>
+#include <map>
 #include <string>
 #include <utility>
 #include <variant>
@@ -286,6 +287,22 @@ Status apply(Scene& scene, ClientRecord&& record, const Limits& limits);
 
 // Buffers + textures held by the scene (what max_client_bytes limits).
 uint64_t scene_bytes(const Scene& scene);
+
+// Scene updates that wait to be applied (a session caches them while a frame renders from
+// the scene) count against max_client_bytes as if they had been applied in order: admit()
+// checks one more waiting update against the buffers and textures the scene would hold once
+// it and every update admitted before it were applied (a replacement counts the size it
+// replaces out, a removal frees it). limit_exceeded says the update must not wait (it is
+// dropped; what waits already is kept). The scene must not change until clear().
+class PendingBytes {
+ public:
+  Status admit(const Scene& scene, const ClientRecord& record, const Limits& limits);
+  void clear();  // the waiting updates were applied (or dropped)
+ private:
+  uint64_t size_of(const Scene& scene, RecordType what, Id id) const;  // as the waiting updates leave it
+  std::map<std::pair<RecordType, Id>, uint64_t> latest_;  // last waiting size per entry
+  uint64_t added_ = 0, freed_ = 0;
+};
 
 // Session order on the sync channel: the first message is exactly one handshake, and no
 // handshake comes later (bad_handshake, fatal). `handshake_done` is the session's state.

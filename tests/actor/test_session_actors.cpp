@@ -99,6 +99,48 @@ CAF_TEST(scene updates are applied at once between frames and cached while a fra
   CAF_CHECK_EQUAL(sink->all<ErrorReply>().size(), 0u);
 }
 
+CAF_TEST(updates cached during a frame count against the byte limit of the client as if applied) {
+  settings->limits.max_client_bytes = 72 + 200;  // tiny_scene holds 72 bytes of buffers
+  auto floats = [](Id id, size_t n) {
+    SetBuffer b;
+    b.id = id;
+    b.buffer.type = Buffer::Type::f32;
+    b.buffer.components = 1;
+    b.buffer.f.assign(n, 0.5f);
+    return b;
+  };
+  client({SetCamera{camera_at(3)}, RenderRequest{1}});
+  deliver_client();
+  // 160 bytes fit; 160 more would not, so that buffer is refused now, not after the frame.
+  client({floats(10, 40), floats(11, 40), SetCamera{camera_at(4)}});
+  deliver_client();
+  auto waiting = status();
+  CAF_CHECK(waiting.in_flight);
+  CAF_CHECK_EQUAL(waiting.cached_updates, 2u);
+  auto errors = sink->all<ErrorReply>();
+  CAF_REQUIRE_EQUAL(errors.size(), 1u);
+  CAF_CHECK(errors[0].code == ErrorCode::limit_exceeded);
+  CAF_CHECK_EQUAL(errors[0].record, 1u);
+  CAF_CHECK(!errors[0].fatal);
+  CAF_CHECK_NOT_EQUAL(errors[0].message.find("buffer 11"), std::string::npos);
+  run();  // the frame ends; what was accepted is applied
+  CAF_CHECK_EQUAL(frames_sent(), std::vector<uint32_t>{1});
+  // Next frame: replacing a waiting buffer counts its old size out, and 40 more bytes fill
+  // the limit exactly.
+  client({RenderRequest{2}});
+  deliver_client();
+  client({floats(10, 40), floats(11, 10)});
+  deliver_client();
+  CAF_CHECK_EQUAL(status().cached_updates, 2u);
+  CAF_CHECK_EQUAL(sink->all<ErrorReply>().size(), 1u);
+  run();
+  CAF_CHECK_EQUAL(frames_sent(), (std::vector<uint32_t>{1, 2}));
+  // Now held: 72 + 160 + 40 bytes, the limit. Between frames the same check applies at once.
+  client({floats(12, 1)});
+  run();
+  CAF_CHECK_EQUAL(sink->all<ErrorReply>().size(), 2u);
+}
+
 CAF_TEST(render requests during a frame are remembered once and never queued twice) {
   client({SetCamera{camera_at(3)}, RenderRequest{1}});
   deliver_client();

@@ -864,6 +864,29 @@ TEST_CASE("Scene-wide limits: client bytes and triangles", "[protocol]") {
   CHECK(apply(scene, std::move(hidden), lim).ok());
 }
 
+TEST_CASE("Updates waiting to be applied count against the client's bytes as if applied in order", "[protocol]") {
+  Scene scene;
+  Limits lim;
+  lim.max_client_bytes = 200;
+  REQUIRE(apply(scene, positions_buffer(1, 2), lim).ok());  // 72 bytes held
+  PendingBytes p;
+  CHECK(p.admit(scene, ClientRecord{positions_buffer(2, 2)}, lim).ok());  // 144 once applied
+  Status over = p.admit(scene, ClientRecord{positions_buffer(3, 2)}, lim);  // 216
+  CHECK(over.code() == ErrorCode::limit_exceeded);
+  CHECK(mentions(over.error().message, "buffer 3"));
+  CHECK(mentions(over.error().message, "200 bytes"));
+  CHECK(p.admit(scene, ClientRecord{positions_buffer(2, 1)}, lim).ok());  // replaces the waiting 72 with 36: 108
+  CHECK(p.admit(scene, ClientRecord{positions_buffer(3, 2)}, lim).ok());  // 180
+  CHECK(p.admit(scene, ClientRecord{positions_buffer(1, 1)}, lim).ok());  // replaces the scene's 72 with 36: 144
+  CHECK(p.admit(scene, ClientRecord{Remove{RecordType::buffer, 3}}, lim).ok());  // frees the waiting 72: 72
+  CHECK(p.admit(scene, ClientRecord{sample_texture(5, 4, 4)}, lim).ok());                // 64 texel bytes: 136
+  CHECK(p.admit(scene, ClientRecord{sample_texture(6, 5, 4)}, lim).code() == ErrorCode::limit_exceeded);  // +80: 216
+  CHECK(p.admit(scene, ClientRecord{SetCamera{}}, lim).ok());  // holds no bytes
+  CHECK(scene_bytes(scene) == 72);  // admitting applies nothing
+  p.clear();  // the waiting updates were applied or dropped: only the scene counts
+  CHECK(p.admit(scene, ClientRecord{positions_buffer(4, 3)}, lim).ok());  // 72 + 108
+}
+
 // ---------------------------------------------------------------------------------------
 // Robustness.
 
