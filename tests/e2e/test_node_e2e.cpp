@@ -105,6 +105,37 @@ TEST_CASE("MJPEG frames stream over HTTP and match the ray tracer", "[e2e]") {
   CHECK(missing->status == 404);
 }
 
+TEST_CASE("An MJPEG viewer that opens after the last frame starts with that frame", "[e2e]") {
+  TestNode node;
+  ProtoClient c;
+  const std::string token = "mjpeglate01";
+  REQUIRE(c.connect(node.port(), "/ws?session=" + token));
+  REQUIRE(c.handshake(DisplayKind::mjpeg, W, H, 90));
+  REQUIRE(c.upload(pavilion().scene));
+  // Two frames with no viewer; then one opens and no frame follows: it must still get a
+  // picture, the latest one, not wait for the next render.
+  REQUIRE(c.render(pavilion_loop().camera(0), 1));
+  REQUIRE(c.render(pavilion_loop().camera(40), 2));
+  std::vector<std::vector<uint8_t>> parts;
+  std::string err;
+  REQUIRE(http::read_mjpeg("127.0.0.1", node.port(), "/mjpeg/" + token, 1, parts, &err, 10000));
+  REQUIRE(parts.size() == 1);
+  const Image got = decode_jpeg(parts[0]);
+  CHECK(compare(got, direct_render(40, 0, 2)).psnr >= 30.0);
+  CHECK(compare(got, direct_render(0, 0, 1)).psnr < compare(got, direct_render(40, 0, 2)).psnr);
+  // The stream goes on with the frames rendered after it opened.
+  parts.clear();
+  auto reader = std::async(std::launch::async, [&] {
+    return http::read_mjpeg("127.0.0.1", node.port(), "/mjpeg/" + token, 2, parts, &err, 30000);
+  });
+  uint32_t n = 3;
+  while (reader.wait_for(std::chrono::milliseconds(0)) != std::future_status::ready && n < 40)
+    REQUIRE(c.render(pavilion_loop().camera(80), n++));
+  REQUIRE(reader.get());
+  REQUIRE(parts.size() == 2);
+  CHECK(compare(decode_jpeg(parts[1]), direct_render(80, 0, 3)).psnr >= 30.0);
+}
+
 TEST_CASE("Malformed messages get errors and neither that session nor another one breaks", "[e2e][fault]") {
   TestNode node;
   ProtoClient a, b;
