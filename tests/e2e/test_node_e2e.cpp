@@ -28,6 +28,13 @@ Image direct_render(size_t k, int ao, uint32_t seq) {
   return render_direct(pavilion().scene, pavilion_loop().camera(k), W, H, ao, seq);
 }
 
+// Connects c to node in session `token` with an MJPEG display and uploads the pavilion.
+void open_mjpeg_session(TestNode& node, ProtoClient& c, const std::string& token) {
+  REQUIRE(c.connect(node.port(), "/ws?session=" + token));
+  REQUIRE(c.handshake(DisplayKind::mjpeg, W, H, 90));
+  REQUIRE(c.upload(pavilion().scene));
+}
+
 }  // namespace
 
 TEST_CASE("A client uploads the pavilion and receives JPEG and S3TC frames that match the ray tracer", "[e2e]") {
@@ -80,9 +87,7 @@ TEST_CASE("MJPEG frames stream over HTTP and match the ray tracer", "[e2e]") {
   TestNode node;
   ProtoClient c;
   const std::string token = "mjpegtest01";
-  REQUIRE(c.connect(node.port(), "/ws?session=" + token));
-  REQUIRE(c.handshake(DisplayKind::mjpeg, W, H, 90));
-  REQUIRE(c.upload(pavilion().scene));
+  open_mjpeg_session(node, c, token);
   std::vector<std::vector<uint8_t>> parts;
   std::string err;
   auto reader = std::async(std::launch::async, [&] {
@@ -109,9 +114,7 @@ TEST_CASE("An MJPEG viewer that opens after the last frame starts with that fram
   TestNode node;
   ProtoClient c;
   const std::string token = "mjpeglate01";
-  REQUIRE(c.connect(node.port(), "/ws?session=" + token));
-  REQUIRE(c.handshake(DisplayKind::mjpeg, W, H, 90));
-  REQUIRE(c.upload(pavilion().scene));
+  open_mjpeg_session(node, c, token);
   // Two frames with no viewer; then one opens and no frame follows: it must still get a
   // picture, the latest one, not wait for the next render.
   REQUIRE(c.render(pavilion_loop().camera(0), 1));
