@@ -113,10 +113,10 @@ export class RemoteBackend {
 
   // Chromium shows a part of a multipart/x-mixed-replace stream only when the next part
   // starts: the node closes each part with the boundary at once, but that alone does not
-  // show it (tried), so the newest frame would stay hidden until another one comes. After the last frame of a change the
-  // client therefore asks for one more (identical) frame, which pushes the previous one out;
-  // and while the stream has shown nothing (it connected after the first frames went out) it
-  // asks again, at most 20 times.
+  // show it (tried), so the newest frame would stay hidden until another one comes. After
+  // the last frame of a change the client therefore asks for one more (identical) frame,
+  // which pushes the previous one out; and while the stream has shown nothing (it connected
+  // after the first frames went out) it asks again, at most 20 times.
   flushMjpeg(frame) {
     const ch = this.channel;
     if (!this.frameView.showing && (this.mjpegRetries = (this.mjpegRetries || 0) + 1) <= 20) {
