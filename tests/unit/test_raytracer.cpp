@@ -280,6 +280,57 @@ TEST_CASE("a 2x2 nearest texture on a quad facing the camera shows its texels ex
 }
 
 // ---------------------------------------------------------------------------------------
+// Output encoding
+// ---------------------------------------------------------------------------------------
+// A linear scene's output is sRGB-encoded. An unlit matte quad filling the view shows its
+// diffuse colour as it is, so each channel's code can be checked against the exact curve,
+// rounded: off by at most one, and exact unless the curve passes within 0.05 of a half step
+// (the encoder's stated error is 0.04). The sweep covers the linear segment, the joint at
+// 0.0031308, dark values (where a table indexed in 1/4096 steps is off by up to 0.4 of a step),
+// the bright end and clamping above 1, in every packet layout's copy of the kernel.
+TEST_CASE("sRGB output codes are the exact curve's, rounded, over the whole range", "[raytracer][output]") {
+  const int W = 4, H = 4;
+  Scene scene;
+  scene.set_resolution(W, H);
+  Environment env = plain_env({0, 0, 0});
+  env.linear = true;
+  scene.set_environment(env);
+  add_object(scene, 100, quad({-4, -4, 0}, {8, 0, 0}, {0, 8, 0}), 1);
+  scene.set_camera(look({0, 0, 2}, {0, 0, 0}, 60 * kDeg));
+  auto exact = [](double c) {  // the code's exact value, before rounding
+    c = std::min(std::max(c, 0.0), 1.0);
+    return 255.0 * (c <= 0.0031308 ? 12.92 * c : 1.055 * std::pow(c, 1 / 2.4) - 0.055);
+  };
+  for (PacketLayout layout : {PacketLayout{2, 2}, PacketLayout{4, 2}, PacketLayout{4, 4}}) {
+    RayTracer rt(layout);
+    int checked = 0, off_by_one = 0;
+    for (int k = 0; k <= 300; ++k) {
+      const float c[3] = {k / 256.0f,                       // 0 .. 1.17: the whole curve and clamping
+                          (k / 300.0f) * (k / 300.0f) * 0.05f,  // dense in the dark
+                          0.0031308f * (k / 150.0f)};           // across the joint of the two segments
+      scene.set_material(1, matte({c[0], c[1], c[2]}));
+      Image img = render_full(rt, scene, no_ao());
+      const Rgb p = px(img, W / 2, H / 2);
+      const int got[3] = {p.r, p.g, p.b};
+      for (int ch = 0; ch < 3; ++ch) {
+        const double v = exact(c[ch]);
+        const int rounded = int(std::floor(v + 0.5));
+        INFO("layout " << layout.w << "x" << layout.h << " channel value " << c[ch] << " exact code " << v
+                       << " got " << got[ch]);
+        CHECK(std::abs(got[ch] - rounded) <= 1);
+        if (std::abs(v - std::floor(v) - 0.5) > 0.05) CHECK(got[ch] == rounded);
+        off_by_one += got[ch] != rounded;
+        ++checked;
+      }
+      for (int y = 0; y < H; ++y)
+        for (int x = 0; x < W; ++x) REQUIRE(std::memcmp(img.pixel(x, y), img.pixel(W / 2, H / 2), 3) == 0);
+    }
+    INFO(off_by_one << " of " << checked << " codes off by one");
+    CHECK(off_by_one <= checked / 100);
+  }
+}
+
+// ---------------------------------------------------------------------------------------
 // Alpha masks
 // ---------------------------------------------------------------------------------------
 TEST_CASE("alpha-masked cut-outs are transparent to camera rays and cast no shadow", "[raytracer][alpha]") {
