@@ -1,8 +1,10 @@
 // tessera bench --scene S.gltf --camera-loop L.json [--frames N] [--step K] [--ao N] ...
 // Replays a camera loop on this node and prints one JSON line per frame, then a summary.
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
+#include <limits>
 
 #include "app/command.h"
 #include "app/common.h"
@@ -23,7 +25,9 @@ const char* kHelp =
     "  bare        a bare Embree loop tracing the same camera rays in the same packets, no shading;\n"
     "              then one more run of each with Embree's intersection calls timed: intersect_ms\n"
     "              (ours) and bare_intersect_ms, after_hit_ms (the rest of our kernel) and\n"
-    "              after_hit_budget_ms (what ours/bare >= 0.8 leaves it: 1.25 x bare - ours inside Embree)\n"
+    "              after_hit_budget_ms (what ours/bare >= 0.8 leaves it: 1.25 x bare - ours inside Embree);\n"
+    "              and ours with no shading at all (hits white): floor_ms, floor_over_bare, shading_ms\n"
+    "              (ours - floor) and shading_budget_ms (what ours/bare >= 0.8 leaves it: 1.25 x bare - floor)\n"
     "  specialised the kernel with AO, secondary rays, textures and filters compiled out, against the\n"
     "              general kernel (render itself runs the specialised one where the scene allows:\n"
     "              \"kernel\" in the summary says which)\n"
@@ -137,6 +141,7 @@ int run(const std::vector<std::string>& argv) {
 
   std::vector<double> kernel, rendering, rate, cmp_ms, cmp_ratio, b_primary, b_shadow, b_ao, b_secondary;
   std::vector<double> isect, bare_isects, after_hit;  // --compare bare: the split of our time
+  std::vector<double> floor_ratio, shading, shading_budget;  // --compare bare: against no shading
   RayCounts total_rays;
   for (long f = 0; f < frames; ++f) {
     size_t k = setup.replay(f, step, settings);
@@ -180,11 +185,27 @@ int run(const std::vector<std::string>& argv) {
       uint64_t n = 0;
       double ms = rt.trace_primary_only(full, &n);
       best(r.rendering_ms, ms, [&] { return rt.trace_primary_only(full, nullptr); });
+      // The floor: ours with no shading (RenderSettings::shading_floor), its R runs in turn
+      // with R more of the bare loop.
+      RenderSettings no_shading = settings;
+      no_shading.shading_floor = true;
+      double floor_ms = std::numeric_limits<double>::infinity();
+      for (long i = 0; i < reps; ++i) {
+        TaskResult fl;
+        rt.render(full, no_shading, fl);
+        floor_ms = std::min(floor_ms, fl.rendering_ms);
+        ms = std::min(ms, rt.trace_primary_only(full, nullptr));
+      }
       double ours = mrays(r.rays.primary, r.rendering_ms), bare = mrays(n, ms);
       cmp_ms.push_back(ms);
       cmp_ratio.push_back(bare > 0 ? ours / bare : 0);
       std::printf(", \"bare_ms\": %.3f, \"bare_mrays_per_s\": %.3f, \"primary_mrays_per_s\": %.3f, \"ours_over_bare\": %.4f", ms, bare,
                   ours, cmp_ratio.back());
+      floor_ratio.push_back(floor_ms > 0 ? ms / floor_ms : 0);  // same rays: the ratio of rates
+      shading.push_back(r.rendering_ms - floor_ms);
+      shading_budget.push_back(1.25 * ms - floor_ms);
+      std::printf(", \"floor_ms\": %.3f, \"floor_over_bare\": %.4f, \"shading_ms\": %.3f, \"shading_budget_ms\": %.3f", floor_ms,
+                  floor_ratio.back(), shading.back(), shading_budget.back());
       // Where our time goes, from one more run of each side with Embree's primary-ray
       // intersection calls timed (CPU ms): inside them, and everything else of our kernel
       // (ray set-up, shading, output, cost map). The 0.8 target allows the latter
@@ -249,6 +270,9 @@ int run(const std::vector<std::string>& argv) {
   if (!isect.empty())
     std::printf(", \"intersect_ms\": %.3f, \"bare_intersect_ms\": %.3f, \"after_hit_ms\": %.3f, \"after_hit_budget_ms\": %.3f",
                 median(isect), median(bare_isects), median(after_hit), 1.25 * median(bare_isects) - median(isect));
+  if (!floor_ratio.empty())
+    std::printf(", \"floor_over_bare\": %.4f, \"shading_ms\": %.3f, \"shading_budget_ms\": %.3f", median(floor_ratio),
+                median(shading), median(shading_budget));
   if (!b_primary.empty())
     std::printf(", \"breakdown_mrays_per_s\": {\"primary\": %.3f, \"shadow\": %.3f, \"ao\": %.3f, \"secondary\": %.3f}",
                 median(b_primary), median(b_shadow), median(b_ao), median(b_secondary));

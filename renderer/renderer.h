@@ -22,6 +22,10 @@ struct RenderSettings {
   // Benchmarks only: time the ray tracer's primary-ray intersection calls with the TSC (two
   // more reads per packet) into TaskResult::primary_intersect_ms.
   bool time_intersections = false;
+  // Benchmarks only: no shading at all. Every hit lane is white and every miss the background,
+  // so a render costs tracing, ray set-up, output and cost map alone (`tessera bench --compare
+  // bare` measures this floor beside the real shading).
+  bool shading_floor = false;
 };
 
 struct RayCounts {

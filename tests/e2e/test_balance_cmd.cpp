@@ -197,6 +197,20 @@ TEST_CASE("tessera bench --reps: best-of-R comparisons, bad counts rejected", "[
   CHECK(summary.at("summary") == true);
   CHECK(summary.at("reps") == 2);
   CHECK(summary.at("compare_ratio").get<double>() > 0);
+  // --compare bare also times the floor (our kernel without shading) and splits our time at it:
+  // per frame and in the summary, shading_ms is ours minus the floor.
+  Run b = run_tessera("bench " + base_args() + " --compare bare --depth 1 --shadows 0");
+  REQUIRE(b.rc == 0);
+  REQUIRE(b.lines.size() == 4);
+  for (const json& line : b.lines) {
+    CHECK(line.at("floor_over_bare").get<double>() > 0);
+    CHECK(line.at("shading_budget_ms").is_number());
+  }
+  for (size_t i = 0; i < 3; ++i) {
+    const json& f = b.lines[i];
+    CHECK(f.at("floor_ms").get<double>() > 0);
+    CHECK(f.at("shading_ms").get<double>() == Approx(f.at("rendering_ms").get<double>() - f.at("floor_ms").get<double>()).margin(2e-3));
+  }
   for (const char* bad : {"--reps 0", "--reps 101", "--reps x"}) {
     INFO(bad);
     CHECK(run_tessera("bench " + base_args() + " --compare bare " + bad).rc != 0);

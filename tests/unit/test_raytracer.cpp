@@ -330,6 +330,45 @@ TEST_CASE("sRGB output codes are the exact curve's, rounded, over the whole rang
   }
 }
 
+// The benchmarks' floor (RenderSettings::shading_floor): no shading, hits white, misses the
+// background, and the task still gets its cost map and ray counts.
+TEST_CASE("the shading floor renders hits white and misses as background, with a full cost map", "[raytracer][bench]") {
+  const int W = 32, H = 16;
+  Scene scene;
+  scene.set_resolution(W, H);
+  scene.set_environment(plain_env({0, 0, 1}));
+  scene.set_material(1, diffuse({1, 0, 0}));
+  scene.set_light(1, directional({0, 0, -1}));
+  // A quad filling the left half of the view only.
+  add_object(scene, 100, quad({-10, -10, 0}, {10, 0, 0}, {0, 20, 0}), 1);
+  scene.set_camera(look({0, 0, 2}, {0, 0, 0}, 60 * kDeg));
+  RayTracer rt;
+  RenderSettings floor = no_ao(1);
+  floor.shading_floor = true;
+  TaskResult shaded, bare;
+  render_full(rt, scene, no_ao(1), nullptr, &shaded);
+  Image img = render_full(rt, scene, floor, nullptr, &bare);
+  int hits = 0;
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      const Rgb p = px(img, x, y), s = px(shaded.image, x, y);
+      INFO("pixel " << x << "," << y << " floor " << str(p) << " shaded " << str(s));
+      if (x < W / 2) {
+        CHECK((p.r == 255 && p.g == 255 && p.b == 255));
+        CHECK((s.r > 0 && s.g == 0 && s.b == 0));  // the real shading: the lit red quad
+        ++hits;
+      } else {
+        CHECK((p.r == 0 && p.g == 0 && p.b == 255));
+        CHECK((s.r == p.r && s.g == p.g && s.b == p.b));
+      }
+    }
+  CHECK(hits == W * H / 2);
+  CHECK(bare.rays.primary == uint64_t(W * H));
+  CHECK(bare.rays.shadow == 0);  // no light is evaluated
+  CHECK(bare.cost.cost.size() == shaded.cost.cost.size());
+  CHECK(bare.kernel_ms > 0);
+}
+
 // ---------------------------------------------------------------------------------------
 // Alpha masks
 // ---------------------------------------------------------------------------------------
