@@ -56,7 +56,7 @@ md += ["", "Reading it: PSNR and bytes are exact; times are noisy. DXT1 has a fi
        "(460,800 bytes at 1280x720); range fit reaches about the PSNR of JPEG q90-q95 at 1.2-1.7x",
        "the bytes of those; cluster fit adds about 1 dB at roughly 20-30x the encode time of the",
        "parallel range fit, too slow for interactive frames on this machine. Spreading range fit",
-       "over 2 threads saves less than 2x here because the other agents keep both cores busy.",
+       "over 2 threads saves up to 2x when both cores are free, and less when other work shares them.",
        "JPEG's encode time barely depends on quality; its bytes roughly double from q50 to q90."]
 md += ["", "## Per scene and frame", "",
        "| scene | frame | method | encode ms (min..max) | bytes | PSNR dB |", "|---|---|---|---|---|---|"]
