@@ -280,6 +280,63 @@ TEST_CASE("a 2x2 nearest texture on a quad facing the camera shows its texels ex
 }
 
 // ---------------------------------------------------------------------------------------
+// Phong highlights
+// ---------------------------------------------------------------------------------------
+// Two Phong quads side by side facing the camera, lit from the camera's side: the right one
+// with a specular colour shows the highlight dr N.L + sr (R.V)^e around the view axis, the
+// left one (specular colour 0) is dr N.L everywhere: the kernel leaves the highlight's power
+// out where no lane shows one, which must not change a pixel. Packets on the seam hold lanes
+// of both materials.
+TEST_CASE("a Phong highlight follows (R.V)^e; a zero specular colour shows none", "[raytracer][phong]") {
+  const int W = 48, H = 32;
+  Scene scene;
+  scene.set_resolution(W, H);
+  scene.set_environment(plain_env({0, 0, 0}));
+  Material dull = diffuse({0.4f, 0.4f, 0.4f});
+  dull.model = Material::Model::phong;  // a specular colour of 0
+  Material shiny = diffuse({0.3f, 0.2f, 0.1f});
+  shiny.model = Material::Model::phong;
+  shiny.specular_color = {0.5f, 0.6f, 0.7f};
+  shiny.shininess = 16.0f / 128.0f;  // exponent 16
+  scene.set_material(1, dull);
+  scene.set_material(2, shiny);
+  add_object(scene, 100, quad({-3, -3, 0}, {3, 0, 0}, {0, 6, 0}), 1);
+  add_object(scene, 200, quad({0, -3, 0}, {3, 0, 0}, {0, 6, 0}), 2);
+  scene.set_light(1, directional({0, 0, -1}));
+  Camera cam = look({0.3f, 0.2f, 2}, {0.3f, 0.2f, 0}, 60 * kDeg);
+  scene.set_camera(cam);
+  RayTracer rt;
+  Image img = render_full(rt, scene, no_ao(1));
+  const Vec3 eye = cam_pos(cam);
+  int checked[2] = {0, 0}, bright = 0;
+  for (int y = 0; y < H; ++y)
+    for (int x = 0; x < W; ++x) {
+      const Vec3 d = pixel_dir(cam, W, H, float(x), float(y));
+      const Vec3 p = eye + d * (-eye.z / d.z);
+      if (std::fabs(p.x) < 0.05f) continue;  // the seam
+      const bool right = p.x > 0;
+      const Material& m = right ? shiny : dull;
+      // N = L = (0, 0, 1): N.L = 1, R = (0, 0, 1), R.V = -d.z.
+      const double rv = -d.z, highlight = std::pow(rv, 16.0);
+      const double want[3] = {m.diffuse_color.x + m.specular_color.x * highlight,
+                              m.diffuse_color.y + m.specular_color.y * highlight,
+                              m.diffuse_color.z + m.specular_color.z * highlight};
+      const Rgb got = px(img, x, y);
+      const int g[3] = {got.r, got.g, got.b};
+      for (int c = 0; c < 3; ++c) {
+        INFO("pixel " << x << "," << y << (right ? " shiny" : " dull") << " channel " << c << " want "
+                      << 255 * want[c] << " got " << g[c]);
+        CHECK(std::abs(g[c] - 255 * std::min(want[c], 1.0)) <= 1.0);
+      }
+      ++checked[right];
+      bright += right && highlight > 0.5;
+    }
+  CHECK(checked[0] > W * H / 4);
+  CHECK(checked[1] > W * H / 4);
+  CHECK(bright > 10);  // the highlight is in view
+}
+
+// ---------------------------------------------------------------------------------------
 // Output encoding
 // ---------------------------------------------------------------------------------------
 // A linear scene's output is sRGB-encoded. An unlit matte quad filling the view shows its
