@@ -2,15 +2,18 @@
 # Regenerates the ray tracer's throughput figures (docs/results/raytracer.jsonl): per shared
 # scene at 1280x720, 1 and 2 threads: marginal Mrays/s per ray kind (breakdown), ours vs the
 # bare Embree kernel (bare), the cost map's overhead (costmap) and general vs compiled-out
-# kernel on the plain scene (specialised). Usage: bench/raytracer_report.sh [frames]
+# kernel on the plain scene (specialised).
+# Usage: bench/raytracer_report.sh [frames]   (about 90 s with 3 frames)
+#        bench/raytracer_report.sh --tables-only   (docs/results/raytracer.md from the stored JSON lines)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 F=${1:-3}
 T=build/app/tessera
 S=../shared/scenes
 out=docs/results/raytracer.jsonl
-: > "$out"
-for sc in pavilion living-room kitchen; do
+scenes=(pavilion living-room kitchen)
+if [[ $F == --tables-only ]]; then scenes=(); else : > "$out"; fi
+for sc in "${scenes[@]}"; do
   ao=8; [[ $sc == pavilion ]] && ao=16
   for th in 1 2; do
     common=(--scene $S/$sc/scene.gltf --camera-loop $S/$sc/camera-loop.json --size 1280 720 --frames "$F" --step 80 --threads $th)
@@ -33,43 +36,43 @@ md = ["# Ray tracer throughput", "",
       "Each kind's rate is its rays divided by the time it adds on top of the previous configuration",
       "(primary only; + shadows; + AO; + secondary). 0 = the scene traces none of that kind (no sky",
       "means no AO rays; no lights means no shadow rays).", "",
-      "| scene | threads | AO rays/hit | primary | shadow | AO | secondary | all rays Mrays/s | frame ms |", "|---|---|---|---|---|---|---|---|---|"]
-for r in rows:
-    if "breakdown_mrays_per_s" in r:
-        b = r["breakdown_mrays_per_s"]; sc = os.path.basename(os.path.dirname(r["scene"]))
-        md.append(f"| {sc} | {r['threads']} | {r['ao']} | {b['primary']:.2f} | {b['shadow']:.2f} | {b['ao']:.2f} | {b['secondary']:.2f} | {r['mrays_per_s']:.2f} | {r['rendering_ms']:.0f} |")
+      ]
+
+def table(columns, want, cells):
+    """One row per run line that `want` accepts: its scene, its threads, then cells(r)."""
+    md.extend(["| scene | threads | " + " | ".join(columns) + " |", "|---|---|" + "---|" * len(columns)])
+    for r in rows:
+        if want(r):
+            sc = os.path.basename(os.path.dirname(r["scene"]))
+            md.append(f"| {sc} | {r['threads']} | " + " | ".join(cells(r)) + " |")
+
+table(["AO rays/hit", "primary", "shadow", "AO", "secondary", "all rays Mrays/s", "frame ms"],
+      lambda r: "breakdown_mrays_per_s" in r,
+      lambda r: [str(r["ao"])] + [f"{r['breakdown_mrays_per_s'][k]:.2f}" for k in ("primary", "shadow", "ao", "secondary")]
+                + [f"{r['mrays_per_s']:.2f}", f"{r['rendering_ms']:.0f}"])
 md += ["", "## Same-run comparisons", "",
        "- `bare`: our primary rays with shading, Mrays/s divided by a bare Embree loop tracing the same camera rays in the same packets with no shading (target >= 0.8).",
        "- `costmap`: frame time with the per-packet TSC timing divided by the time without (target <= 1.01).",
-       "- `specialised`: on the `--plain` scene (no textures, reflection, refraction, masks), the general kernel's time divided by the kernel with those features compiled out. `tessera render` and the nodes run the compiled-out kernel for such scenes (the bench summary's `kernel` field says which kernel a scene gets), so this ratio is what that choice saves, and such a scene is never slower than with the features compiled out (target <= 1.0).", "",
-       "| scene | threads | comparison | ratio (median over frames) |", "|---|---|---|---|"]
-for r in rows:
-    if r.get("compare") in ("bare", "costmap", "specialised"):
-        sc = os.path.basename(os.path.dirname(r["scene"]))
-        md.append(f"| {sc} | {r['threads']} | {r['compare']} | {r['compare_ratio']:.3f} |")
+       "- `specialised`: on the `--plain` scene (no textures, reflection, refraction, masks), the general kernel's time divided by the kernel with those features compiled out. `tessera render` and the nodes run the compiled-out kernel for such scenes (the bench summary's `kernel` field says which kernel a scene gets), so this ratio is what that choice saves, and such a scene is never slower than with the features compiled out (target <= 1.0).", ""]
+table(["comparison", "ratio (median over frames)"], lambda r: r.get("compare") in ("bare", "costmap", "specialised"),
+      lambda r: [r["compare"], f"{r['compare_ratio']:.3f}"])
 md += ["", "## Where the time goes against the bare loop (`--compare bare`)", "",
        "One more run of each side with Embree's primary-ray intersection calls timed by the TSC",
        "(CPU ms summed over threads, medians over frames): inside Embree in our kernel and in the",
        "bare loop, the rest of our kernel (ray set-up, shading, output, cost map), and what the 0.8",
-       "target leaves that rest: 1.25 x bare intersections - ours.", "",
-       "| scene | threads | ours inside Embree ms | bare inside Embree ms | rest of ours ms | rest allowed by 0.8 ms |",
-       "|---|---|---|---|---|---|"]
-for r in rows:
-    if r.get("compare") == "bare" and "intersect_ms" in r:
-        sc = os.path.basename(os.path.dirname(r["scene"]))
-        md.append(f"| {sc} | {r['threads']} | {r['intersect_ms']:.1f} | {r['bare_intersect_ms']:.1f} | {r['after_hit_ms']:.1f} | {r['after_hit_budget_ms']:.1f} |")
+       "target leaves that rest: 1.25 x bare intersections - ours.", ""]
+table(["ours inside Embree ms", "bare inside Embree ms", "rest of ours ms", "rest allowed by 0.8 ms"],
+      lambda r: r.get("compare") == "bare" and "intersect_ms" in r,
+      lambda r: [f"{r[k]:.1f}" for k in ("intersect_ms", "bare_intersect_ms", "after_hit_ms", "after_hit_budget_ms")])
 md += ["", "## The floor: our kernel with no shading at all (`--compare bare`)", "",
        "Our render with `RenderSettings::shading_floor` (every hit white: tracing, ray set-up, output",
        "and cost map without any shading), timed like the others (fastest of 3, in turn with the bare",
        "loop), medians over frames: its rate over the bare loop's, the time our real shading adds to",
-       "it, and what the 0.8 target leaves the shading: 1.25 x bare - floor.", "",
-       "| scene | threads | floor / bare | shading ms | shading allowed by 0.8 ms |",
-       "|---|---|---|---|---|"]
-for r in rows:
-    if r.get("compare") == "bare" and "floor_over_bare" in r:
-        sc = os.path.basename(os.path.dirname(r["scene"]))
-        md.append(f"| {sc} | {r['threads']} | {r['floor_over_bare']:.3f} | {r['shading_ms']:.1f} | {r['shading_budget_ms']:.1f} |")
+       "it, and what the 0.8 target leaves the shading: 1.25 x bare - floor.", ""]
+table(["floor / bare", "shading ms", "shading allowed by 0.8 ms"],
+      lambda r: r.get("compare") == "bare" and "floor_over_bare" in r,
+      lambda r: [f"{r['floor_over_bare']:.3f}", f"{r['shading_ms']:.1f}", f"{r['shading_budget_ms']:.1f}"])
 md.append("")
 open(os.path.join(os.path.dirname(sys.argv[1]), "raytracer.md"), "w").write("\n".join(md))
 PY
-echo "wrote $out and docs/results/raytracer.md"
+echo "wrote docs/results/raytracer.md from $out"
