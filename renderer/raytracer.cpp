@@ -195,7 +195,6 @@ struct TexelAddressing {
 
 struct RayTracer::Impl {
   struct Tex {
-    int32_t w = 0, h = 0;
     // RGBA, 16 bits a channel (low to high), colour already as shading uses it (decoded from
     // sRGB for glTF scenes), so a lookup is one 64-bit load per texel and no table.
     std::vector<uint64_t> texels;
@@ -456,12 +455,11 @@ void RayTracer::Impl::sync(const Scene& scene, std::vector<std::string>& warning
       t.decoded = decode;  // warned once: not again at every sync
       continue;
     }
-    t.w = src.width; t.h = src.height;
-    t.addr = TexelAddressing(t.w, t.h, src.sampler.wrap_s == Sampler::Wrap::repeat,
+    t.addr = TexelAddressing(src.width, src.height, src.sampler.wrap_s == Sampler::Wrap::repeat,
                              src.sampler.wrap_t == Sampler::Wrap::repeat, src.sampler.filter == Sampler::Filter::nearest);
     t.decoded = decode;
     t.version = e.version;
-    t.texels.resize(size_t(t.w) * size_t(t.h));
+    t.texels.resize(size_t(src.width) * size_t(src.height));
     for (size_t i = 0; i < t.texels.size(); ++i) {
       const uint8_t* p = &src.rgba[i * 4];
       uint64_t v = uint64_t(p[3]) * 257 << 48;
@@ -484,7 +482,7 @@ void RayTracer::Impl::sync(const Scene& scene, std::vector<std::string>& warning
   }
   auto tex_of = [&](Id id) -> const Tex* {
     auto it = textures.find(id);
-    return it != textures.end() && it->second.w > 0 ? &it->second : nullptr;
+    return it != textures.end() && !it->second.texels.empty() ? &it->second : nullptr;  // empty: ignored
   };
   mat_diffuse_tex.resize(materials.size());
   mat_specular_tex.resize(materials.size());

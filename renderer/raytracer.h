@@ -64,8 +64,8 @@ class RayTracer final : public Renderer {
   // The general kernel (every feature compiled in) whatever the scene needs: what render()
   // would cost without picking a kernel per scene.
   void render_general(const Rect& pixels, const RenderSettings& settings, TaskResult& out);
-  // The physical limit: the same camera rays in the same packets, traced with no shading
-  // and no timing. Returns wall milliseconds; rays traced in *rays. With intersect_ms, the
+  // The physical limit: the same camera rays in the same packets, traced with no shading and
+  // no cost map. Returns wall milliseconds; rays traced in *rays. With intersect_ms, the
   // intersection calls are timed as time_intersections times render()'s (summed over threads).
   double trace_primary_only(const Rect& pixels, uint64_t* rays, double* intersect_ms = nullptr);
   // The same kernel, cost map and image as render(), with the task's packets scheduled over
