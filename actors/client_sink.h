@@ -14,6 +14,12 @@ class ClientSink {
   virtual ~ClientSink() = default;
   // One binary WebSocket message (a complete protocol message).
   virtual void send(std::vector<uint8_t> message) = 0;
+  // A Frame record. A client that has not read the frames before it gets the newest: the
+  // network layer keeps at most one frame waiting per connection and a newer one replaces it
+  // (net/server.cpp). Default: send().
+  virtual void send_frame(std::vector<uint8_t> message) { send(std::move(message)); }
+  // Frames replaced that way so far (reported in Stats.dropped). Any thread.
+  virtual uint32_t frames_dropped() const { return 0; }
   // One JPEG for the session's MJPEG streams (multipart/x-mixed-replace on HTTP).
   virtual void send_mjpeg(std::shared_ptr<const std::vector<uint8_t>> jpeg) = 0;
   // Ends the connection after a fatal protocol error (the session has sent the error).

@@ -47,7 +47,7 @@ void maybe_send_stats(display_state& st, const FrameMeta& m, int64_t sent_ns, do
   if (span < kStatsPeriodNs) return;
   protocol::Stats s;
   s.frames = uint32_t(st.frames);
-  s.dropped = m.dropped;
+  s.dropped = m.dropped + st.sink->frames_dropped();
   s.bytes_sent = st.bytes;
   s.scene_bytes = m.scene_bytes;
   s.triangles = m.triangles;
@@ -128,12 +128,12 @@ display_actor::behavior_type display_impl(display_actor::stateful_pointer<displa
                 bytes = jpeg->size();
                 st.sink->send_mjpeg(std::move(jpeg));
                 protocol::encode_frame_header(f, 0, header);
-                st.sink->send(std::move(header));
+                st.sink->send_frame(std::move(header));
               } else {
                 protocol::encode_frame_header(f, payload, header);
                 std::memcpy(ef.message.data(), header.data(), ef.header_bytes);
                 bytes = ef.message.size();
-                st.sink->send(std::move(ef.message));
+                st.sink->send_frame(std::move(ef.message));
               }
               st.frames++;
               st.bytes += bytes;

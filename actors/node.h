@@ -20,6 +20,7 @@
 #include "actors/renderer_protocol.h"
 #include "actors/session_protocol.h"
 #include "actors/tiler_protocol.h"
+#include "net/memory_budget.h"
 #include "net/protocol.h"
 #include "renderer/tiler.h"
 
@@ -43,6 +44,11 @@ struct NodeSettings {
                                       // failed (at least 3x the last frame's rendering time)
   uint32_t reconnect_ms = 1000;       // retry period for lost children
   caf::weak_actor_ptr node;           // this process's node actor (none: a single node)
+  // --- Resource bounds (docs/operations.md, "Resource bounds") ---
+  uint32_t handshake_timeout_ms = 5000;  // a session without a valid handshake by then is closed
+                                         // with a fatal bad_handshake (0: no timeout)
+  std::shared_ptr<MemoryBudget> budget;  // node-wide: every session's scene bytes and the frames
+                                         // queued for its client (none: only max_client_bytes)
   NodeInfo info() const { return NodeInfo{name, coefficient.logical_cores, coefficient.single_core_perf}; }
 };
 

@@ -32,6 +32,10 @@ struct session_state {
   // Frame pipeline.
   std::vector<ClientRecord> cached;  // scene updates that arrived while a frame was rendering
   PendingBytes cached_bytes;         // their buffers and textures count against max_client_bytes
+  uint64_t cached_payload = 0;       // bytes those cached buffers and textures hold
+  // This session's part of the node-wide budget (NodeSettings::budget): its scene's buffers
+  // and textures plus cached_payload, and, while a message is decoded, what it declares.
+  BudgetShare share;
   bool in_flight = false;
   std::optional<uint32_t> pending;   // the latest render request that arrived while rendering
   uint32_t seq = 0, dropped = 0, errors = 0;
@@ -87,6 +91,20 @@ void fail(self_ptr self, const Error& e) {
   }
 }
 
+// Bytes a scene update holds while it waits (buffers and textures).
+uint64_t payload_of(const ClientRecord& rec) {
+  if (const auto* b = std::get_if<SetBuffer>(&rec)) return b->buffer.bytes();
+  if (const auto* t = std::get_if<SetTexture>(&rec)) return t->texture.rgba.size();
+  return 0;
+}
+
+// The session's share of the node budget becomes what it holds now. Never more than it had
+// reserved: every update grows the scene by at most the size its message declared.
+void settle_budget(self_ptr self) {
+  auto& st = self->state;
+  st.share.set(scene_bytes(*st.scene) + st.cached_payload);
+}
+
 void apply_update(self_ptr self, ClientRecord&& rec, uint32_t index) {
   auto& st = self->state;
   // Children get exactly the records this node accepted (encoded before apply moves them).
@@ -114,11 +132,13 @@ void apply_cached(self_ptr self) {
   auto cached = std::move(st.cached);
   st.cached.clear();
   st.cached_bytes.clear();
+  st.cached_payload = 0;
   for (auto& r : cached) {
     if (st.closed) return;
     apply_update(self, std::move(r), kNoRecord);  // deferred: the record index is no longer meaningful
   }
   flush_forward(self);
+  settle_budget(self);
 }
 
 void maybe_preload(self_ptr self) {
@@ -133,6 +153,7 @@ void maybe_preload(self_ptr self) {
   st.scene->set_resolution(w, h);
   if (own_camera) st.scene->set_camera(cam);
   if (st.router.alive_children() > 0) st.router.forward(self, scene_snapshot_bytes(SceneSnapshot{st.scene}), true);
+  settle_budget(self);  // the preloaded scene is the node's own: counted, never refused
   log(self, "\"preloaded_scene\": true, \"triangles\": " + std::to_string(st.scene->triangle_count()));
 }
 
@@ -390,12 +411,62 @@ void on_handshake(self_ptr self, const Handshake& h) {
   });
 }
 
+// The node-wide budget, checked before anything is inflated or decoded: each buffer and
+// texture the message declares is reserved from the budget; one that does not fit is
+// refused (limit_exceeded, not fatal) and cut out of the message, the others go on. `kept`
+// maps the indices of the message that remains to those of the client's. False: nothing is
+// left to decode.
+bool admit_payloads(self_ptr self, std::vector<uint8_t>& bytes, std::vector<uint32_t>& kept) {
+  auto& st = self->state;
+  if (!st.settings->budget) return true;
+  auto declared = declared_payloads(bytes.data(), bytes.size(), st.settings->limits);
+  if (!declared) return true;  // bad framing: the decoder says why
+  std::vector<uint32_t> drop;
+  for (const DeclaredRecord& d : *declared) {
+    if (d.bytes == 0 || st.share.reserve(d.bytes)) continue;
+    drop.push_back(d.index);
+    const MemoryBudget& b = *st.settings->budget;
+    fail(self, Error{ErrorCode::limit_exceeded,
+                     "record " + std::to_string(d.index) + ": its " +
+                         std::to_string(d.bytes) + " bytes would exceed the node's memory budget (" +
+                         std::to_string(b.used()) + " of " + std::to_string(b.limit()) +
+                         " bytes in use by all clients); the update is dropped",
+                     d.index});
+  }
+  if (drop.empty()) return true;
+  if (drop.size() == declared->size()) return false;
+  bytes = without_records(bytes.data(), bytes.size(), *declared, drop);
+  for (const DeclaredRecord& d : *declared)
+    if (!std::binary_search(drop.begin(), drop.end(), d.index)) kept.push_back(d.index);
+  return true;
+}
+
+void on_client_records(self_ptr self, std::vector<uint8_t>& bytes, const std::vector<uint32_t>& kept);
+
 void on_client(self_ptr self, std::vector<uint8_t>& bytes) {
   auto& st = self->state;
   if (st.closed) return;
+  std::vector<uint32_t> kept;  // empty: every record of the message
+  if (admit_payloads(self, bytes, kept)) on_client_records(self, bytes, kept);
+  bytes = {};
+  if (!st.closed) settle_budget(self);  // gives back what was reserved and not kept
+}
+
+void on_client_records(self_ptr self, std::vector<uint8_t>& bytes, const std::vector<uint32_t>& kept) {
+  auto& st = self->state;
+  auto original = [&](uint32_t i) { return i < kept.size() ? kept[i] : i; };
   auto res = decode_client(bytes.data(), bytes.size(), st.settings->limits);
   bytes = {};  // the decoded records own their data now
-  if (!res) return fail(self, res.error());
+  if (!res) {
+    Error e = res.error();
+    if (e.record != kNoRecord) e.record = original(e.record);
+    // Before the handshake, a message that does not decode cannot be one: the session ends.
+    if (!st.handshake_done && e.code != ErrorCode::bad_handshake) {
+      e.message = "the first message must be a valid handshake: " + std::string(to_string(e.code)) + ": " + e.message;
+      e.code = ErrorCode::bad_handshake;
+    }
+    return fail(self, e);
+  }
   auto& recs = res.value();
   if (Status order = check_session_order(st.handshake_done, recs); !order) return fail(self, order.error());
   for (uint32_t i = 0; i < recs.size() && !st.closed; ++i) {
@@ -416,13 +487,14 @@ void on_client(self_ptr self, std::vector<uint8_t>& bytes) {
       // is refused (as it would be when applied) instead of held until the frame ends.
       if (Status room = st.cached_bytes.admit(*st.scene, rec, st.settings->limits); !room) {
         Error e = room.error();
-        e.record = i;
+        e.record = original(i);
         fail(self, e);
         continue;
       }
+      st.cached_payload += payload_of(rec);
       st.cached.push_back(std::move(rec));
     } else {
-      apply_update(self, std::move(rec), i);
+      apply_update(self, std::move(rec), original(i));
     }
   }
   flush_forward(self);
@@ -472,6 +544,9 @@ session_actor::behavior_type session_impl(self_ptr self, std::shared_ptr<ClientS
     join_children(self);
     self->delayed_send(self, std::chrono::milliseconds(st.settings->reconnect_ms), tick_atom::value);
   }
+  st.share.attach(st.settings->budget);
+  if (st.settings->handshake_timeout_ms > 0)
+    self->delayed_send(self, std::chrono::milliseconds(st.settings->handshake_timeout_ms), hs_timeout_atom::value);
   return {
       [=](client_atom, std::vector<uint8_t>& bytes) { on_client(self, bytes); },
       [=](status_atom) -> SessionStatus {
@@ -499,6 +574,12 @@ session_actor::behavior_type session_impl(self_ptr self, std::shared_ptr<ClientS
         for (auto& c : st.router.children)
           if (c.alive) out.push_back(caf::actor_cast<caf::actor>(c.worker));
         return out;
+      },
+      [=](hs_timeout_atom) {
+        auto& st = self->state;
+        if (st.handshake_done || st.closed) return;
+        fail(self, Error{ErrorCode::bad_handshake,
+                         "no handshake within " + std::to_string(st.settings->handshake_timeout_ms) + " ms", kNoRecord});
       },
       [=](tick_atom) {
         join_children(self);

@@ -14,10 +14,14 @@
 
 namespace tessera {
 
+// The handshake timeout (NodeSettings::handshake_timeout_ms), sent by the session to itself.
+using hs_timeout_atom = caf::atom_constant<caf::atom("hstimeout")>;
+
 using session_actor = caf::typed_actor<caf::reacts_to<client_atom, std::vector<uint8_t>>,
                                        caf::replies_to<status_atom>::with<SessionStatus>,
                                        // renderer, tiler, encoder, display, workers (tests, monitoring)
                                        caf::replies_to<children_atom>::with<std::vector<caf::actor>>,
-                                       caf::reacts_to<tick_atom>>;  // look for children that came back
+                                       caf::reacts_to<tick_atom>,   // look for children that came back
+                                       caf::reacts_to<hs_timeout_atom>>;
 
 }  // namespace tessera

@@ -32,6 +32,11 @@ NodeConfig::NodeConfig() {
       .add(max_triangles, "max-triangles", "triangles per client scene")
       .add(max_texture_size, "max-texture-size", "largest texture width/height")
       .add(log_frames, "log-frames", "log one JSON line per frame")
+      .add(handshake_timeout_ms, "handshake-timeout-ms", "close a WebSocket without a valid handshake after this long")
+      .add(max_node_bytes, "max-node-bytes",
+           "memory budget over all clients: scene bytes + queued frames (0: half the physical memory)")
+      .add(max_mjpeg_per_session, "max-mjpeg-per-session", "MJPEG viewers of one session")
+      .add(max_mjpeg_viewers, "max-mjpeg-viewers", "MJPEG viewers on the node")
       .add(cluster_port, "cluster-port", "publish this node to parent nodes on this port (-1: off, 0: any)")
       .add(cluster_host, "cluster-host", "address of the cluster port (0.0.0.0: all interfaces)")
       .add(children, "children", "child nodes as [\"host:port\", ...]")
@@ -67,6 +72,10 @@ std::shared_ptr<NodeSettings> NodeConfig::node_settings() const {
   if (task_timeout_ms < 50) throw std::invalid_argument("tessera.task-timeout-ms must be >= 50");
   if (reconnect_ms < 10) throw std::invalid_argument("tessera.reconnect-ms must be >= 10");
   if (cluster_port < -1 || cluster_port > 65535) throw std::invalid_argument("tessera.cluster-port must be in -1..65535");
+  if (handshake_timeout_ms < 10) throw std::invalid_argument("tessera.handshake-timeout-ms must be >= 10");
+  if (max_node_bytes < 0) throw std::invalid_argument("tessera.max-node-bytes must be >= 0 (0: half the physical memory)");
+  s->handshake_timeout_ms = uint32_t(handshake_timeout_ms);
+  s->budget = std::make_shared<MemoryBudget>(max_node_bytes > 0 ? uint64_t(max_node_bytes) : MemoryBudget::default_limit());
   s->render = renders;
   s->children = children;
   s->task_timeout_ms = uint32_t(task_timeout_ms);
@@ -89,6 +98,10 @@ ServerOptions NodeConfig::server_options() const {
   o.port = uint16_t(port);
   o.web_root = web_root;
   o.max_clients = size_t(max_clients);
+  if (max_mjpeg_per_session < 1) throw std::invalid_argument("tessera.max-mjpeg-per-session must be >= 1");
+  if (max_mjpeg_viewers < 1) throw std::invalid_argument("tessera.max-mjpeg-viewers must be >= 1");
+  o.max_mjpeg_per_session = size_t(max_mjpeg_per_session);
+  o.max_mjpeg_viewers = size_t(max_mjpeg_viewers);
   return o;
 }
 

@@ -30,6 +30,11 @@ struct NodeConfig : caf::actor_system_config {
   int64_t max_triangles = 20'000'000;
   int max_texture_size = 8192;
   bool log_frames = true;
+  // Resource bounds (docs/operations.md, "Resource bounds").
+  int handshake_timeout_ms = 5000;  // a WebSocket without a valid handshake by then is closed
+  int64_t max_node_bytes = 0;       // node-wide memory budget over all clients (0: half the physical memory)
+  int max_mjpeg_per_session = 4;    // MJPEG viewers of one session
+  int max_mjpeg_viewers = 64;       // MJPEG viewers on the node
   // Cluster (docs/operations.md): this node's CAF endpoint and its children.
   int cluster_port = -1;          // publish the node actor here (-1: not a child of anyone; 0: any port)
   std::string cluster_host = "127.0.0.1";  // address the cluster port binds to

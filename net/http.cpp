@@ -7,6 +7,7 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cctype>
 #include <chrono>
 #include <cstring>
@@ -101,6 +102,74 @@ std::optional<std::string> resolve_static(const std::string& root, const std::st
   return f;
 }
 
+bool public_path(const std::string& rel) {
+  static const char* kPrefixes[] = {"src/", "demo/", "node_modules/three/build/"};
+  if (rel == "index.html") return true;
+  for (const char* p : kPrefixes)
+    if (rel.compare(0, std::strlen(p), p) == 0 && rel.size() > std::strlen(p)) return true;
+  return false;
+}
+
+std::optional<std::string> resolve_public(const std::string& root, const std::string& target) {
+  auto file = resolve_static(root, target);
+  if (!file) return std::nullopt;
+  std::error_code ec;
+  const std::string base = fs::weakly_canonical(fs::path(root), ec).string();
+  if (ec || file->size() <= base.size() + 1) return std::nullopt;
+  return public_path(file->substr(base.size() + 1)) ? file : std::nullopt;
+}
+
+namespace {
+
+// Digits only; saturates at UINT64_MAX. False when empty or not all digits.
+bool parse_u64(const std::string& s, uint64_t& v) {
+  if (s.empty()) return false;
+  v = 0;
+  for (char c : s) {
+    if (c < '0' || c > '9') return false;
+    const uint64_t d = uint64_t(c - '0');
+    v = v > (UINT64_MAX - d) / 10 ? UINT64_MAX : v * 10 + d;
+  }
+  return true;
+}
+
+std::string trim(const std::string& s) {
+  size_t a = s.find_first_not_of(" \t"), b = s.find_last_not_of(" \t");
+  return a == std::string::npos ? "" : s.substr(a, b - a + 1);
+}
+
+}  // namespace
+
+RangeKind parse_range(const std::string& header, uint64_t size, ByteRange& range) {
+  std::string h = trim(header);
+  auto eq = h.find('=');
+  if (eq == std::string::npos) return RangeKind::full;
+  std::string unit = trim(h.substr(0, eq));
+  for (auto& c : unit) c = char(std::tolower(static_cast<unsigned char>(c)));
+  if (unit != "bytes") return RangeKind::full;
+  const std::string spec = trim(h.substr(eq + 1));
+  if (spec.find(',') != std::string::npos) return RangeKind::full;  // several ranges: the whole file
+  const auto dash = spec.find('-');
+  if (dash == std::string::npos) return RangeKind::full;
+  const std::string a = trim(spec.substr(0, dash)), b = trim(spec.substr(dash + 1));
+  uint64_t first = 0, last = 0;
+  if (a.empty()) {  // suffix: the last b bytes
+    if (!parse_u64(b, last)) return RangeKind::full;
+    if (last == 0 || size == 0) return RangeKind::unsatisfiable;
+    range = {size - std::min(last, size), size - 1};
+    return RangeKind::partial;
+  }
+  if (!parse_u64(a, first)) return RangeKind::full;
+  if (b.empty()) {
+    last = UINT64_MAX;
+  } else if (!parse_u64(b, last) || last < first) {
+    return RangeKind::full;  // invalid: ignored
+  }
+  if (first >= size) return RangeKind::unsatisfiable;
+  range = {first, std::min(last, size - 1)};
+  return RangeKind::partial;
+}
+
 bool valid_token(const std::string& t) {
   if (t.size() < 8 || t.size() > 64) return false;
   for (char c : t)
@@ -161,8 +230,9 @@ bool read_some(int fd, std::string& buf, Clock::time_point deadline) {
   return true;
 }
 
-bool send_request(int fd, const std::string& host, const std::string& target) {
-  std::string req = "GET " + target + " HTTP/1.1\r\nHost: " + host + "\r\nConnection: close\r\n\r\n";
+bool send_request(int fd, const std::string& host, const std::string& target, const std::string& method = "GET",
+                  const std::string& extra = "") {
+  std::string req = method + " " + target + " HTTP/1.1\r\nHost: " + host + "\r\nConnection: close\r\n" + extra + "\r\n";
   return ::send(fd, req.data(), req.size(), MSG_NOSIGNAL) == ssize_t(req.size());
 }
 
@@ -181,20 +251,33 @@ std::string header_value(const std::string& head, const std::string& name) {
 
 }  // namespace
 
+std::optional<std::string> Response::header(const std::string& name) const {
+  std::string lower = head, key = name;
+  for (auto& c : lower) c = char(std::tolower(static_cast<unsigned char>(c)));
+  for (auto& c : key) c = char(std::tolower(static_cast<unsigned char>(c)));
+  if (lower.find("\r\n" + key + ":") == std::string::npos) return std::nullopt;
+  return header_value(head, key);
+}
+
 std::optional<Response> get(const std::string& host, uint16_t port, const std::string& target, int timeout_ms) {
+  return request(host, port, "GET", target, "", timeout_ms);
+}
+
+std::optional<Response> request(const std::string& host, uint16_t port, const std::string& method,
+                                const std::string& target, const std::string& extra_headers, int timeout_ms) {
   int fd = connect_to(host, port);
   if (fd < 0) return std::nullopt;
   auto deadline = Clock::now() + std::chrono::milliseconds(timeout_ms);
   std::string buf;
-  if (!send_request(fd, host, target)) { ::close(fd); return std::nullopt; }
+  if (!send_request(fd, host, target, method, extra_headers)) { ::close(fd); return std::nullopt; }
   while (read_some(fd, buf, deadline)) {}
   ::close(fd);
   auto he = buf.find("\r\n\r\n");
   if (buf.compare(0, 5, "HTTP/") != 0 || he == std::string::npos) return std::nullopt;
   Response r;
   r.status = std::atoi(buf.c_str() + buf.find(' ') + 1);
-  std::string head = buf.substr(0, he + 2);
-  r.content_type = header_value(head, "content-type");
+  r.head = buf.substr(0, he + 2);
+  r.content_type = header_value(r.head, "content-type");
   r.body = buf.substr(he + 4);
   return r;
 }

@@ -18,6 +18,25 @@ const char* mime_type(const std::string& path);
 // without index.html. A target ending in '/' means its index.html.
 std::optional<std::string> resolve_static(const std::string& root, const std::string& target);
 
+// What the node serves of its web root: the web client (src/), the demo pages (demo/), the
+// index page and the three.js build the pages import (node_modules/three/build/); never
+// package.json, tools/, test/ or other packages. resolve_static, then this allow-list on the
+// resolved path relative to the root (so neither a symlink nor an escape gets round it).
+std::optional<std::string> resolve_public(const std::string& root, const std::string& target);
+bool public_path(const std::string& relative);  // "demo/index.html" -> true
+
+// A Range request header (RFC 9110 14.2) against a file of `size` bytes. Only one range of
+// unit "bytes" is served: "a-b", "a-" or "-n" (the last n bytes).
+enum class RangeKind {
+  full,           // no Range, several ranges, or a header that does not parse: 200 with the whole file
+  partial,        // 206 with `range`
+  unsatisfiable,  // 416 (the range starts at or after the end, or "-0")
+};
+struct ByteRange {
+  uint64_t first = 0, last = 0;  // inclusive
+};
+RangeKind parse_range(const std::string& header, uint64_t size, ByteRange& range);
+
 // Session tokens (?session=TOKEN on the WebSocket, /mjpeg/TOKEN): 8..64 of [A-Za-z0-9_-].
 bool valid_token(const std::string& token);
 // The value of `key` in the target's query string ("" when absent).
@@ -30,10 +49,17 @@ std::string target_path(const std::string& target);
 struct Response {
   int status = 0;
   std::string content_type;
+  std::string head;  // status line and headers, each line ending in CRLF
   std::string body;
+  // The value of header `name` (case-insensitive); nullopt when absent.
+  std::optional<std::string> header(const std::string& name) const;
 };
 // GET http://host:port/target; nullopt on connection failure or timeout.
 std::optional<Response> get(const std::string& host, uint16_t port, const std::string& target, int timeout_ms = 5000);
+// Any method, with extra header lines ("Range: bytes=0-9\r\n"); reads until the server closes.
+std::optional<Response> request(const std::string& host, uint16_t port, const std::string& method,
+                                const std::string& target, const std::string& extra_headers = "",
+                                int timeout_ms = 5000);
 
 // Reads `parts` JPEG parts from a multipart/x-mixed-replace stream (MJPEG), then closes.
 // False and *error on failure or timeout.

@@ -12,6 +12,7 @@
 #include <set>
 #include <sstream>
 #include <thread>
+#include <array>
 
 #include <caf/all.hpp>
 
@@ -34,6 +35,7 @@ namespace {
 // directly; a slow viewer gets the latest frame (older pending ones are replaced).
 struct MjpegStream : std::enable_shared_from_this<MjpegStream> {
   WsServer::connection_ptr con;
+  std::atomic<size_t>* live = nullptr;  // the server's count of open streams
   bool writing = false, dead = false;
   std::shared_ptr<const std::vector<uint8_t>> current, pending;
   std::string part_header;
@@ -62,7 +64,17 @@ struct MjpegStream : std::enable_shared_from_this<MjpegStream> {
       self->write_next();
     });
   }
+  // A viewer that goes away is noticed at once (its slot is free), not at the next frame.
+  std::array<char, 512> discard;
+  void watch_eof() {
+    auto self = shared_from_this();
+    con->get_raw_socket().async_read_some(asio::buffer(discard), [self](const asio::error_code& ec, size_t) {
+      if (ec) { self->shutdown(); return; }
+      if (!self->dead) self->watch_eof();
+    });
+  }
   void start() {
+    watch_eof();
     part_header = std::string("HTTP/1.1 200 OK\r\nContent-Type: multipart/x-mixed-replace; boundary=") + kBoundary +
                   "\r\nCache-Control: no-cache, no-store\r\nPragma: no-cache\r\nConnection: close\r\n\r\n--" +
                   kBoundary + "\r\n";
@@ -77,6 +89,7 @@ struct MjpegStream : std::enable_shared_from_this<MjpegStream> {
   void shutdown() {
     if (dead) return;
     dead = true;
+    if (live) --*live;
     asio::error_code ec;
     con->get_raw_socket().shutdown(asio::ip::tcp::socket::shutdown_both, ec);
     con->get_raw_socket().close(ec);
@@ -96,12 +109,28 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl> {
   std::atomic<uint64_t> next_id{0};
   bool running = false;
 
+  // What waits to be handed to websocketpp for one connection (see enqueue).
+  struct Out {
+    std::shared_ptr<const std::vector<uint8_t>> bytes;
+    bool frame = false;
+  };
   struct Conn {
     session_actor session;
     std::shared_ptr<struct Sink> sink;
+    bool closing = false;   // closed by the node: no longer holds a client slot
+    std::deque<Out> out;    // at most one frame, and the records after it (order kept)
+    size_t out_bytes = 0;
+    bool frame_waiting = false;
+    size_t largest_frame = 0;
+    uint64_t backlog = 0;   // out_bytes + websocketpp's queue, as last seen
+    BudgetShare share;      // backlog, in the node's budget
   };
   // Touched only on the network thread.
-  std::map<connection_hdl, Conn, std::owner_less<connection_hdl>> conns;
+  std::map<connection_hdl, std::shared_ptr<Conn>, std::owner_less<connection_hdl>> conns;
+  std::atomic<uint64_t> queued{0};    // sum of the connections' backlogs
+  std::atomic<size_t> viewers{0};     // open MJPEG streams
+  std::unique_ptr<asio::steady_timer> poll;  // flushes waiting frames (websocketpp has no send-complete callback)
+  bool poll_armed = false;
   std::set<std::string> tokens;
   std::map<std::string, std::vector<std::shared_ptr<MjpegStream>>> mjpeg;
   std::map<std::string, std::shared_ptr<const std::vector<uint8_t>>> last_mjpeg;  // a viewer that opens late starts with it
@@ -116,6 +145,29 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl> {
   bool on_validate(connection_hdl h);
   void on_message(connection_hdl h, WsServer::message_ptr msg);
   void on_http(connection_hdl h);
+  void enqueue(connection_hdl h, std::shared_ptr<const std::vector<uint8_t>> msg, bool frame);
+  void flush(connection_hdl h, Conn& c);
+  void arm_poll();
+  void close_conn(connection_hdl h, Conn& c, websocketpp::close::status::value code, const std::string& reason);
+  std::atomic<size_t> open_conns{0};  // including those being closed
+  void recount() {
+    size_t n = 0;
+    for (auto& [h, c] : conns) n += !c->closing;
+    count = n;
+    open_conns = conns.size();
+  }
+  size_t live_viewers(const std::string& token) {
+    auto it = mjpeg.find(token);
+    if (it == mjpeg.end()) return 0;
+    auto& v = it->second;
+    v.erase(std::remove_if(v.begin(), v.end(), [](auto& s) { return s->dead; }), v.end());
+    return v.size();
+  }
+  size_t live_viewers() {
+    size_t n = 0;
+    for (auto& [t, v] : mjpeg) n += live_viewers(t);
+    return n;
+  }
   void end_mjpeg(const std::string& token) {
     last_mjpeg.erase(token);
     auto it = mjpeg.find(token);
@@ -140,14 +192,18 @@ struct Sink : ClientSink {
       if (auto i = w.lock()) f(*i);
     });
   }
+  std::atomic<uint32_t> dropped{0};  // frames replaced before the client took them
   void send(std::vector<uint8_t> message) override {
-    auto p = std::make_shared<std::vector<uint8_t>>(std::move(message));
+    auto p = std::make_shared<const std::vector<uint8_t>>(std::move(message));
     auto h = hdl;
-    post([h, p](Server::Impl& i) {
-      websocketpp::lib::error_code ec;
-      i.ws.send(h, p->data(), p->size(), websocketpp::frame::opcode::binary, ec);
-    });
+    post([h, p](Server::Impl& i) { i.enqueue(h, p, false); });
   }
+  void send_frame(std::vector<uint8_t> message) override {
+    auto p = std::make_shared<const std::vector<uint8_t>>(std::move(message));
+    auto h = hdl;
+    post([h, p](Server::Impl& i) { i.enqueue(h, p, true); });
+  }
+  uint32_t frames_dropped() const override { return dropped; }
   void send_mjpeg(std::shared_ptr<const std::vector<uint8_t>> jpeg) override {
     auto t = tok;
     post([t, jpeg](Server::Impl& i) {
@@ -164,13 +220,106 @@ struct Sink : ClientSink {
     auto h = hdl;
     std::string r = reason.substr(0, 120);  // close reasons are limited to 123 bytes
     post([h, r](Server::Impl& i) {
-      websocketpp::lib::error_code ec;
-      i.ws.close(h, websocketpp::close::status::policy_violation, r, ec);
+      auto it = i.conns.find(h);
+      if (it != i.conns.end()) i.close_conn(h, *it->second, websocketpp::close::status::policy_violation, r);
     });
     open = false;
   }
   std::string token() const override { return tok; }
 };
+
+// A client that does not read must not grow the node: websocketpp queues every send without
+// bound and says nothing when one has been written, so frames are handed to it only while
+// its queue is empty (get_buffered_amount() == 0: what it holds is being written). Meanwhile
+// the newest frame waits here and replaces an older waiting one (counted as dropped); the
+// records sent after a waiting frame wait behind it, so the client sees them in order. A
+// client costs at most three frames: one being written, one queued behind it, one waiting.
+void Server::Impl::enqueue(connection_hdl h, std::shared_ptr<const std::vector<uint8_t>> msg, bool frame) {
+  auto it = conns.find(h);
+  if (it == conns.end() || it->second->closing) return;
+  Conn& c = *it->second;
+  if (frame) {
+    if (c.frame_waiting) flush(h, c);  // it may go now, rather than be replaced
+    if (c.closing) return;
+    if (c.frame_waiting) {
+      for (auto o = c.out.begin(); o != c.out.end(); ++o)
+        if (o->frame) {
+          c.out_bytes -= o->bytes->size();
+          c.out.erase(o);
+          break;
+        }
+      c.sink->dropped++;
+    }
+    c.frame_waiting = true;
+    c.largest_frame = std::max(c.largest_frame, msg->size());
+  }
+  c.out_bytes += msg->size();
+  c.out.push_back(Out{std::move(msg), frame});
+  flush(h, c);
+}
+
+void Server::Impl::flush(connection_hdl h, Conn& c) {
+  websocketpp::lib::error_code ec;
+  auto con = ws.get_con_from_hdl(h, ec);
+  if (ec || c.closing) return;
+  while (!c.out.empty()) {
+    Out& o = c.out.front();
+    if (o.frame && con->get_buffered_amount() > 0) break;
+    con->send(o.bytes->data(), o.bytes->size(), websocketpp::frame::opcode::binary);  // copies the bytes
+    c.out_bytes -= o.bytes->size();
+    if (o.frame) c.frame_waiting = false;
+    c.out.pop_front();
+  }
+  const uint64_t backlog = c.out_bytes + con->get_buffered_amount();
+  queued += backlog - c.backlog;  // unsigned wrap-around adds the (possibly negative) difference
+  c.backlog = backlog;
+  c.share.set(backlog);
+  // Records other than frames are not replaced: a client that lets them pile up (it sends
+  // malformed messages and never reads the errors) is closed.
+  const uint64_t cap = std::max<uint64_t>(8u << 20, 3 * uint64_t(c.largest_frame));
+  if (backlog > cap) {
+    log("{\"closed_slow_client\": true, \"backlog\": " + std::to_string(backlog) + "}");
+    close_conn(h, c, websocketpp::close::status::policy_violation, "client is not reading");
+    return;
+  }
+  if (backlog > 0) arm_poll();
+}
+
+void Server::Impl::arm_poll() {
+  if (poll_armed || !poll) return;
+  poll_armed = true;
+  poll->expires_after(std::chrono::milliseconds(2));
+  poll->async_wait([this](const asio::error_code& ec) {
+    poll_armed = false;
+    if (ec) return;
+    // flush() may close (and not erase) a connection: iterate over a copy of the handles.
+    std::vector<std::pair<connection_hdl, std::shared_ptr<Conn>>> busy;
+    for (auto& [h, c] : conns)
+      if (c->backlog > 0 && !c->closing) busy.emplace_back(h, c);
+    for (auto& [h, c] : busy) flush(h, *c);
+  });
+}
+
+void Server::Impl::close_conn(connection_hdl h, Conn& c, websocketpp::close::status::value code,
+                              const std::string& reason) {
+  if (c.closing) return;
+  // The records already queued (the fatal error record) go out before the close frame; a
+  // waiting frame does not.
+  websocketpp::lib::error_code ec;
+  for (auto& o : c.out)
+    if (!o.frame) ws.send(h, o.bytes->data(), o.bytes->size(), websocketpp::frame::opcode::binary, ec);
+  c.out.clear();
+  c.out_bytes = 0;
+  c.frame_waiting = false;
+  c.closing = true;
+  queued -= c.backlog;
+  c.backlog = 0;
+  c.share.set(0);
+  c.sink->open = false;
+  caf::anon_send_exit(c.session, caf::exit_reason::user_shutdown);  // no-op when it ended itself
+  recount();
+  ws.close(h, code, reason, ec);
+}
 
 bool Server::Impl::on_validate(connection_hdl h) {
   auto con = ws.get_con_from_hdl(h);
@@ -205,85 +354,141 @@ void Server::Impl::on_open(connection_hdl h) {
   sink->tok = http::query_param(con->get_resource(), "session");
   if (!sink->tok.empty()) tokens.insert(sink->tok);
   uint64_t id = ++next_id;
-  auto session = spawn_session(sys, sink, settings, id);
-  conns[h] = Conn{session, sink};
-  count = conns.size();
+  auto c = std::make_shared<Conn>();
+  c->session = spawn_session(sys, sink, settings, id);
+  c->sink = sink;
+  c->share.attach(settings->budget);
+  conns[h] = std::move(c);
+  recount();
 }
 
 void Server::Impl::on_close(connection_hdl h) {
   pending_opens.erase(h);
   auto it = conns.find(h);
   if (it == conns.end()) return;
-  it->second.sink->open = false;
-  caf::anon_send_exit(it->second.session, caf::exit_reason::user_shutdown);
-  if (!it->second.sink->tok.empty()) {
-    tokens.erase(it->second.sink->tok);
-    end_mjpeg(it->second.sink->tok);
+  Conn& c = *it->second;
+  c.sink->open = false;
+  caf::anon_send_exit(c.session, caf::exit_reason::user_shutdown);
+  if (!c.sink->tok.empty()) {
+    tokens.erase(c.sink->tok);
+    end_mjpeg(c.sink->tok);
   }
+  queued -= c.backlog;
   conns.erase(it);
-  count = conns.size();
+  recount();
 }
 
 void Server::Impl::on_message(connection_hdl h, WsServer::message_ptr msg) {
   auto it = conns.find(h);
-  if (it == conns.end()) return;
+  if (it == conns.end() || it->second->closing) return;
   const std::string& p = msg->get_payload();
   // Text messages go to the decoder too: it answers them with a protocol error (bad magic).
-  caf::anon_send(it->second.session, client_atom::value, std::vector<uint8_t>(p.begin(), p.end()));
+  caf::anon_send(it->second->session, client_atom::value, std::vector<uint8_t>(p.begin(), p.end()));
 }
 
+namespace {
+
+// Sets a response's status, headers and body. HEAD gets the same headers (Content-Length of
+// the body a GET would get) and no body.
+void respond(WsServer::connection_ptr con, bool head, websocketpp::http::status_code::value status,
+             const std::string& body, const char* content_type = "text/plain; charset=utf-8") {
+  con->set_status(status);
+  con->replace_header("Content-Type", content_type);
+  con->replace_header("X-Content-Type-Options", "nosniff");
+  con->set_body(head ? std::string() : body);
+  con->replace_header("Content-Length", std::to_string(body.size()));
+}
+
+}  // namespace
+
 void Server::Impl::on_http(connection_hdl h) {
+  namespace sc = websocketpp::http::status_code;
   auto con = ws.get_con_from_hdl(h);
   const std::string target = con->get_resource();
   const std::string path = http::target_path(target);
-  if (con->get_request().get_method() != "GET" && con->get_request().get_method() != "HEAD") {
-    con->set_status(websocketpp::http::status_code::method_not_allowed);
+  const std::string& method = con->get_request().get_method();
+  if (method != "GET" && method != "HEAD") {
+    respond(con, false, sc::method_not_allowed, "method not allowed: GET and HEAD only\n");
+    con->replace_header("Allow", "GET, HEAD");
     return;
   }
+  const bool head = method == "HEAD";
   if (path.rfind("/mjpeg/", 0) == 0) {
     std::string token = path.substr(7);
     if (!tokens.count(token)) {
-      con->set_status(websocketpp::http::status_code::not_found);
-      con->set_body("no session with this token\n");
+      respond(con, head, sc::not_found, "no session with this token\n");
+      return;
+    }
+    const size_t of_session = live_viewers(token), all = live_viewers();
+    if (of_session >= opts.max_mjpeg_per_session || all >= opts.max_mjpeg_viewers) {
+      const bool session_full = of_session >= opts.max_mjpeg_per_session;
+      respond(con, head, sc::service_unavailable,
+              session_full ? "too many MJPEG viewers of this session: " + std::to_string(opts.max_mjpeg_per_session) +
+                                 " (max-mjpeg-per-session)\n"
+                           : "too many MJPEG viewers on this node: " + std::to_string(opts.max_mjpeg_viewers) +
+                                 " (max-mjpeg-viewers)\n");
+      con->replace_header("Retry-After", "5");
+      if (!head)
+        log(std::string("{\"rejected\": \"mjpeg viewers\", \"limit\": \"") +
+            (session_full ? "max-mjpeg-per-session" : "max-mjpeg-viewers") + "\"}");
+      return;
+    }
+    if (head) {  // the headers of the stream, no stream
+      respond(con, true, sc::ok, "", "multipart/x-mixed-replace; boundary=tesseraframe");
+      con->remove_header("Content-Length");
       return;
     }
     con->defer_http_response();
     auto s = std::make_shared<MjpegStream>();
     s->con = con;
+    s->live = &viewers;
+    ++viewers;
     mjpeg[token].push_back(s);
     s->start();
     if (auto last = last_mjpeg.find(token); last != last_mjpeg.end()) s->push(last->second);
     return;
   }
   if (path == "/ws") {
-    con->set_status(websocketpp::http::status_code::upgrade_required);
-    con->set_body("WebSocket endpoint\n");
+    respond(con, head, sc::upgrade_required, "WebSocket endpoint\n");
     return;
   }
   std::optional<std::string> file;
   if (path == "/") {
-    file = http::resolve_static(opts.web_root, "/index.html");
-    if (!file) file = http::resolve_static(opts.web_root, "/demo/index.html");
+    file = http::resolve_public(opts.web_root, "/index.html");
+    if (!file) file = http::resolve_public(opts.web_root, "/demo/index.html");
   } else if (target.rfind("/scenes/", 0) == 0) {
     file = http::resolve_static(opts.scenes_root, target.substr(7));
   } else {
-    file = http::resolve_static(opts.web_root, target);
+    file = http::resolve_public(opts.web_root, target);
   }
   std::ifstream in;
   if (file) in.open(*file, std::ios::binary);
   if (!file || !in) {
-    con->set_status(websocketpp::http::status_code::not_found);
-    con->append_header("Content-Type", "text/plain; charset=utf-8");
-    con->set_body("not found\n");
+    respond(con, head, sc::not_found, "not found\n");
     return;
   }
   std::ostringstream body;
   body << in.rdbuf();
-  con->set_status(websocketpp::http::status_code::ok);
-  con->append_header("Content-Type", http::mime_type(*file));
-  con->append_header("Cache-Control", "no-cache");
-  con->append_header("X-Content-Type-Options", "nosniff");
-  con->set_body(body.str());
+  std::string bytes = body.str();
+  const uint64_t size = bytes.size();
+  http::ByteRange range;
+  // A Range on HEAD is ignored (RFC 9110 14.2): the headers of the whole file.
+  const http::RangeKind kind =
+      head ? http::RangeKind::full : http::parse_range(con->get_request_header("Range"), size, range);
+  const char* type = http::mime_type(*file);
+  if (kind == http::RangeKind::unsatisfiable) {
+    respond(con, false, sc::request_range_not_satisfiable, "range not satisfiable\n");
+    con->replace_header("Content-Range", "bytes */" + std::to_string(size));
+  } else if (kind == http::RangeKind::partial) {
+    respond(con, false, sc::partial_content, bytes.substr(size_t(range.first), size_t(range.last - range.first + 1)),
+            type);
+    con->replace_header("Content-Range", "bytes " + std::to_string(range.first) + "-" + std::to_string(range.last) +
+                                             "/" + std::to_string(size));
+  } else {
+    respond(con, head, sc::ok, bytes, type);
+  }
+  con->replace_header("Accept-Ranges", "bytes");
+  con->replace_header("Cache-Control", "no-cache");
 }
 
 Server::Server(caf::actor_system& sys, std::shared_ptr<const NodeSettings> settings, ServerOptions options)
@@ -297,6 +502,8 @@ void Server::start() {
   i.ws.clear_error_channels(websocketpp::log::elevel::all);
   i.ws.init_asio();
   i.ws.set_reuse_addr(true);
+  i.ws.set_user_agent("");  // no Server header
+  i.poll = std::make_unique<asio::steady_timer>(i.ws.get_io_service());
   i.ws.set_max_message_size(i.settings->limits.max_message_bytes);
   i.ws.set_max_http_body_size(64 * 1024);
   i.ws.set_tcp_post_init_handler([&i](connection_hdl h) {
@@ -335,9 +542,11 @@ void Server::stop() {
   i.ws.get_io_service().post([&i, &done] {
     websocketpp::lib::error_code ec;
     i.ws.stop_listening(ec);
+    if (i.poll) i.poll->cancel();
     for (auto& [h, c] : i.conns) {
-      c.sink->open = false;
-      caf::anon_send_exit(c.session, caf::exit_reason::user_shutdown);
+      c->sink->open = false;
+      c->closing = true;
+      caf::anon_send_exit(c->session, caf::exit_reason::user_shutdown);
       i.ws.close(h, websocketpp::close::status::going_away, "server stopping", ec);
     }
     for (auto& [t, v] : i.mjpeg)
@@ -349,18 +558,20 @@ void Server::stop() {
   done.get_future().wait_for(std::chrono::seconds(2));
   // Give close handshakes a moment, then stop the loop whatever is left.
   for (int k = 0; k < 100 && !i.ws.stopped(); ++k) {
-    if (i.count == 0) break;
+    if (i.open_conns == 0) break;
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
   i.ws.stop();
   if (i.thread.joinable()) i.thread.join();
-  for (auto& [h, c] : i.conns) caf::anon_send_exit(c.session, caf::exit_reason::user_shutdown);
+  for (auto& [h, c] : i.conns) caf::anon_send_exit(c->session, caf::exit_reason::user_shutdown);
   i.conns.clear();
   i.count = 0;
 }
 
 uint16_t Server::port() const { return impl_->bound_port; }
 size_t Server::sessions() const { return impl_->count; }
+uint64_t Server::queued_bytes() const { return impl_->queued; }
+size_t Server::mjpeg_viewers() const { return impl_->viewers; }
 
 // --- Client -----------------------------------------------------------------------------
 

@@ -23,6 +23,8 @@ struct ServerOptions {
   std::string web_root = "web";
   std::string scenes_root = "../shared/scenes";  // served at /scenes/ (the demo pages' glTF files)
   size_t max_clients = 16;     // further WebSocket handshakes get HTTP 503
+  size_t max_mjpeg_per_session = 4;  // MJPEG viewers of one session token; further ones get HTTP 503
+  size_t max_mjpeg_viewers = 64;     // MJPEG viewers on the node
 };
 
 class Server {
@@ -37,7 +39,11 @@ class Server {
   // Closes every connection, ends every session and joins the network thread.
   void stop();
   uint16_t port() const;
-  size_t sessions() const;  // connected WebSocket clients
+  size_t sessions() const;  // connected WebSocket clients (not counting those being closed)
+  // Bytes waiting for slow WebSocket clients (websocketpp's send queues and the frames
+  // waiting to replace), over all connections; counted in NodeSettings::budget.
+  uint64_t queued_bytes() const;
+  size_t mjpeg_viewers() const;  // open MJPEG streams
 
   struct Impl;
 

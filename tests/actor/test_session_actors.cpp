@@ -21,6 +21,7 @@ namespace {
 struct fixture : test_coordinator_fixture<TestConfig> {
   std::shared_ptr<RecordingSink> sink = std::make_shared<RecordingSink>();
   std::shared_ptr<NodeSettings> settings = std::make_shared<NodeSettings>();
+  std::shared_ptr<MemoryBudget> budget = std::make_shared<MemoryBudget>(1u << 20);
   size_t baseline = 0;
   session_actor session;
   caf::actor renderer, tiler, encoder, display;
@@ -29,6 +30,8 @@ struct fixture : test_coordinator_fixture<TestConfig> {
     settings->detached = false;  // everything on the test coordinator
     settings->packet_layout = {4, 4};
     settings->log = [](const std::string&) {};
+    settings->handshake_timeout_ms = 0;  // run() advances the clock: the timeout has its own tests
+    settings->budget = budget;
     run();
     baseline = sys.registry().running();
     session = spawn_session(sys, sink, settings, 1);
@@ -234,6 +237,149 @@ CAF_TEST(malformed and inconsistent messages get errors and the session keeps re
   CAF_CHECK_EQUAL(errors[1].code, ErrorCode::bad_mesh);
   CAF_CHECK_EQUAL(errors[1].record, 0u);
   CAF_CHECK_EQUAL(frames_sent(), std::vector<uint32_t>{5});
+}
+
+SetBuffer floats(Id id, size_t n) {
+  SetBuffer b;
+  b.id = id;
+  b.buffer.type = Buffer::Type::f32;
+  b.buffer.components = 1;
+  b.buffer.f.assign(n, 0.5f);
+  return b;
+}
+
+CAF_TEST(the node budget holds the scene and refuses only the update that would cross it) {
+  CAF_CHECK_EQUAL(budget->used(), 72u);  // tiny_scene's buffers
+  // Other clients hold all but 300 bytes of the node's budget.
+  const uint64_t others = budget->limit() - budget->used() - 300;
+  budget->acquire(others);
+  // A message with a buffer that fits, one that does not, and a camera: only the second is
+  // refused (not fatal), the rest is applied.
+  client({floats(10, 50), floats(11, 100), SetCamera{camera_at(5)}});
+  run();
+  auto errors = sink->all<ErrorReply>();
+  CAF_REQUIRE_EQUAL(errors.size(), 1u);
+  CAF_CHECK_EQUAL(errors[0].code, ErrorCode::limit_exceeded);
+  CAF_CHECK(!errors[0].fatal);
+  CAF_CHECK_EQUAL(errors[0].record, 1u);
+  CAF_CHECK(errors[0].message.find("memory budget") != std::string::npos);
+  CAF_CHECK_EQUAL(budget->used(), others + 72 + 200);
+  // A deflated buffer declaring 4 MB (a few KB on the wire, its checksum broken): refused
+  // from its declared size, before it is inflated (else: bad_payload).
+  auto bomb = encode(ClientRecord{[] {
+    SetBuffer b = floats(12, 1u << 20);
+    b.deflate = true;
+    return b;
+  }()});
+  CAF_REQUIRE(bomb.size() < 64u << 10);
+  bomb[bomb.size() - 1] ^= 0xff;
+  self->send(session, client_atom::value, bomb);
+  run();
+  errors = sink->all<ErrorReply>();
+  CAF_REQUIRE_EQUAL(errors.size(), 2u);
+  CAF_CHECK_EQUAL(errors[1].code, ErrorCode::limit_exceeded);
+  CAF_CHECK(!errors[1].fatal);
+  // The session goes on: it renders, and what it frees can be used again.
+  client({RenderRequest{7}});
+  run();
+  CAF_CHECK_EQUAL(frames_sent(), std::vector<uint32_t>{7});
+  // (A message's payloads need room beside what the session holds: they are reserved before
+  // it is decoded, so a removal frees its bytes for the next message.)
+  client({Remove{RecordType::buffer, 10}});
+  client({floats(11, 70)});
+  run();
+  CAF_CHECK_EQUAL(sink->all<ErrorReply>().size(), 2u);
+  CAF_CHECK_EQUAL(budget->used(), others + 72 + 280);
+  budget->release(others);
+}
+
+CAF_TEST(updates cached while a frame renders count in the node budget and a session returns its bytes) {
+  client({SetCamera{camera_at(3)}, RenderRequest{1}});
+  deliver_client();
+  CAF_CHECK(status().in_flight);
+  client({floats(20, 100)});
+  deliver_client();
+  CAF_CHECK_EQUAL(status().cached_updates, 1u);
+  CAF_CHECK_EQUAL(budget->used(), 72u + 400);
+  run();
+  CAF_CHECK_EQUAL(status().cached_updates, 0u);
+  CAF_CHECK_EQUAL(budget->used(), 72u + 400);  // now in the scene
+  self->send_exit(session, caf::exit_reason::user_shutdown);
+  run();
+  CAF_CHECK_EQUAL(budget->used(), 0u);
+}
+
+CAF_TEST_FIXTURE_SCOPE_END()
+
+namespace {
+
+// A session without a handshake yet.
+struct bare_fixture : test_coordinator_fixture<TestConfig> {
+  std::shared_ptr<RecordingSink> sink = std::make_shared<RecordingSink>();
+  std::shared_ptr<NodeSettings> settings = std::make_shared<NodeSettings>();
+  session_actor session;
+  size_t baseline = 0;
+  bare_fixture() {
+    settings->detached = false;
+    settings->packet_layout = {4, 4};
+    settings->log = [](const std::string&) {};
+    settings->handshake_timeout_ms = 300;
+    run();
+    baseline = sys.registry().running();
+  }
+  void open() {
+    session = spawn_session(sys, sink, settings, 1);
+    sched.run();  // not the timeout
+  }
+  void check_closed_with_bad_handshake() {
+    auto errors = sink->all<ErrorReply>();
+    CAF_REQUIRE_EQUAL(errors.size(), 1u);
+    CAF_CHECK(errors[0].fatal);
+    CAF_CHECK_EQUAL(errors[0].code, ErrorCode::bad_handshake);
+    CAF_CHECK_EQUAL(sink->closes, 1);
+    CAF_CHECK_EQUAL(sys.registry().running(), baseline);
+  }
+};
+
+}  // namespace
+
+CAF_TEST_FIXTURE_SCOPE(handshake_tests, bare_fixture)
+
+CAF_TEST(a session without a handshake is closed after the handshake timeout) {
+  open();
+  CAF_CHECK_EQUAL(sink->closes, 0);
+  sched.advance_time(std::chrono::milliseconds(299));
+  sched.run();
+  CAF_CHECK_EQUAL(sink->closes, 0);
+  sched.advance_time(std::chrono::milliseconds(1));
+  sched.run();
+  check_closed_with_bad_handshake();
+  CAF_CHECK(sink->all<ErrorReply>()[0].message.find("300 ms") != std::string::npos);
+}
+
+CAF_TEST(a handshake in time is not closed by the timeout) {
+  open();
+  Handshake hs;
+  hs.width = 16;
+  hs.height = 16;
+  self->send(session, client_atom::value, encode(std::vector<ClientRecord>{hs}));
+  sched.run();
+  sched.advance_time(std::chrono::milliseconds(1000));
+  sched.run();
+  CAF_CHECK_EQUAL(sink->closes, 0);
+  CAF_CHECK_EQUAL(sink->all<HandshakeReply>().size(), 1u);
+  self->send_exit(session, caf::exit_reason::user_shutdown);
+  sched.run();
+}
+
+CAF_TEST(a first message that does not decode ends the session with bad_handshake) {
+  open();
+  auto bytes = encode(std::vector<ClientRecord>{Handshake{}});
+  bytes[8 + 8] = 7;  // renderer: no such enum value
+  self->send(session, client_atom::value, bytes);
+  sched.run();
+  check_closed_with_bad_handshake();
+  CAF_CHECK(sink->all<ErrorReply>()[0].message.find("bad_enum") != std::string::npos);
 }
 
 CAF_TEST_FIXTURE_SCOPE_END()
