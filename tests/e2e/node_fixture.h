@@ -39,7 +39,9 @@ struct TestNode {
   std::mutex mu;
   std::vector<std::string> log;
 
-  explicit TestNode(size_t max_clients = 8) {
+  // `configure` may change the settings and options before the server starts.
+  explicit TestNode(size_t max_clients = 8,
+                    const std::function<void(NodeSettings&, ServerOptions&)>& configure = nullptr) {
     settings->log = [this](const std::string& line) {
       std::lock_guard<std::mutex> l(mu);
       log.push_back(line);
@@ -49,6 +51,7 @@ struct TestNode {
     o.port = 0;
     o.web_root = "web";
     o.max_clients = max_clients;
+    if (configure) configure(*settings, o);
     server = std::make_unique<Server>(sys, settings, o);
     server->start();
   }

@@ -36,3 +36,44 @@ TEST_CASE("Session tokens and query parameters", "[unit]") {
   CHECK(query_param("/ws", "session").empty());
   CHECK(target_path("/a/b?c#d") == "/a/b");
 }
+
+TEST_CASE("Only the client, the demo pages, the index page and the three.js build are public", "[unit]") {
+  for (const char* ok : {"index.html", "src/xml3d.js", "src/net/Protocol.js", "demo/index.html", "demo/demo.css",
+                         "node_modules/three/build/three.module.js", "node_modules/three/build/three.core.js"})
+    CHECK(public_path(ok));
+  for (const char* no : {"package.json", "package-lock.json", "tools/static-server.js", "test/run-unit.js",
+                         "node_modules/ws/index.js", "node_modules/three/package.json", "node_modules/three/src/Three.js",
+                         "src", "demo/", "srcx/a.js", "index.htm"})
+    CHECK_FALSE(public_path(no));
+  // Run from the repository root (CTest's working directory).
+  CHECK(resolve_public("web", "/demo/index.html"));
+  CHECK(resolve_public("web", "/src/xml3d.js"));
+  CHECK(resolve_public("web", "/demo/"));
+  for (const char* no : {"/package.json", "/package-lock.json", "/tools/static-server.js", "/test/run-unit.js",
+                         "/%70ackage.json", "/demo/../package.json", "/src/../tools/static-server.js"})
+    CHECK_FALSE(resolve_public("web", no));
+}
+
+TEST_CASE("Range headers: one byte range is served, several or malformed ones mean the whole file", "[unit]") {
+  ByteRange r;
+  CHECK(parse_range("", 100, r) == RangeKind::full);
+  CHECK(parse_range("bytes=0-9", 100, r) == RangeKind::partial);
+  CHECK((r.first == 0 && r.last == 9));
+  CHECK(parse_range("bytes=90-", 100, r) == RangeKind::partial);
+  CHECK((r.first == 90 && r.last == 99));
+  CHECK(parse_range("bytes=50-1000", 100, r) == RangeKind::partial);  // clamped to the end
+  CHECK((r.first == 50 && r.last == 99));
+  CHECK(parse_range("bytes=-10", 100, r) == RangeKind::partial);  // the last 10 bytes
+  CHECK((r.first == 90 && r.last == 99));
+  CHECK(parse_range("bytes=-1000", 100, r) == RangeKind::partial);
+  CHECK((r.first == 0 && r.last == 99));
+  CHECK(parse_range(" Bytes = 5 - 5 ", 100, r) == RangeKind::partial);
+  CHECK((r.first == 5 && r.last == 5));
+  CHECK(parse_range("bytes=99999999999999999999999-", 100, r) == RangeKind::unsatisfiable);
+  CHECK(parse_range("bytes=100-", 100, r) == RangeKind::unsatisfiable);
+  CHECK(parse_range("bytes=-0", 100, r) == RangeKind::unsatisfiable);
+  CHECK(parse_range("bytes=0-", 0, r) == RangeKind::unsatisfiable);
+  for (const char* full : {"bytes=0-1,5-6", "items=0-5", "bytes=5-1", "bytes=a-b", "bytes=", "bytes=-", "bytes 0-5",
+                           "bytes=1-2-3"})
+    CHECK(parse_range(full, 100, r) == RangeKind::full);
+}
