@@ -254,18 +254,20 @@ TEST_CASE("A client that never reads costs the node a bounded number of frames",
   REQUIRE(good.upload(pavilion().scene));
   uint64_t peak = 0;
   uint32_t good_frames = 0;
+  // Until the node has rendered 100 frames (11 MB) for the client that does not read: more
+  // than every socket buffer between them holds.
   const auto t0 = std::chrono::steady_clock::now();
-  for (uint32_t i = 0; std::chrono::steady_clock::now() - t0 < std::chrono::milliseconds(2500); ++i) {
+  auto rendered = [&] { return node.log_count("\"display\": \"s3tc\""); };
+  for (uint32_t i = 0; rendered() < 100 && std::chrono::steady_clock::now() - t0 < std::chrono::seconds(20); ++i) {
     REQUIRE(raw.send_ws(protocol::encode(protocol::ClientRecord{protocol::RenderRequest{i}})));
     if (i % 8 == 0 && good.render(pavilion_loop().camera(i % 100), i)) ++good_frames;
     std::this_thread::sleep_for(std::chrono::milliseconds(2));
     peak = std::max(peak, node.server->queued_bytes());
   }
-  const uint64_t frames_rendered = node.log_count("\"display\": \"s3tc\"");
+  const uint64_t frames_rendered = rendered();
   INFO("frames rendered for the client that does not read: " << frames_rendered << ", peak queued bytes " << peak);
-  // Enough frames were produced to fill every socket buffer many times over...
-  CHECK(frames_rendered * frame_bytes > 12 * (1u << 20));
-  // ...but at most two of them wait in the node (one more is being written).
+  REQUIRE(frames_rendered >= 100);
+  // At most two frames wait in the node (one more is being written).
   CHECK(peak <= 2 * frame_bytes + 4096);
   CHECK(good_frames >= 10);
   raw.shut();
