@@ -25,7 +25,9 @@ const char* kHelp =
     "--scene preloads a glTF scene for clients that connect with an empty scene. Settings (INI group\n"
     "[tessera], see configs/single.ini): host, port, web-root, scene, max-clients, render-threads,\n"
     "logical-cores, single-core-perf, max-width, max-height, max-message-bytes, max-buffer-bytes,\n"
-    "max-client-bytes, max-triangles, max-texture-size, log-frames.\n"
+    "max-client-bytes, max-triangles, max-texture-size, log-frames; resource bounds: handshake-timeout-ms,\n"
+    "max-node-bytes (memory budget over all clients, 0: half the physical memory), max-mjpeg-per-session,\n"
+    "max-mjpeg-viewers.\n"
     "Cluster (docs/operations.md): [--cluster-port P] publishes this node to parents; [--children H:P,H:P]\n"
     "names its children; [--no-render] makes it a hub or dedicated master; [--no-http] serves no clients.\n"
     "INI: cluster-port, cluster-host, children, render, http, name, task-timeout-ms, reconnect-ms.\n"
@@ -128,14 +130,17 @@ int run(const std::vector<std::string>& argv) {
   for (auto& c : cfg.children) kids += (kids.empty() ? "" : ", ") + json_str(c);
   std::printf("{\"listening\": %s, \"websocket\": %s, \"cluster\": %s, \"name\": %s, \"children\": [%s], "
               "\"render\": %s, \"web_root\": %s, \"scene\": %s, \"max_clients\": %d, \"render_threads\": %d, "
-              "\"cpu\": %s, \"renderer\": %s, \"rasterizer\": %s}\n",
+              "\"cpu\": %s, \"renderer\": %s, \"rasterizer\": %s, \"max_node_bytes\": %llu, "
+              "\"handshake_timeout_ms\": %u}\n",
               server ? json_str("http://" + opts.host + ":" + std::to_string(server->port()) + "/").c_str() : "null",
               server ? json_str("ws://" + opts.host + ":" + std::to_string(server->port()) + "/ws").c_str() : "null",
               published >= 0 ? json_str(cfg.cluster_host + ":" + std::to_string(published)).c_str() : "null",
               json_str(settings->name).c_str(), kids.c_str(), cfg.renders ? "true" : "false",
               json_str(opts.web_root).c_str(), json_str(cfg.scene).c_str(), cfg.max_clients,
               cfg.render_threads > 0 ? cfg.render_threads : hardware_threads(), json_str(cpu_model()).c_str(),
-              json_str(renderer).c_str(), json_str(gl_ok ? "available" : "unavailable: " + gl_why).c_str());
+              json_str(renderer).c_str(), json_str(gl_ok ? "available" : "unavailable: " + gl_why).c_str(),
+              static_cast<unsigned long long>(settings->budget ? settings->budget->limit() : 0),
+              settings->handshake_timeout_ms);
   std::fflush(stdout);
   int sig = 0;
   sigwait(&sigs, &sig);

@@ -133,3 +133,39 @@ TEST_CASE("tessera serve exits non-zero with a clear error on a missing config, 
     CHECK(WEXITSTATUS(*st) == 0);
   }
 }
+
+TEST_CASE("tessera serve takes the resource bounds from its settings", "[e2e]") {
+  {
+    Process p(serve({"--port", "0", "--tessera.handshake-timeout-ms=300", "--tessera.max-node-bytes=50000000"}));
+    auto line = p.first_line(30000);
+    INFO("stderr: " << p.err());
+    REQUIRE(line);
+    CHECK(line->find("\"max_node_bytes\": 50000000") != std::string::npos);
+    CHECK(line->find("\"handshake_timeout_ms\": 300") != std::string::npos);
+    const uint16_t port = listening_port(*line);
+    ProtoClient silent;
+    REQUIRE(silent.connect(port));
+    auto e = silent.next<protocol::ErrorReply>(3000);
+    REQUIRE(e);
+    CHECK(e->code == protocol::ErrorCode::bad_handshake);
+    CHECK(e->fatal);
+    p.signal(SIGTERM);
+    REQUIRE(p.wait(15000));
+  }
+  {
+    Process p(serve({"--port", "0"}));  // the default budget: half the physical memory
+    auto line = p.first_line(30000);
+    REQUIRE(line);
+    CHECK(line->find("\"max_node_bytes\": 0") == std::string::npos);
+    CHECK(line->find("\"handshake_timeout_ms\": 5000") != std::string::npos);
+    p.signal(SIGTERM);
+    REQUIRE(p.wait(15000));
+  }
+  {
+    Process p(serve({"--port", "0", "--tessera.handshake-timeout-ms=5"}));
+    auto status = p.wait(15000);
+    REQUIRE(status);
+    CHECK(WEXITSTATUS(*status) != 0);
+    CHECK(p.err().find("handshake-timeout-ms") != std::string::npos);
+  }
+}
