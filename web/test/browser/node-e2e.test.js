@@ -1,5 +1,5 @@
 // The web client against a REAL Tessera node: `tessera serve` (path in TESSERA_BIN, passed by
-// CTest) serves web/ and renders what the page in headless chromium sends. The page
+// CTest) renders what the page in headless chromium sends. The page
 // (pages/node.html) shows pages/node-scene.gltf from frame 0 of pages/node-camera-loop.json;
 // its server frames must match `tessera render` of the same glTF and camera (PSNR bound) for
 // each display method, and page scripts that move the camera or the model must produce frames
@@ -104,7 +104,9 @@ async function openNodePage(query) {
   page.logs = [];
   page.on('console', (m) => page.logs.push(`${m.type()}: ${m.text()}`));
   page.on('pageerror', (e) => page.logs.push(`pageerror: ${e.message}`));
-  await page.goto(`${node.base}/test/browser/pages/node.html?server=${node.host}:${node.port}&${query}`);
+  // The page comes from the test's static server: a node serves only the client and demo files
+  // of its web root, never test/ (docs/operations.md); the page's WebSocket goes to the node.
+  await page.goto(`${env.base}/test/browser/pages/node.html?server=${node.host}:${node.port}&${query}`);
   return page;
 }
 
