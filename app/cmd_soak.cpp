@@ -618,6 +618,11 @@ void malformed_client(const ClientSetup& cs, const std::vector<Malformed>& kinds
         auto& t = per_kind[m.kind];
         t.sent += k.sent, t.error_reply += k.error_reply, t.closed += k.closed, t.frame += k.frame, t.silent += k.silent;
       }
+      if (m.fatal) {  // the node ends the session: wait for the close, so the next kind starts afresh
+        const auto close_deadline = Clock::now() + std::chrono::seconds(2);
+        while (!ws.closed() && Clock::now() < close_deadline) ws.receive(50);
+        break;
+      }
     }
     ws.abort();
   }
