@@ -222,8 +222,10 @@ Material convert_material(const tinygltf::Material& gm, const std::map<int, Id>&
 }
 
 // External files (buffers, images) are read only from the glTF file's folder and below: a
-// URI that is absolute or climbs out with "..", after tinygltf has decoded and joined it
-// with the folder (or with "." , its fallback), is refused with an error naming the path.
+// path that climbs out with "..", after tinygltf has decoded the URI and joined it with the
+// folder (or with ".", its fallback), is refused with an error naming the path. tinygltf
+// joins absolute URIs to the folder too ("folder//etc/passwd"), so they stay inside it; with
+// no folder in the path (a file in the working directory) an absolute one is refused here.
 // data: URIs never reach the file system.
 struct FolderJail {
   std::filesystem::path folder;  // absolute, lexically normal
