@@ -550,7 +550,7 @@ class ClientDecoder {
         // Invertible, well-conditioned and bounded (renderer/validate.h): a huge or nearly
         // singular camera would give rays that Embree asserts on.
         if (std::string why = check_transform(s.camera.to_world, kCameraLimits); !why.empty())
-          return c.fail(ErrorCode::out_of_range, "to_world " + why);
+          return c.fail(ErrorCode::out_of_range, "to_world: " + why);
         out = std::move(s);
         return true;
       }
@@ -592,7 +592,7 @@ class ClientDecoder {
             !c.flag(visible, "visible") || !c.reserved(res))
           return false;
         if (std::string why = check_transform(m.transform, kMeshLimits); !why.empty())
-          return c.fail(ErrorCode::out_of_range, "transform " + why);
+          return c.fail(ErrorCode::out_of_range, "transform: " + why);
         out = std::move(s);
         return true;
       }

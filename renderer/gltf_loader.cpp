@@ -2,6 +2,7 @@
 
 #include <array>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <functional>
@@ -398,11 +399,11 @@ LoadedScene load_gltf(const std::string& path) {
     // with a warning and the rest of the scene loads (renderer/validate.h has the bounds).
     const std::string mesh_why = check_transform(world, kMeshLimits);
     if (node.mesh >= 0 && size_t(node.mesh) < prims.size() && !mesh_why.empty())
-      out.warnings.push_back(node_name + ": world transform " + mesh_why + "; its meshes are left out");
+      out.warnings.push_back(node_name + ": world transform: " + mesh_why + "; its meshes are left out");
     if (node.mesh >= 0 && size_t(node.mesh) < prims.size() && mesh_why.empty()) {
       for (const Prim& prim : prims[node.mesh]) {
         if (std::string why = check_world_extent(world, prim.max_abs); !why.empty()) {
-          out.warnings.push_back(node_name + ": world transform " + why + "; mesh left out");
+          out.warnings.push_back(node_name + ": world transform: " + why + "; mesh left out");
           continue;
         }
         Mesh mesh;
@@ -537,8 +538,12 @@ CameraLoop load_camera_loop(const std::string& path) {
     const std::string where = path + ": frame " + std::to_string(i) + ": ";
     for (size_t k = 0; k < 9; ++k)
       if (!(std::fabs(v[k]) <= kWorldLimit))  // also NaN
-        throw LoadError(where + (k < 3 ? "eye" : k < 6 ? "target" : "up") + " component " + std::to_string(v[k]) +
+      {
+        char num[32];
+        std::snprintf(num, sizeof num, "%g", v[k]);
+        throw LoadError(where + (k < 3 ? "eye" : k < 6 ? "target" : "up") + " component " + num +
                         " is not finite or beyond the world limit 2^32");
+      }
     CameraLoop::Frame f{{float(v[0]), float(v[1]), float(v[2])}, {float(v[3]), float(v[4]), float(v[5])},
                         {float(v[6]), float(v[7]), float(v[8])}};
     const Vec3 view = f.target - f.eye;

@@ -507,7 +507,7 @@ void RayTracer::Impl::sync(const Scene& scene, std::vector<std::string>& warning
   camera = scene.camera();
   const std::string camera_why = check_transform(camera.to_world, kCameraLimits);
   camera_ok = camera_why.empty() || !camera_check;
-  if (!camera_ok) warnings.push_back("camera not used (frames show the background): to_world " + camera_why);
+  if (!camera_ok) warnings.push_back("camera not used (frames show the background): to_world: " + camera_why);
   Vec3 cam = camera.to_world.transform_point({0, 0, 0});
   Vec3 new_origin = origin;
   if (camera_ok && finite(cam) && max_abs(cam) <= kWorldLimit && max_abs(cam - origin) > 4096.0f)

@@ -58,7 +58,7 @@ std::string Scene::validate_mesh(const Mesh& m) const {
   if (!m.transform.finite()) return "mesh transform holds NaN or Inf";
   std::string why = check_transform(m.transform, kMeshLimits);
   if (why.empty()) why = check_world_extent(m.transform, pos_index.max_abs);
-  if (!why.empty()) return "mesh transform " + why;
+  if (!why.empty()) return "mesh transform: " + why;
   return {};
 }
 

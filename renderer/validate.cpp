@@ -68,7 +68,7 @@ std::string check_transform(const Mat4& m, const TransformLimits& lim) {
 
 std::string check_camera(const Camera& c) {
   std::string why = check_transform(c.to_world, kCameraLimits);
-  if (!why.empty()) return "to_world " + why;
+  if (!why.empty()) return "to_world: " + why;
   if (!(c.fov_y > 0 && c.fov_y < kPi)) return "fov_y " + num(c.fov_y) + " outside (0, pi)";
   return {};
 }

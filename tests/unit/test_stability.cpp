@@ -587,8 +587,8 @@ TEST_CASE("a mesh whose vertices land beyond the world box is left out", "[stabi
   for (auto& w : warnings) all += w + "\n";
   INFO("warnings:\n" << all);
   CHECK(warnings.size() == 2);
-  CHECK(all.find("mesh 20 not rendered: mesh transform places vertices") != std::string::npos);
-  CHECK(all.find("mesh 40 not rendered: mesh transform places vertices") != std::string::npos);
+  CHECK(all.find("mesh 20 not rendered: mesh transform: places vertices") != std::string::npos);
+  CHECK(all.find("mesh 40 not rendered: mesh transform: places vertices") != std::string::npos);
   REQUIRE(img.width == 32);
 }
 
