@@ -24,7 +24,7 @@
 //     ||A|| <= 2^32 and |t_i| <= 2^32 (nothing placed beyond the world box by the transform
 //     alone); ||A^-1|| <= 2^24 (objects scaled down to 6e-8 at most). Object-space rays
 //     are A^-1 (o - t) and A^-1 d, so their components are at most 2^24 (2^33 + 2^32) < 2^58,
-//     a factor of 6 under FLT_LARGE; object-space vertices are at most 2^24 2^33 = 2^57.
+//     a factor of 8 under FLT_LARGE; object-space vertices are at most 2^24 2^33 = 2^57.
 //     cond(A) = ||A|| ||A^-1|| <= 2^20 (about 1e6): float rounding in the instance transform
 //     then changes an object-space ray by at most about 2^20 2^-24 = 1/16 of its length in the
 //     worst direction; beyond that the picture is noise, and nearly singular transforms (a
