@@ -23,7 +23,7 @@ int run(const std::vector<std::string>& argv) {
   int threads = 0;
   auto limit = limit_threads(args, &threads);
   SceneSetup setup = load_scene(args, 640, 360);
-  long frame = args.integer("--frame", 0);
+  long frame = read_frame(args, setup);
   long reps = args.integer("--reps", 3);
   std::vector<int> ao_list;
   for (double v : parse_number_list("--ao-list", args.str("--ao-list", "1,2,4,8,16,32"))) ao_list.push_back(int(v));

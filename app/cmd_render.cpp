@@ -22,7 +22,7 @@ int run(const std::vector<std::string>& argv) {
   int threads = 0;
   auto limit = limit_threads(args, &threads);
   SceneSetup setup = load_scene(args);
-  long frame = args.integer("--frame", 0);
+  long frame = read_frame(args, setup);
   std::string out_path = args.required("--out");
   RenderSettings settings = read_settings(args);
   std::string kind = read_renderer_kind(args);

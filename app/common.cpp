@@ -1,6 +1,8 @@
 #include "app/common.h"
 
 #include <algorithm>
+#include <cmath>
+#include <cstdint>
 #include <cstdlib>
 #include <fstream>
 #include <thread>
@@ -38,6 +40,8 @@ RenderSettings read_settings(Args& args) {
   s.ao_distance = float(args.number("--ao-distance", 0));
   if (s.ao_samples < 0 || s.ao_samples > 4096) throw std::invalid_argument("--ao must be in 0..4096");
   if (s.max_depth < 1 || s.max_depth > 64) throw std::invalid_argument("--depth must be in 1..64");
+  if (!(s.ao_distance >= 0 && std::isfinite(s.ao_distance)))
+    throw std::invalid_argument("--ao-distance must be a finite number >= 0 (0: 10% of the scene's extent)");
   return s;
 }
 
@@ -56,6 +60,19 @@ std::unique_ptr<Renderer> make_renderer(const std::string& kind) {
 
 void SceneSetup::set_frame(size_t k) {
   if (!loop.frames.empty()) loaded.scene.set_camera(loop.camera(k));
+}
+
+long read_frame(Args& args, const SceneSetup& setup) {
+  const long frame = args.integer("--frame", 0);
+  const long last = setup.loop.frames.empty() ? long(UINT32_MAX) : long(setup.loop.frames.size()) - 1;
+  if (frame < 0 || frame > last) {
+    if (setup.loop.frames.empty())
+      throw std::invalid_argument("--frame " + std::to_string(frame) + " outside 0.." + std::to_string(last) +
+                                  " (without --camera-loop it seeds the AO pattern)");
+    throw std::invalid_argument("--frame " + std::to_string(frame) + " outside the camera loop's frames 0.." +
+                                std::to_string(last));
+  }
+  return frame;
 }
 
 size_t SceneSetup::replay(long f, long step, RenderSettings& settings) {

@@ -36,6 +36,9 @@ struct SceneSetup {
   // frame, and the AO pattern seeded with it. Returns the loop frame. Needs a loop.
   size_t replay(long f, long step, RenderSettings& settings);
 };
+// --frame K: with a camera loop, a loop frame in 0..frames-1; without one, the AO pattern's
+// seed (0..2^32-1). Anything else is refused with the valid range (it used to wrap silently).
+long read_frame(Args& args, const SceneSetup& setup);
 enum class LoopOption { optional, required };  // required: no --camera-loop is an error
 SceneSetup load_scene(Args& args, int default_w = 1280, int default_h = 720,
                       LoopOption loop_option = LoopOption::optional);

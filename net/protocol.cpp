@@ -7,6 +7,7 @@
 #include "codecs/deflate.h"
 #include "codecs/jpeg.h"
 #include "renderer/image.h"
+#include "renderer/validate.h"
 
 static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "the wire format is little endian and read with memcpy");
 
@@ -546,8 +547,10 @@ class ClientDecoder {
         if (!c.finite(s.camera.to_world, "to_world") || !c.finite(s.camera.fov_y, "fov_y")) return false;
         if (!(s.camera.fov_y > 0 && s.camera.fov_y < kPi))
           return c.fail(ErrorCode::out_of_range, "fov_y = " + std::to_string(s.camera.fov_y) + " outside (0, pi)");
-        if (s.camera.to_world.det3() == 0)
-          return c.fail(ErrorCode::out_of_range, "to_world is singular");
+        // Invertible, well-conditioned and bounded (renderer/validate.h): a huge or nearly
+        // singular camera would give rays that Embree asserts on.
+        if (std::string why = check_transform(s.camera.to_world, kCameraLimits); !why.empty())
+          return c.fail(ErrorCode::out_of_range, "to_world: " + why);
         out = std::move(s);
         return true;
       }
@@ -588,6 +591,8 @@ class ClientDecoder {
         if (!c.id(s.id, "id") || !c.id(m.positions, "positions") || !c.finite(m.transform, "transform") ||
             !c.flag(visible, "visible") || !c.reserved(res))
           return false;
+        if (std::string why = check_transform(m.transform, kMeshLimits); !why.empty())
+          return c.fail(ErrorCode::out_of_range, "transform: " + why);
         out = std::move(s);
         return true;
       }
@@ -801,6 +806,12 @@ class ClientDecoder {
       return false;
     if (l.type != Light::Type::point && dot(l.direction, l.direction) == 0)
       return c.fail(ErrorCode::out_of_range, "direction is zero");
+    // Shadow rays aim at point and spot lights and along the others' directions (renderer/validate.h).
+    if (l.type != Light::Type::directional)
+      if (std::string why = check_point(l.position); !why.empty()) return c.fail(ErrorCode::out_of_range, "position " + why);
+    if (l.type != Light::Type::point)
+      if (std::string why = check_direction(l.direction); !why.empty())
+        return c.fail(ErrorCode::out_of_range, "direction " + why);
     if (l.type != Light::Type::directional && l.attenuation == Vec3(0, 0, 0))
       return c.fail(ErrorCode::out_of_range, "attenuation is all zero");
     if (l.type == Light::Type::spot && l.cutoff == 0) return c.fail(ErrorCode::out_of_range, "cutoff is zero");

@@ -1,6 +1,9 @@
 #include "renderer/gltf_loader.h"
 
+#include <array>
 #include <cmath>
+#include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <functional>
 #include <map>
@@ -26,6 +29,7 @@
 #endif
 
 #include "renderer/image.h"
+#include "renderer/validate.h"
 
 namespace tessera {
 namespace {
@@ -35,26 +39,64 @@ struct LoadError : std::runtime_error {
 };
 
 // Reads accessor `index` as `comps` floats per element (converting normalized integers).
+// An accessor without a bufferView is all zeros (sparse-only accessors are not used by our
+// scenes); it may hold at most this many elements, so that a count alone cannot allocate
+// gigabytes. Accessors with a bufferView are bounded by their (checked) bufferView instead.
+constexpr size_t kMaxZeroAccessor = size_t(1) << 24;
+
+// Where accessor `acc`'s `count` elements of `elem` bytes lie: checked against its bufferView
+// and buffer before anything is allocated (check_buffer_views has checked every bufferView
+// against its buffer). Returns the first element's offset in the buffer and the stride.
+struct AccessorSpan {
+  size_t start = 0, stride = 0;
+};
+AccessorSpan accessor_span(const tinygltf::Model& m, const tinygltf::Accessor& acc, size_t elem, const std::string& what) {
+  if (acc.bufferView < 0 || size_t(acc.bufferView) >= m.bufferViews.size()) throw LoadError(what + ": bufferView out of range");
+  const auto& bv = m.bufferViews[acc.bufferView];
+  const size_t stride = bv.byteStride ? bv.byteStride : elem;
+  // In divisions, not products: a count or stride from the file cannot overflow the check.
+  const size_t len = bv.byteLength;
+  const bool fits = acc.count == 0 || (acc.byteOffset <= len && elem <= len - acc.byteOffset && stride > 0 &&
+                                       (acc.count - 1) <= (len - acc.byteOffset - elem) / stride);
+  if (!fits)
+    throw LoadError(what + ": accessor of " + std::to_string(acc.count) + " elements (stride " + std::to_string(stride) +
+                    ", byteOffset " + std::to_string(acc.byteOffset) + ") reads past the end of bufferView " +
+                    std::to_string(acc.bufferView) + " (" + std::to_string(bv.byteLength) + " bytes)");
+  return {bv.byteOffset + acc.byteOffset, stride};
+}
+
+// Every bufferView must lie inside its buffer: checked once, before any accessor is read.
+void check_buffer_views(const tinygltf::Model& m, const std::string& path) {
+  for (size_t i = 0; i < m.bufferViews.size(); ++i) {
+    const auto& bv = m.bufferViews[i];
+    if (bv.buffer < 0 || size_t(bv.buffer) >= m.buffers.size())
+      throw LoadError(path + ": bufferView " + std::to_string(i) + " names buffer " + std::to_string(bv.buffer) +
+                      ", which does not exist");
+    const size_t size = m.buffers[bv.buffer].data.size();
+    if (bv.byteOffset > size || bv.byteLength > size - bv.byteOffset)
+      throw LoadError(path + ": bufferView " + std::to_string(i) + " (byteOffset " + std::to_string(bv.byteOffset) +
+                      ", byteLength " + std::to_string(bv.byteLength) + ") exceeds buffer " + std::to_string(bv.buffer) +
+                      " (" + std::to_string(size) + " bytes)");
+  }
+}
+
 std::vector<float> read_floats(const tinygltf::Model& m, int index, int comps, const std::string& what) {
   if (index < 0 || size_t(index) >= m.accessors.size()) throw LoadError(what + ": accessor index out of range");
   const auto& acc = m.accessors[index];
   int nc = tinygltf::GetNumComponentsInType(acc.type);
   if (nc != comps) throw LoadError(what + ": expected " + std::to_string(comps) + " components, got " + std::to_string(nc));
-  std::vector<float> out(acc.count * comps, 0.0f);
-  if (acc.bufferView < 0) return out;  // all zeros (sparse-only accessors are not used by our scenes)
-  if (size_t(acc.bufferView) >= m.bufferViews.size()) throw LoadError(what + ": bufferView out of range");
-  const auto& bv = m.bufferViews[acc.bufferView];
-  if (bv.buffer < 0 || size_t(bv.buffer) >= m.buffers.size()) throw LoadError(what + ": buffer out of range");
-  const auto& buf = m.buffers[bv.buffer].data;
+  if (acc.bufferView < 0) {
+    if (acc.count > kMaxZeroAccessor)
+      throw LoadError(what + ": accessor without a bufferView has " + std::to_string(acc.count) + " elements (at most " +
+                      std::to_string(kMaxZeroAccessor) + ")");
+    return std::vector<float>(acc.count * comps, 0.0f);
+  }
   int csize = tinygltf::GetComponentSizeInBytes(acc.componentType);
   if (csize <= 0) throw LoadError(what + ": bad component type");
-  size_t stride = bv.byteStride ? bv.byteStride : size_t(csize) * comps;
-  size_t start = bv.byteOffset + acc.byteOffset;
-  if (acc.count > 0) {
-    size_t need = start + stride * (acc.count - 1) + size_t(csize) * comps;
-    if (need > buf.size() || acc.byteOffset + stride * (acc.count - 1) + size_t(csize) * comps > bv.byteLength)
-      throw LoadError(what + ": accessor reads past the end of its buffer");
-  }
+  const auto span = accessor_span(m, acc, size_t(csize) * comps, what);
+  const auto& buf = m.buffers[m.bufferViews[acc.bufferView].buffer].data;
+  const size_t start = span.start, stride = span.stride;
+  std::vector<float> out(acc.count * comps, 0.0f);
   for (size_t i = 0; i < acc.count; ++i) {
     const unsigned char* p = buf.data() + start + i * stride;
     for (int c = 0; c < comps; ++c) {
@@ -78,15 +120,11 @@ std::vector<uint32_t> read_indices(const tinygltf::Model& m, int index, const st
   const auto& acc = m.accessors[index];
   if (acc.type != TINYGLTF_TYPE_SCALAR || acc.bufferView < 0 || size_t(acc.bufferView) >= m.bufferViews.size())
     throw LoadError(what + ": indices must be a scalar accessor with a bufferView");
-  const auto& bv = m.bufferViews[acc.bufferView];
-  if (bv.buffer < 0 || size_t(bv.buffer) >= m.buffers.size()) throw LoadError(what + ": buffer out of range");
-  const auto& buf = m.buffers[bv.buffer].data;
   int csize = tinygltf::GetComponentSizeInBytes(acc.componentType);
   if (csize != 1 && csize != 2 && csize != 4) throw LoadError(what + ": bad index component type");
-  size_t stride = bv.byteStride ? bv.byteStride : size_t(csize);
-  size_t start = bv.byteOffset + acc.byteOffset;
-  if (acc.count > 0 && start + stride * (acc.count - 1) + csize > buf.size())
-    throw LoadError(what + ": indices read past the end of their buffer");
+  const auto span = accessor_span(m, acc, size_t(csize), what + " indices");
+  const auto& buf = m.buffers[m.bufferViews[acc.bufferView].buffer].data;
+  const size_t start = span.start, stride = span.stride;
   std::vector<uint32_t> out(acc.count);
   for (size_t i = 0; i < acc.count; ++i) {
     const unsigned char* p = buf.data() + start + i * stride;
@@ -184,6 +222,38 @@ Material convert_material(const tinygltf::Material& gm, const std::map<int, Id>&
   return mat;
 }
 
+// External files (buffers, images) are read only from the glTF file's folder and below: a
+// path that climbs out with "..", after tinygltf has decoded the URI and joined it with the
+// folder (or with ".", its fallback), is refused with an error naming the path. tinygltf
+// joins absolute URIs to the folder too ("folder//etc/passwd"), so they stay inside it; with
+// no folder in the path (a file in the working directory) an absolute one is refused here.
+// data: URIs never reach the file system.
+struct FolderJail {
+  std::filesystem::path folder;  // absolute, lexically normal
+};
+
+bool inside(const std::filesystem::path& folder, const std::filesystem::path& p) {
+  auto f = folder.begin(), q = p.begin();
+  for (; f != folder.end(); ++f, ++q) {
+    if (f->empty()) continue;  // a trailing separator's empty element
+    if (q == p.end() || *f != *q) return false;
+  }
+  return true;
+}
+
+bool jailed_read(std::vector<unsigned char>* out, std::string* err, const std::string& filepath, void* user) {
+  const auto& jail = *static_cast<const FolderJail*>(user);
+  std::error_code ec;
+  const std::filesystem::path abs = std::filesystem::absolute(filepath, ec).lexically_normal();
+  if (ec || !inside(jail.folder, abs)) {
+    if (err)
+      *err += "refused: '" + filepath + "' lies outside the glTF file's folder " + jail.folder.string() +
+              " (external URIs must be relative paths inside it)";
+    return false;
+  }
+  return tinygltf::ReadWholeFile(out, err, filepath, nullptr);
+}
+
 }  // namespace
 
 LoadedScene load_gltf(const std::string& path) {
@@ -191,6 +261,13 @@ LoadedScene load_gltf(const std::string& path) {
   tinygltf::Model model;
   std::string err, warn;
   bool ok = false;
+  FolderJail jail;
+  {
+    std::error_code ec;
+    jail.folder = std::filesystem::absolute(path, ec).lexically_normal().parent_path();
+  }
+  tinygltf::FsCallbacks fs{&tinygltf::FileExists, &tinygltf::ExpandFilePath, &jailed_read, &tinygltf::WriteWholeFile, &jail};
+  ctx.SetFsCallbacks(fs);
   try {
     bool binary = path.size() > 4 && path.compare(path.size() - 4, 4, ".glb") == 0;
     ok = binary ? ctx.LoadBinaryFromFile(&model, &err, &warn, path) : ctx.LoadASCIIFromFile(&model, &err, &warn, path);
@@ -199,6 +276,7 @@ LoadedScene load_gltf(const std::string& path) {
   }
   if (!ok) throw LoadError(path + ": " + (err.empty() ? "cannot load glTF" : err));
 
+  check_buffer_views(model, path);
   LoadedScene out;
   Scene& scene = out.scene;
   if (!warn.empty()) out.warnings.push_back(path + ": " + warn);
@@ -252,6 +330,7 @@ LoadedScene load_gltf(const std::string& path) {
   struct Prim {
     Id positions = kNoId, normals = kNoId, texcoords = kNoId, indices = kNoId, material = kNoId;
     std::vector<float> pos;  // kept for bounds
+    float max_abs = 0;       // largest |coordinate| (for the world-box check)
   };
   std::vector<std::vector<Prim>> prims(model.meshes.size());
   for (size_t mi = 0; mi < model.meshes.size(); ++mi) {
@@ -268,8 +347,10 @@ LoadedScene load_gltf(const std::string& path) {
       Prim prim;
       prim.pos = read_floats(model, pit->second, 3, what + " POSITION");
       size_t nv = prim.pos.size() / 3;
-      for (float v : prim.pos)
+      for (float v : prim.pos) {
         if (!std::isfinite(v)) throw LoadError(what + ": POSITION holds NaN or Inf");
+        prim.max_abs = std::fmax(prim.max_abs, std::fabs(v));
+      }
       auto add_floats = [&](std::vector<float> values, uint8_t components) {
         Buffer b;
         b.components = components;
@@ -313,8 +394,18 @@ LoadedScene load_gltf(const std::string& path) {
     const auto& node = model.nodes[ni];
     Mat4 world = parent * node_local(node);
     if (!world.finite()) throw LoadError(path + ": node '" + node.name + "' has a non-finite transform");
-    if (node.mesh >= 0 && size_t(node.mesh) < prims.size()) {
+    const std::string node_name = path + ": node " + std::to_string(ni) + " '" + node.name + "'";
+    // A zero or nearly zero scale is a common way to hide a node: its meshes are left out
+    // with a warning and the rest of the scene loads (renderer/validate.h has the bounds).
+    const std::string mesh_why = check_transform(world, kMeshLimits);
+    if (node.mesh >= 0 && size_t(node.mesh) < prims.size() && !mesh_why.empty())
+      out.warnings.push_back(node_name + ": world transform: " + mesh_why + "; its meshes are left out");
+    if (node.mesh >= 0 && size_t(node.mesh) < prims.size() && mesh_why.empty()) {
       for (const Prim& prim : prims[node.mesh]) {
+        if (std::string why = check_world_extent(world, prim.max_abs); !why.empty()) {
+          out.warnings.push_back(node_name + ": world transform: " + why + "; mesh left out");
+          continue;
+        }
         Mesh mesh;
         mesh.positions = prim.positions;
         mesh.normals = prim.normals;
@@ -332,8 +423,12 @@ LoadedScene load_gltf(const std::string& path) {
       Camera c;
       c.to_world = world;
       if (cam.type == "perspective") c.fov_y = float(cam.perspective.yfov);
-      scene.set_camera(c);
-      out.has_camera = true;
+      if (std::string why = check_camera(c); !why.empty()) {
+        out.warnings.push_back(node_name + ": camera ignored: " + why);
+      } else {
+        scene.set_camera(c);
+        out.has_camera = true;
+      }
     }
     if (auto it = node.extensions.find("KHR_lights_punctual"); it != node.extensions.end() && lights_ext) {
       int li = int(number_or(it->second, "light", -1));
@@ -356,7 +451,12 @@ LoadedScene load_gltf(const std::string& path) {
           l.cutoff = outer;
           l.softness = outer > 0 ? 1.0f - inner / outer : 0.0f;
         }
-        scene.set_light(next_id++, l);
+        std::string why;
+        if (l.type != Light::Type::directional && !(why = check_point(l.position)).empty()) why = "position " + why;
+        if (why.empty() && l.type != Light::Type::point && !(why = check_direction(l.direction)).empty())
+          why = "direction " + why;
+        if (why.empty()) scene.set_light(next_id++, l);
+        else out.warnings.push_back(node_name + ": light ignored: " + why);
       }
     }
     for (int child : node.children) visit(child, world, depth + 1);
@@ -391,7 +491,9 @@ LoadedScene load_gltf(const std::string& path) {
     Camera c;
     if (out.bounds.valid()) {
       Vec3 center = (out.bounds.lo + out.bounds.hi) * 0.5f;
-      c.to_world = Mat4::look_at(center + Vec3{0, 0, out.bounds.extent()}, center, {0, 1, 0});
+      Camera fit = c;
+      fit.to_world = Mat4::look_at(center + Vec3{0, 0, out.bounds.extent()}, center, {0, 1, 0});
+      if (check_camera(fit).empty()) c = fit;  // else (bounds at the world's edge) the identity camera
     }
     scene.set_camera(c);
   }
@@ -411,16 +513,51 @@ CameraLoop load_camera_loop(const std::string& path) {
   std::ifstream in(path);
   if (!in) throw LoadError(path + ": cannot open camera loop");
   CameraLoop loop;
+  double fov = 0;
+  // Numbers are read as double and checked before they become floats (1e39 would overflow).
+  std::vector<std::array<double, 9>> raw;
   try {
     auto j = nlohmann::json::parse(in);
-    loop.fov_y_deg = j.at("fovY_deg").get<float>();
-    auto v3 = [](const nlohmann::json& a) { return Vec3{a.at(0).get<float>(), a.at(1).get<float>(), a.at(2).get<float>()}; };
-    for (const auto& f : j.at("frames")) loop.frames.push_back({v3(f.at("eye")), v3(f.at("target")), v3(f.at("up"))});
+    fov = j.at("fovY_deg").get<double>();
+    for (const auto& f : j.at("frames")) {
+      std::array<double, 9> v{};
+      int k = 0;
+      for (const char* key : {"eye", "target", "up"})
+        for (int c = 0; c < 3; ++c) v[size_t(k++)] = f.at(key).at(size_t(c)).get<double>();
+      raw.push_back(v);
+    }
   } catch (const std::exception& e) {
     throw LoadError(path + ": " + e.what());
   }
-  if (loop.frames.empty()) throw LoadError(path + ": camera loop has no frames");
-  if (!(loop.fov_y_deg > 0 && loop.fov_y_deg < 180)) throw LoadError(path + ": fovY_deg must be in (0, 180)");
+  if (raw.empty()) throw LoadError(path + ": camera loop has no frames");
+  // The field of view: the kernel clamps to (1e-6 rad, 180 deg - 1e-4 rad); a loop asks for a sane one.
+  if (!(fov >= 1e-3 && fov <= 179)) throw LoadError(path + ": fovY_deg must be in [0.001, 179]");
+  loop.fov_y_deg = float(fov);
+  for (size_t i = 0; i < raw.size(); ++i) {
+    const auto& v = raw[i];
+    const std::string where = path + ": frame " + std::to_string(i) + ": ";
+    for (size_t k = 0; k < 9; ++k)
+      if (!(std::fabs(v[k]) <= kWorldLimit))  // also NaN
+      {
+        char num[32];
+        std::snprintf(num, sizeof num, "%g", v[k]);
+        throw LoadError(where + (k < 3 ? "eye" : k < 6 ? "target" : "up") + " component " + num +
+                        " is not finite or beyond the world limit 2^32");
+      }
+    CameraLoop::Frame f{{float(v[0]), float(v[1]), float(v[2])}, {float(v[3]), float(v[4]), float(v[5])},
+                        {float(v[6]), float(v[7]), float(v[8])}};
+    const Vec3 view = f.target - f.eye;
+    if (!(length(view) > 0)) throw LoadError(where + "eye and target are the same point");
+    if (!check_direction(view).empty()) throw LoadError(where + "the view direction (target - eye) " + check_direction(view));
+    if (!check_direction(f.up).empty()) throw LoadError(where + "up " + check_direction(f.up));
+    if (length(cross(normalize(view), normalize(f.up))) < 1e-3f)
+      throw LoadError(where + "up is parallel to the view direction");
+    Camera c;
+    c.fov_y = loop.fov_y_deg * kPi / 180.0f;
+    c.to_world = Mat4::look_at(f.eye, f.target, f.up);
+    if (std::string why = check_camera(c); !why.empty()) throw LoadError(where + "camera " + why);
+    loop.frames.push_back(f);
+  }
   return loop;
 }
 

@@ -1,5 +1,7 @@
 #include "renderer/raytracer.h"
 
+#include "renderer/validate.h"
+
 #include <embree3/rtcore.h>
 #include <tbb/blocked_range2d.h>
 #include <tbb/combinable.h>
@@ -255,6 +257,8 @@ struct RayTracer::Impl {
   };
   std::vector<LightConst> light_consts;
   Camera camera;
+  bool camera_ok = true;  // the camera's transform passes check_camera's transform bounds; else frames are background
+  bool camera_check = true;  // set_camera_check (tests)
   Environment env;
   int32_t width = 0, height = 0;
   Vec3 origin;  // world position subtracted from everything (camera-relative rebasing)
@@ -496,10 +500,17 @@ void RayTracer::Impl::sync(const Scene& scene, std::vector<std::string>& warning
   // Camera-relative rebasing: keep world coordinates small around the camera so that a
   // scene far from the origin keeps its float precision. The origin moves in steps of
   // 1024 units, so ordinary scenes keep origin 0 and never rebuild for it.
+  // A camera outside the bounds of renderer/validate.h (possible only for scenes built in code:
+  // every entry point refuses it) renders the background and moves no origin: its rays
+  // would not be finite or within what Embree accepts. The field of view is clamped by the
+  // kernel, so only the transform counts here.
   camera = scene.camera();
+  const std::string camera_why = check_transform(camera.to_world, kCameraLimits);
+  camera_ok = camera_why.empty() || !camera_check;
+  if (!camera_ok) warnings.push_back("camera not used (frames show the background): to_world: " + camera_why);
   Vec3 cam = camera.to_world.transform_point({0, 0, 0});
   Vec3 new_origin = origin;
-  if (max_abs(cam - origin) > 4096.0f)
+  if (camera_ok && finite(cam) && max_abs(cam) <= kWorldLimit && max_abs(cam - origin) > 4096.0f)
     new_origin = {std::round(cam.x / 1024) * 1024, std::round(cam.y / 1024) * 1024, std::round(cam.z / 1024) * 1024};
   origin = new_origin;
 
@@ -593,6 +604,10 @@ void RayTracer::Impl::sync(const Scene& scene, std::vector<std::string>& warning
   for (auto& [id, e] : scene.lights()) {
     Light l = e.value;
     if (!l.on || !finite(l.position) || !finite(l.direction) || !finite(l.color) || !std::isfinite(l.intensity)) continue;
+    if (l.type != Light::Type::directional && !check_point(l.position).empty()) {  // shadow rays start at hits, aim here
+      warnings.push_back("light " + std::to_string(id) + " not used: position " + check_point(l.position));
+      continue;
+    }
     l.position = l.position - origin;
     l.direction = normalize(l.direction);
     if (l.type != Light::Type::point && length(l.direction) == 0) continue;
@@ -683,6 +698,7 @@ RayTracer::~RayTracer() = default;
 
 void RayTracer::sync(const Scene& scene, std::vector<std::string>& warnings) { impl_->sync(scene, warnings); }
 PacketLayout RayTracer::packet_layout() const { return impl_->layout; }
+void RayTracer::set_camera_check(bool on) { impl_->camera_check = on; }
 SceneFeatures RayTracer::features() const { return impl_->features; }
 float RayTracer::scene_extent() const { return impl_->extent; }
 RayTracer::SyncStats RayTracer::last_sync() const { return impl_->stats; }

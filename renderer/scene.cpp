@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "renderer/validate.h"
+
 namespace tessera {
 
 bool Texture::has_alpha() const {
@@ -54,6 +56,9 @@ std::string Scene::validate_mesh(const Mesh& m) const {
     return "non-indexed mesh needs a multiple of 3 vertices, has " + std::to_string(nv);
   }
   if (!m.transform.finite()) return "mesh transform holds NaN or Inf";
+  std::string why = check_transform(m.transform, kMeshLimits);
+  if (why.empty()) why = check_world_extent(m.transform, pos_index.max_abs);
+  if (!why.empty()) return "mesh transform: " + why;
   return {};
 }
 
@@ -81,7 +86,11 @@ void Scene::set_buffer(Id id, Buffer b) {
   held_bytes_ -= old ? old->bytes() : 0;
   held_bytes_ += b.bytes();
   ix.finite = true;
-  for (float v : b.f) ix.finite = ix.finite && std::isfinite(v);
+  ix.max_abs = 0;
+  for (float v : b.f) {
+    ix.finite = ix.finite && std::isfinite(v);
+    ix.max_abs = std::max(ix.max_abs, std::fabs(v));
+  }
   ix.max_index = 0;
   for (uint32_t i : b.u) ix.max_index = std::max<uint64_t>(ix.max_index, uint64_t(i) + 1);
   put(buffers_, id, std::move(b));
@@ -94,6 +103,7 @@ bool Scene::remove_buffer(Id id) {
   triangles_ -= ix.index_refs * index_triangles(old) + ix.position_refs * position_triangles(old);
   held_bytes_ -= old->bytes();
   ix.finite = true;
+  ix.max_abs = 0;
   ix.max_index = 0;
   if (ix.index_refs == 0 && ix.position_refs == 0) buffer_index_.erase(id);
   return drop(buffers_, id);

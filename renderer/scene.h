@@ -147,7 +147,10 @@ class Scene {
   const Material* material(Id id) const { return find(materials_, id); }
 
   // Checks a mesh against the buffers it references: existence, element types and
-  // component counts, matching vertex counts, index range, finite positions. Returns an
+  // component counts, matching vertex counts, index range, finite positions, and its
+  // transform against the bounds of renderer/validate.h (check_transform with kMeshLimits,
+  // and the world box its vertices land in), so that a scene built in code and never
+  // validated still hands Embree nothing it asserts on. Returns an
   // empty string when the mesh can be rendered, else what is wrong. A missing material is
   // not an error (the default material is used until it arrives).
   std::string validate_mesh(const Mesh& m) const;
@@ -189,6 +192,7 @@ class Scene {
   // many visible meshes take their triangles from it (as index buffer / as non-indexed positions).
   struct BufferIndex {
     bool finite = true;        // every float is finite
+    float max_abs = 0;         // largest |float| (when finite)
     uint64_t max_index = 0;    // largest uint32 element + 1 (0: none)
     uint32_t index_refs = 0, position_refs = 0;
   };

@@ -60,3 +60,34 @@ TEST_CASE("Thread limits outside 1..1024 are rejected", "[unit]") {
     CHECK_THROWS_AS(tessera::app::limit_threads(a, nullptr), std::invalid_argument);
   }
 }
+
+TEST_CASE("--frame outside the camera loop (or negative) is refused with the valid range", "[unit]") {
+  tessera::app::SceneSetup with_loop;
+  with_loop.loop.frames.resize(120);
+  for (const char* bad : {"-1", "120", "999999"}) {
+    Args a({"--frame", bad});
+    INFO(bad);
+    CHECK_THROWS_WITH(tessera::app::read_frame(a, with_loop), Catch::Contains("--frame") && Catch::Contains("0..119"));
+  }
+  for (const char* good : {"0", "119"}) {
+    Args a({"--frame", good});
+    CHECK(tessera::app::read_frame(a, with_loop) == std::stol(good));
+  }
+  tessera::app::SceneSetup no_loop;  // the frame only seeds the AO pattern
+  Args neg({"--frame", "-1"});
+  CHECK_THROWS_WITH(tessera::app::read_frame(neg, no_loop), Catch::Contains("0..4294967295"));
+  Args seed({"--frame", "999999"});
+  CHECK(tessera::app::read_frame(seed, no_loop) == 999999);
+  Args none({});
+  CHECK(tessera::app::read_frame(none, with_loop) == 0);
+}
+
+TEST_CASE("--ao-distance must be finite and >= 0", "[unit]") {
+  for (const char* bad : {"-1", "nan", "inf"}) {
+    Args a({"--ao-distance", bad});
+    INFO(bad);
+    CHECK_THROWS_WITH(tessera::app::read_settings(a), Catch::Contains("--ao-distance"));
+  }
+  Args ok({"--ao-distance", "2.5"});
+  CHECK(tessera::app::read_settings(ok).ao_distance == 2.5f);
+}

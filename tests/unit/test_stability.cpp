@@ -506,3 +506,160 @@ TEST_CASE("1x1 images, 0-sized images and 0-sized tasks", "[stability][sizes]") 
   Image img = render_full(rt, empty, s);
   CHECK(px(img, 3, 3).b == 255);
 }
+
+// ---------------------------------------------------------------------------------------
+// Fault containment (renderer/validate.h): a scene built in code, never validated, with
+// transforms and cameras that made Embree abort the process (`all(valid, ray.valid())`,
+// `diag[dim] > 0.0f`): it renders, the bad entries left out, and every pixel is written.
+// ---------------------------------------------------------------------------------------
+namespace {
+
+Scene containment_scene() {
+  Scene scene;
+  scene.set_resolution(32, 24);
+  scene.set_environment(plain_env({0, 0, 1}, {0.2f, 0.2f, 0.2f}));
+  scene.set_material(1, matte({0, 1, 0}));
+  Material mirror = diffuse({0.2f, 0.2f, 0.2f});
+  mirror.reflection = 0.5f;
+  scene.set_material(2, mirror);
+  scene.set_camera(look({0, 0, 5}, {0, 0, 0}, 50 * kDeg));
+  scene.set_light(1, directional({0.2f, -1, -0.5f}));
+  add_object(scene, 10, sphere(1, 16), 2, Mat4::translate({-1.5f, 0, 0}));  // a good mesh
+  return scene;
+}
+
+Mat4 one_element(int i, float v) {
+  Mat4 m;
+  m.m[size_t(i)] = v;
+  return m;
+}
+
+}  // namespace
+
+TEST_CASE("meshes with singular, nearly singular or huge transforms set directly on a Scene are left out, the rest renders",
+          "[stability][containment]") {
+  const struct {
+    const char* name;
+    Mat4 xf;
+    const char* why;
+  } cases[] = {
+      {"all zero", [] { Mat4 z; z.m.fill(0); return z; }(), "singular"},
+      {"zero z-scale", Mat4::scale({1, 1, 0}), "singular"},
+      {"uniform scale 1e-30", Mat4::scale(Vec3{1e-30f}), "nearly singular"},
+      {"scale 1e19", Mat4::scale(Vec3{1e19f}), "scale too large"},
+      {"3e38 in one element", one_element(4, 3e38f), "scale too large"},
+      {"translation 1e30", Mat4::translate({1e30f, 0, 0}), "translation"},
+      {"z-scale 1e-7", Mat4::scale({1, 1, 1e-7f}), "ill-conditioned"},
+      {"z-scale 1e-8", Mat4::scale({1, 1, 1e-8f}), "nearly singular"},
+      {"condition 2e6 within the scale bounds", Mat4::scale({2e3f, 2e3f, 1e-3f}), "ill-conditioned"},
+  };
+  for (const auto& c : cases) {
+    Scene scene = containment_scene();
+    add_object(scene, 20, sphere(1, 16), 1, Mat4::translate({1.5f, 0, 0}) * c.xf);
+    RayTracer rt;
+    std::vector<std::string> warnings;
+    INFO(c.name);
+    Image img = render_full(rt, scene, no_ao(3), &warnings);
+    std::string all;
+    for (auto& w : warnings) all += w + "\n";
+    INFO("warnings:\n" << all);
+    REQUIRE(warnings.size() == 1);
+    CHECK(warnings[0].find("mesh 20 not rendered") != std::string::npos);
+    CHECK(warnings[0].find(c.why) != std::string::npos);
+    REQUIRE(img.width == 32);
+    for (size_t i = 3; i < img.rgba.size(); i += 4) REQUIRE(img.rgba[i] == 255);  // every pixel written
+    CHECK(px(img, 27, 12).b == 255);  // where the bad sphere would be: the background
+  }
+}
+
+TEST_CASE("a mesh whose vertices land beyond the world box is left out", "[stability][containment]") {
+  Scene scene = containment_scene();
+  Geometry far = sphere(1, 8);
+  for (float& v : far.pos) v *= 1e30f;  // finite, but Embree's bounds and hit points would not be
+  add_object(scene, 20, far, 1);
+  Geometry big = sphere(1, 8);
+  add_object(scene, 30, big, 1, Mat4::scale(Vec3{3e9f}));  // 3e9 x 1 is fine alone ...
+  add_object(scene, 40, big, 1, Mat4::translate({3e9f, 0, 0}) * Mat4::scale(Vec3{3e9f}));  // ... but not plus 3e9
+  RayTracer rt;
+  std::vector<std::string> warnings;
+  Image img = render_full(rt, scene, no_ao(3), &warnings);
+  std::string all;
+  for (auto& w : warnings) all += w + "\n";
+  INFO("warnings:\n" << all);
+  CHECK(warnings.size() == 2);
+  CHECK(all.find("mesh 20 not rendered: mesh transform: places vertices") != std::string::npos);
+  CHECK(all.find("mesh 40 not rendered: mesh transform: places vertices") != std::string::npos);
+  REQUIRE(img.width == 32);
+}
+
+TEST_CASE("a camera that is huge or singular set directly on a Scene renders the background", "[stability][containment]") {
+  const struct {
+    const char* name;
+    Mat4 xf;
+  } cases[] = {
+      {"scale 1e19", Mat4::translate({0, 0, 5}) * Mat4::scale(Vec3{1e19f})},
+      {"3e38 in one element", Mat4::translate({0, 0, 5}) * one_element(0, 3e38f)},
+      {"translation 1e30", Mat4::translate({1e30f, 0, 5})},
+      {"all zero", [] { Mat4 z; z.m.fill(0); return z; }()},
+      {"uniform scale 1e-30", Mat4::translate({0, 0, 5}) * Mat4::scale(Vec3{1e-30f})},
+  };
+  for (const auto& c : cases) {
+    INFO(c.name);
+    Scene scene = containment_scene();
+    Camera cam;
+    cam.to_world = c.xf;
+    scene.set_camera(cam);
+    RayTracer rt;
+    std::vector<std::string> warnings;
+    Image img = render_full(rt, scene, no_ao(3), &warnings);
+    REQUIRE(warnings.size() == 1);
+    CHECK(warnings[0].find("camera not used") != std::string::npos);
+    for (int y = 0; y < img.height; ++y)
+      for (int x = 0; x < img.width; ++x) REQUIRE(str(px(img, x, y)) == str(Rgb{0, 0, 255}));
+    // The next good camera renders the scene again.
+    scene.set_camera(look({0, 0, 5}, {0, 0, 0}, 50 * kDeg));
+    img = render_full(rt, scene, no_ao(3), &warnings);
+    CHECK(warnings.empty());
+    CHECK(str(px(img, 8, 12)) != str(Rgb{0, 0, 255}));  // the good sphere
+  }
+}
+
+TEST_CASE("the kernel drops rays that are not finite or beyond kRayLimit instead of passing them to Embree",
+          "[stability][containment]") {
+  // The camera check is switched off, so the camera's rays reach the kernel: directions of
+  // 1e19 (beyond Embree's FLT_LARGE of 1.844e18), infinite ones (3e38 x sx overflows), NaN
+  // ones, and origins of 1e30, 3e38 and NaN. Each lane is dropped and shows the background.
+  const struct {
+    const char* name;
+    Mat4 xf;
+  } cases[] = {
+      {"scale 1e19", Mat4::translate({0, 0, 5}) * Mat4::scale(Vec3{1e19f})},
+      {"scale 3e38", Mat4::translate({0, 0, 5}) * Mat4::scale(Vec3{3e38f})},
+      {"NaN directions", Mat4::translate({0, 0, 5}) * one_element(8, kNaN)},
+      {"NaN origin", Mat4::translate({kNaN, 0, 5})},
+      {"origin 1e30", Mat4::translate({1e30f, 0, 5})},
+      {"origin 3e38", Mat4::translate({3e38f, 3e38f, 3e38f})},
+  };
+  for (int depth : {1, 3})
+    for (int ao : {0, 4})
+      for (const auto& c : cases) {
+        INFO(c.name << ", depth " << depth << ", AO " << ao);
+        Scene scene = containment_scene();
+        Camera cam;
+        cam.to_world = c.xf;
+        scene.set_camera(cam);
+        RayTracer rt;
+        rt.set_camera_check(false);
+        std::vector<std::string> warnings;
+        RenderSettings s = no_ao(depth);
+        s.ao_samples = ao;
+        TaskResult res;
+        rt.sync(scene, warnings);
+        CHECK(warnings.empty());
+        rt.render({0, 0, 32, 24}, s, res);
+        REQUIRE(res.image.width == 32);
+        for (int y = 0; y < 24; ++y)
+          for (int x = 0; x < 32; ++x) REQUIRE(str(px(res.image, x, y)) == str(Rgb{0, 0, 255}));
+        CHECK(res.rays.primary == 0);  // none reached Embree
+      }
+}
