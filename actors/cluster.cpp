@@ -318,9 +318,9 @@ node_actor::behavior_type node_impl(node_ptr self, std::shared_ptr<const NodeSet
   return {
       [=](open_atom, const OpenRequest& req) -> caf::result<OpenReply> {
         auto& st = self->state;
+        auto parent = self->current_sender();  // before the promise takes it over
         auto rp = self->make_response_promise<OpenReply>();
-        auto w = spawn_worker(self->system(), st.settings, caf::actor_cast<node_actor>(self), req,
-                              self->current_sender());
+        auto w = spawn_worker(self->system(), st.settings, caf::actor_cast<node_actor>(self), req, parent);
         node_event(self, "\"worker_opened\": " + std::to_string(req.session) + ", \"master\": \"" + req.master + "\"");
         self->request(w, std::chrono::milliseconds(2 * st.settings->task_timeout_ms), nodes_atom::value)
             .then([=](std::vector<NodeInfo>& l) mutable { rp.deliver(OpenReply{caf::actor_cast<caf::actor>(w), l}); },
