@@ -3,6 +3,9 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <map>
+
+#include <malloc.h>
 
 #include <caf/all.hpp>
 #include <caf/io/middleman.hpp>
@@ -41,12 +44,19 @@ std::string check_tile(const TileResult& t, uint32_t frame, const Rect& expected
   return {};
 }
 
+namespace {
+// A node or master name: 1..256 bytes, no control characters, quotes or backslashes.
+bool usable_name(const std::string& name) {
+  bool ok = !name.empty() && name.size() <= 256;
+  for (unsigned char c : name) ok &= c >= 0x20 && c != 0x7f && c != '"' && c != '\\';
+  return ok;
+}
+}  // namespace
+
 std::string check_nodes(const std::vector<NodeInfo>& nodes) {
   if (nodes.size() > 65536) return std::to_string(nodes.size()) + " nodes";
   for (const NodeInfo& n : nodes) {
-    bool printable = !n.name.empty() && n.name.size() <= 256;
-    for (unsigned char c : n.name) printable &= c >= 0x20 && c != '"' && c != '\\';
-    if (!printable) return "a node without a usable name";
+    if (!usable_name(n.name)) return "a node without a usable name";
     if (n.logical_cores < 1 || n.logical_cores > 65536)
       return "node " + n.name + " claims " + std::to_string(n.logical_cores) + " logical cores";
     if (!std::isfinite(n.single_core_perf) || n.single_core_perf <= 0 || n.single_core_perf > 1000)
@@ -59,11 +69,44 @@ std::string nodes_json(const std::vector<NodeInfo>& nodes) {
   std::string s = "[";
   for (size_t i = 0; i < nodes.size(); ++i) {
     char buf[64];
-    std::snprintf(buf, sizeof buf, "\", \"cores\": %d, \"perf\": %.3g}", nodes[i].logical_cores,
-                  nodes[i].single_core_perf);
-    s += (i ? ", " : "") + std::string("{\"name\": \"") + nodes[i].name + buf;
+    std::snprintf(buf, sizeof buf, ", \"cores\": %d, \"perf\": %.3g}", nodes[i].logical_cores,
+                  std::isfinite(nodes[i].single_core_perf) ? nodes[i].single_core_perf : 0.0);
+    s += (i ? ", " : "") + std::string("{\"name\": ") + json_quote(nodes[i].name) + buf;
   }
   return s + "]";
+}
+
+std::string check_open(const OpenRequest& req) {
+  if (req.session == 0) return "session 0";
+  if (!usable_name(req.master)) return "a master name that is empty, longer than 256 bytes or not printable";
+  auto pow2 = [](int32_t v) { return v >= 1 && v <= 16 && (v & (v - 1)) == 0; };
+  const int64_t rays = int64_t(req.packet_w) * req.packet_h;
+  if (!pow2(req.packet_w) || !pow2(req.packet_h) || (rays != 4 && rays != 8 && rays != 16))
+    return "packet layout " + std::to_string(req.packet_w) + "x" + std::to_string(req.packet_h) +
+           " (the ray tracer has 4, 8 or 16 rays per packet)";
+  if (req.timeout_ms > 3'600'000) return "reply timeout of " + std::to_string(req.timeout_ms) + " ms";
+  if (req.keepalive_ms < 10 || req.keepalive_ms > 60'000)
+    return "keep-alive period of " + std::to_string(req.keepalive_ms) + " ms (10..60000)";
+  return {};
+}
+
+std::string check_batch(const RenderBatch& b, const protocol::Limits& lim) {
+  if (b.width < 1 || b.height < 1 || b.width > lim.max_width || b.height > lim.max_height)
+    return "frame " + std::to_string(b.width) + "x" + std::to_string(b.height) + " outside 1x1.." +
+           std::to_string(lim.max_width) + "x" + std::to_string(lim.max_height);
+  if (b.ao_samples < 0 || uint32_t(b.ao_samples) > lim.max_ao_samples)
+    return "ao_samples " + std::to_string(b.ao_samples) + " outside 0.." + std::to_string(lim.max_ao_samples);
+  if (b.max_depth < 0 || uint32_t(b.max_depth) > lim.max_depth)
+    return "max_depth " + std::to_string(b.max_depth) + " outside 0.." + std::to_string(lim.max_depth);
+  if (b.renderer > uint8_t(protocol::RendererKind::rasterizer)) return "renderer kind " + std::to_string(int(b.renderer));
+  if (b.timeout_ms < 1 || b.timeout_ms > 3'600'000) return "timeout of " + std::to_string(b.timeout_ms) + " ms";
+  if (b.tasks.size() > 65536) return std::to_string(b.tasks.size()) + " tasks";
+  const Rect frame{0, 0, b.width, b.height};
+  for (const Rect& t : b.tasks)
+    if (!t.empty() && !frame.contains(t))
+      return "task [" + std::to_string(t.x0) + "," + std::to_string(t.y0) + "," + std::to_string(t.x1) + "," +
+             std::to_string(t.y1) + "] outside the frame " + std::to_string(b.width) + "x" + std::to_string(b.height);
+  return {};
 }
 
 std::string apply_records(Scene& scene, const std::vector<uint8_t>& bytes, const protocol::Limits& node_limits) {
@@ -102,6 +145,9 @@ struct worker_state {
   // tick handler).
   bool adopted = false;
   std::chrono::steady_clock::time_point opened_at = std::chrono::steady_clock::now();
+  // The last message from the parent (an update, a keep-alive, a batch, a nodes query), on the
+  // actor clock: a parent that is silent for keepalive_misses of its periods is gone.
+  caf::actor_clock::time_point last_heard;
   bool committed = false;  // the first node list (for the open reply) was committed
   renderer_actor renderer;
   Router router;
@@ -111,8 +157,27 @@ using worker_ptr = worker_actor::stateful_pointer<worker_state>;
 
 void worker_log(worker_ptr self, const std::string& what) {
   auto& st = self->state;
-  node_log(*st.settings, "{\"node\": \"" + st.settings->name + "\", \"session\": " + std::to_string(st.req.session) +
-                             ", " + what + "}");
+  node_log(*st.settings, "{\"node\": " + json_quote(st.settings->name) + ", \"session\": " +
+                             std::to_string(st.req.session) + ", " + what + "}");
+}
+
+// A message from this worker's parent (or from anyone, for a worker without one): it is alive.
+void heard(worker_ptr self) {
+  auto& st = self->state;
+  const auto& sender = self->current_sender();
+  if (!st.parent || (sender && sender->address() == st.parent)) st.last_heard = self->clock().now();
+}
+
+// Every tile of a batch that this node will not render, failed with `why`.
+BatchReply failed_batch(const RenderBatch& b, const std::string& why) {
+  BatchReply r;
+  r.tiles.resize(std::min<size_t>(b.tasks.size(), 65536));
+  for (size_t i = 0; i < r.tiles.size(); ++i) {
+    r.tiles[i].frame = b.frame;
+    r.tiles[i].pixels = b.tasks[i];
+    r.tiles[i].error = why;
+  }
+  return r;
 }
 
 void worker_apply(worker_ptr self, const std::vector<uint8_t>& bytes, bool reset) {
@@ -124,7 +189,7 @@ void worker_apply(worker_ptr self, const std::vector<uint8_t>& bytes, bool reset
   std::string err = apply_records(*st.scene, bytes, st.settings->limits);
   if (!err.empty() && st.broken.empty()) {
     st.broken = err;
-    worker_log(self, "\"update_failed\": \"" + err + "\"");
+    worker_log(self, "\"update_failed\": " + json_quote(err));
   }
 }
 
@@ -153,9 +218,15 @@ worker_actor::behavior_type worker_impl(worker_ptr self, std::shared_ptr<const N
     self->monitor(parent);
   }
   if (st.node) self->monitor(st.node);  // the node shuts down: its workers go with it
+  st.last_heard = self->clock().now();
   self->set_down_handler([=](caf::down_msg& m) {
-    if (m.source == self->state.parent || (self->state.node && m.source == self->state.node.address())) {
-      self->quit(caf::exit_reason::user_shutdown);  // the session ended, or its link to us broke
+    const bool from_parent = m.source == self->state.parent;
+    if (from_parent || (self->state.node && m.source == self->state.node.address())) {
+      // The session ended (or the parent worker did), its connection to this node broke, or
+      // this node is shutting down.
+      worker_log(self, std::string("\"ended\": ") + (from_parent ? "\"parent down\"" : "\"node down\"") +
+                           ", \"reason\": " + json_quote(to_string(m.reason)));
+      self->quit(caf::exit_reason::user_shutdown);
       return;
     }
     self->state.router.child_failed(m.source, to_string(m.reason));
@@ -173,11 +244,13 @@ worker_actor::behavior_type worker_impl(worker_ptr self, std::shared_ptr<const N
     r.master = st.settings->name;
     st.router.join_children(self, st.node, r, st.settings->task_timeout_ms, snapshot);
   };
+  st.router.keepalive_ms = st.settings->reconnect_ms;  // this worker's tick period
   join();
   self->delayed_send(self, std::chrono::milliseconds(st.settings->reconnect_ms), tick_atom::value);
   return {
       [=](update_atom, std::vector<uint8_t>& bytes, bool reset) {
         auto& st = self->state;
+        heard(self);
         st.adopted = true;
         if (bytes.empty() && !reset) return;  // the parent's notice that it adopted this worker
         st.router.forward(self, bytes, reset);
@@ -185,6 +258,13 @@ worker_actor::behavior_type worker_impl(worker_ptr self, std::shared_ptr<const N
         else worker_apply(self, bytes, reset);
       },
       [=](render_atom, RenderBatch& batch) -> caf::result<BatchReply> {
+        heard(self);
+        // Checked like a client's requests on this node: a bad batch fails every tile and the
+        // worker serves on.
+        if (std::string bad = check_batch(batch, self->state.settings->limits); !bad.empty()) {
+          worker_log(self, "\"bad_batch\": " + json_quote(bad));
+          return failed_batch(batch, "node " + self->state.settings->name + " refused the batch: " + bad);
+        }
         auto rp = self->make_response_promise<BatchReply>();
         auto local = [self](const RenderTask& t, std::function<void(TileResult&&)> cb) {
           auto& st = self->state;
@@ -219,6 +299,7 @@ worker_actor::behavior_type worker_impl(worker_ptr self, std::shared_ptr<const N
         return rp;
       },
       [=](nodes_atom) -> caf::result<std::vector<NodeInfo>> {
+        heard(self);
         auto& st = self->state;
         auto rp = self->make_response_promise<std::vector<NodeInfo>>();
         // The first list (the open reply) waits for the children being opened; the parent's
@@ -243,6 +324,20 @@ worker_actor::behavior_type worker_impl(worker_ptr self, std::shared_ptr<const N
           self->quit(caf::exit_reason::user_shutdown);
           return;
         }
+        // A parent that stopped answering (hung, or cut off without the connection noticing)
+        // sends no keep-alives: after keepalive_misses of its periods this worker ends.
+        const auto silent = self->clock().now() - st.last_heard;
+        if (st.req.keepalive_ms > 0 &&
+            silent > std::chrono::milliseconds(uint64_t(st.req.keepalive_ms) * st.settings->keepalive_misses)) {
+          worker_log(self, "\"ended\": \"parent silent\", \"silent_ms\": " +
+                               std::to_string(std::chrono::duration_cast<std::chrono::milliseconds>(silent).count()));
+          self->quit(caf::exit_reason::user_shutdown);
+          return;
+        }
+        // Anyone holding this worker's handle can send it a tick: only its own (delayed_send
+        // to itself) runs the periodic work, so ticks from elsewhere start no further loops.
+        if (self->current_sender() != self->ctrl()) return;
+        st.router.keepalive(self);
         join();
         self->delayed_send(self, std::chrono::milliseconds(self->state.settings->reconnect_ms), tick_atom::value);
       },
@@ -261,12 +356,14 @@ struct node_state {
     bool reported = false;  // a failure to connect was logged (log the next change only)
   };
   std::vector<Child> children;
+  std::map<caf::actor_addr, uint64_t> workers;  // live workers (monitored) and their sessions
+  int trim_in = 0;  // ticks until the heap is trimmed (set when the last worker ends)
   static inline const char* name = "tessera.node";
 };
 using node_ptr = node_actor::stateful_pointer<node_state>;
 
 void node_event(node_ptr self, const std::string& what) {
-  node_log(*self->state.settings, "{\"node\": \"" + self->state.settings->name + "\", " + what + "}");
+  node_log(*self->state.settings, "{\"node\": " + json_quote(self->state.settings->name) + ", " + what + "}");
 }
 
 void connect_child(node_ptr self, size_t i) {
@@ -283,13 +380,14 @@ void connect_child(node_ptr self, size_t i) {
             c.node = caf::actor_cast<node_actor>(p);
             c.reported = false;
             self->monitor(c.node);
-            node_event(self, "\"child_connected\": \"" + c.name + "\"");
+            node_event(self, "\"child_connected\": " + json_quote(c.name));
           },
           [=](caf::error& e) {
             auto& c = self->state.children[i];
             c.connecting = false;
-            if (!c.reported) node_event(self, "\"child_unreachable\": \"" + c.name + "\", \"reason\": \"" +
-                                                  self->system().render(e) + "\"");
+            if (!c.reported)
+              node_event(self, "\"child_unreachable\": " + json_quote(c.name) +
+                                   ", \"reason\": " + json_quote(self->system().render(e)));
             c.reported = true;
           });
 }
@@ -307,21 +405,43 @@ node_actor::behavior_type node_impl(node_ptr self, std::shared_ptr<const NodeSet
   }
   for (size_t i = 0; i < st.children.size(); ++i) connect_child(self, i);
   self->set_down_handler([=](caf::down_msg& m) {
-    for (auto& c : self->state.children)
+    auto& st = self->state;
+    if (auto w = st.workers.find(m.source); w != st.workers.end()) {
+      const uint64_t session = w->second;
+      st.workers.erase(w);
+      if (st.workers.empty()) st.trim_in = 2;
+      node_event(self, "\"worker_closed\": " + std::to_string(session) +
+                           ", \"live_workers\": " + std::to_string(st.workers.size()));
+      return;
+    }
+    for (auto& c : st.children)
       if (c.node && c.node.address() == m.source) {
         c.node = nullptr;
-        node_event(self, "\"child_lost\": \"" + c.name + "\", \"reason\": \"" + to_string(m.reason) + "\"");
+        node_event(self, "\"child_lost\": " + json_quote(c.name) + ", \"reason\": " + json_quote(to_string(m.reason)));
       }
   });
-  if (!st.children.empty())
-    self->delayed_send(self, std::chrono::milliseconds(st.settings->reconnect_ms), tick_atom::value);
+  self->delayed_send(self, std::chrono::milliseconds(st.settings->reconnect_ms), tick_atom::value);
   return {
       [=](open_atom, const OpenRequest& req) -> caf::result<OpenReply> {
         auto& st = self->state;
+        // The worker watches whoever opened it: read the sender before the promise takes it over.
+        auto parent = self->current_sender();
+        std::string refused = parent ? check_open(req) : "an open request without a sender";
+        const bool full = refused.empty() && st.workers.size() >= st.settings->max_workers;
+        if (full)
+          refused = "node " + st.settings->name + " has " + std::to_string(st.workers.size()) +
+                    " live workers, its max-workers";
+        if (!refused.empty()) {
+          node_event(self, "\"open_refused\": " + json_quote(refused) + ", \"session\": " + std::to_string(req.session) +
+                               ", \"from\": " + json_quote(parent ? to_string(parent->node()) : std::string("?")));
+          return caf::make_error(full ? caf::sec::runtime_error : caf::sec::invalid_argument, "open refused: " + refused);
+        }
         auto rp = self->make_response_promise<OpenReply>();
-        auto w = spawn_worker(self->system(), st.settings, caf::actor_cast<node_actor>(self), req,
-                              self->current_sender());
-        node_event(self, "\"worker_opened\": " + std::to_string(req.session) + ", \"master\": \"" + req.master + "\"");
+        auto w = spawn_worker(self->system(), st.settings, caf::actor_cast<node_actor>(self), req, parent);
+        self->monitor(w);
+        st.workers.emplace(w.address(), req.session);
+        node_event(self, "\"worker_opened\": " + std::to_string(req.session) + ", \"master\": " + json_quote(req.master) +
+                             ", \"live_workers\": " + std::to_string(st.workers.size()));
         self->request(w, std::chrono::milliseconds(2 * st.settings->task_timeout_ms), nodes_atom::value)
             .then([=](std::vector<NodeInfo>& l) mutable { rp.deliver(OpenReply{caf::actor_cast<caf::actor>(w), l}); },
                   [=](caf::error& e) mutable {
@@ -338,7 +458,14 @@ node_actor::behavior_type node_impl(node_ptr self, std::shared_ptr<const NodeSet
       },
       [=](tick_atom) {
         auto& st = self->state;
+        if (self->current_sender() != self->ctrl()) return;  // a peer's tick starts no second loop
         for (size_t i = 0; i < st.children.size(); ++i) connect_child(self, i);
+        // The last worker ended a tick or two ago (its renderer has freed its scene by now):
+        // hand the freed heap back to the OS, so an idle node's RSS returns to its baseline.
+        if (st.trim_in > 0 && --st.trim_in == 0 && st.workers.empty()) {
+          malloc_trim(0);
+          node_event(self, "\"heap_trimmed\": true");
+        }
         self->delayed_send(self, std::chrono::milliseconds(st.settings->reconnect_ms), tick_atom::value);
       },
   };

@@ -10,6 +10,11 @@
 //                  The request says how long the parent waits (OpenRequest::timeout_ms): a
 //                  worker that gets no update within twice that was opened after its parent
 //                  gave up (a cut link delivering what it held) and ends itself ("orphaned").
+//                  A worker lives as long as its session: it watches the actor that opened
+//                  it (down: the session ended or the connection broke), and the parent sends
+//                  it an empty update every OpenRequest::keepalive_ms; silent for
+//                  NodeSettings::keepalive_misses periods, it ends. A node refuses malformed
+//                  opens and opens beyond NodeSettings::max_workers (check_open, router.h).
 //     links     -> the children this node is connected to now (used by its own workers to
 //                  notice children that came back)
 //   worker_actor (one per session per node)
@@ -18,7 +23,8 @@
 //                  once, or cached while this node renders, and forwarded to the children.
 //                  Empty and reset=false: the parent adopted this worker (its first message).
 //     render    -> BatchReply: renders its own task, relays the others, validates what the
-//                  children return, fails the tasks of a child that is down or too late.
+//                  children return, fails the tasks of a child that is down or too late. A
+//                  batch outside this node's limits fails every tile (check_batch, router.h).
 //     nodes     -> commits membership changes (dead children out, rejoined children in) and
 //                  returns the flattened list that the next batches are indexed by.
 //

@@ -236,10 +236,13 @@ struct OpenRequest {
   std::string master;        // for log lines
   int32_t packet_w = 4, packet_h = 4;  // the master's packet layout (one packet space per cluster)
   uint32_t timeout_ms = 0;   // how long the parent waits for the reply (0: not said)
+  uint32_t keepalive_ms = 0; // the parent sends the worker something (at least an empty update)
+                             // this often; a worker that hears nothing for a multiple of it ends
 };
 template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, OpenRequest& x) {
-  return f(caf::meta::type_name("tessera::open_request"), x.session, x.master, x.packet_w, x.packet_h, x.timeout_ms);
+  return f(caf::meta::type_name("tessera::open_request"), x.session, x.master, x.packet_w, x.packet_h, x.timeout_ms,
+           x.keepalive_ms);
 }
 struct OpenReply {
   caf::actor worker;            // a worker_actor

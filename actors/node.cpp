@@ -45,6 +45,45 @@ void register_message_types(caf::actor_system_config& cfg) {
   cfg.add_message_type<std::vector<double>>("tessera::doubles");
 }
 
+std::string json_quote(const std::string& s) {
+  static const char* hex = "0123456789abcdef";
+  std::string o = "\"";
+  o.reserve(s.size() + 2);
+  const auto* b = reinterpret_cast<const unsigned char*>(s.data());
+  const size_t n = s.size();
+  for (size_t i = 0; i < n;) {
+    const unsigned char c = b[i];
+    if (c == '"' || c == '\\') {
+      o += '\\';
+      o += char(c);
+      ++i;
+    } else if (c < 0x20 || c == 0x7f) {
+      o += "\\u00";
+      o += hex[c >> 4];
+      o += hex[c & 15];
+      ++i;
+    } else if (c < 0x80) {
+      o += char(c);
+      ++i;
+    } else {
+      // A well-formed UTF-8 sequence (no overlong forms, no surrogates, <= U+10FFFF) is kept.
+      size_t len = c >= 0xc2 && c <= 0xdf ? 2 : c >= 0xe0 && c <= 0xef ? 3 : c >= 0xf0 && c <= 0xf4 ? 4 : 0;
+      bool ok = len > 0 && i + len <= n;
+      for (size_t k = 1; ok && k < len; ++k) ok = (b[i + k] & 0xc0) == 0x80;
+      if (ok && len == 3) ok = !(c == 0xe0 && b[i + 1] < 0xa0) && !(c == 0xed && b[i + 1] >= 0xa0);
+      if (ok && len == 4) ok = !(c == 0xf0 && b[i + 1] < 0x90) && !(c == 0xf4 && b[i + 1] >= 0x90);
+      if (ok) {
+        o.append(s, i, len);
+        i += len;
+      } else {
+        o += "\\ufffd";
+        ++i;
+      }
+    }
+  }
+  return o + "\"";
+}
+
 void node_log(const NodeSettings& settings, const std::string& line) {
   if (settings.log) {
     settings.log(line);

@@ -42,7 +42,12 @@ struct NodeSettings {
   std::vector<std::string> children;  // "host:port" of the child nodes' cluster endpoints
   uint32_t task_timeout_ms = 5000;    // a sub-tree that has not answered a frame's tasks by then is
                                       // failed (at least 3x the last frame's rendering time)
-  uint32_t reconnect_ms = 1000;       // retry period for lost children
+  uint32_t reconnect_ms = 1000;       // retry period for lost children; also the period of the
+                                      // keep-alive a parent sends its children's workers
+  uint32_t max_workers = 32;          // live workers on this node (every session of every parent);
+                                      // further open requests are refused
+  uint32_t keepalive_misses = 10;     // a worker whose parent was silent for this many of the
+                                      // parent's keep-alive periods ends itself
   caf::weak_actor_ptr node;           // this process's node actor (none: a single node)
   // --- Resource bounds (docs/operations.md, "Resource bounds") ---
   uint32_t handshake_timeout_ms = 5000;  // a session without a valid handshake by then is closed
@@ -57,6 +62,10 @@ void register_message_types(caf::actor_system_config& cfg);
 
 // Writes a log line through settings.log, or to stderr.
 void node_log(const NodeSettings& settings, const std::string& line);
+// A string as a JSON string literal, quotes included: '"', '\\' and control characters escaped,
+// bytes that are not UTF-8 replaced by U+FFFD. Every string a client, a peer or an error
+// message supplies goes into a log line through this, so no text can forge log lines.
+std::string json_quote(const std::string& s);
 
 renderer_actor spawn_renderer(caf::actor_system& sys, PacketLayout layout, bool detached);
 tiler_actor spawn_tiler(caf::actor_system& sys, std::vector<double> coefficients);

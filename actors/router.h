@@ -37,6 +37,19 @@ std::string check_nodes(const std::vector<NodeInfo>& nodes);
 // The flattened list of a sub-tree and the JSON of a node list, for log lines.
 std::string nodes_json(const std::vector<NodeInfo>& nodes);
 
+// Why a peer's open request cannot be served (empty string: it can): a session id, a master
+// name like a node name (1..256 bytes, no control characters, quotes or backslashes), a packet
+// layout the ray tracer has (w and h powers of two, 4, 8 or 16 rays), a reply timeout of at
+// most an hour and a keep-alive period of 10 ms..60 s.
+std::string check_open(const OpenRequest& req);
+
+// Why a batch from a worker's parent cannot be rendered (empty string: it can), by the rules
+// that apply to a client's requests on this node: the frame within the limits' max_width x
+// max_height, ao_samples and max_depth within max_ao_samples and max_depth, a known renderer
+// kind, a timeout of 1 ms..1 h, and every task inside the frame. (The task count is checked
+// against the node list by Router::dispatch.)
+std::string check_batch(const RenderBatch& b, const protocol::Limits& limits);
+
 // The task of one node in a batch.
 inline RenderTask task_of(const RenderBatch& b, const Rect& pixels) {
   RenderTask t;
@@ -86,6 +99,7 @@ class Router {
   bool changed = false;               // membership changed since the last commit
   PacketLayout layout;
   std::function<void(const std::string&)> log;
+  uint32_t keepalive_ms = 1000;       // how often keepalive() is called (told to the workers opened)
 
   // The committed flattened list: this node first (if it renders), then each routed child's.
   std::vector<NodeInfo> list() const {
@@ -117,6 +131,15 @@ class Router {
   void forward(Self* self, const std::vector<uint8_t>& records, bool reset) {
     for (auto& c : children)
       if (c.alive) self->send(c.worker, update_atom::value, records, reset);
+  }
+
+  // Tells every live child that its parent is alive (an empty update, as the adoption notice):
+  // called every keepalive_ms. A worker that hears nothing from its parent for
+  // NodeSettings::keepalive_misses periods ends itself (cluster.cpp).
+  template <class Self>
+  void keepalive(Self* self) {
+    for (auto& c : children)
+      if (c.alive) self->send(c.worker, update_atom::value, std::vector<uint8_t>{}, false);
   }
 
   // Splits a batch indexed by list() between the local renderer and the children.
@@ -298,6 +321,7 @@ class Router {
     if (!node) return;
     OpenRequest open = req;
     open.timeout_ms = timeout_ms;  // a worker opened later than that is an orphan (cluster.cpp)
+    open.keepalive_ms = keepalive_ms;
     ++opening_;
     self->request(node, std::chrono::milliseconds(timeout_ms), links_atom::value)
         .then(
@@ -327,13 +351,13 @@ class Router {
                             c.nodes = std::move(r.nodes);
                             children.push_back(std::move(c));
                             changed = true;
-                            if (log) log("\"joined\": \"" + name + "\", \"nodes\": " + nodes_json(children.back().nodes));
+                            if (log) log("\"joined\": " + json_quote(name) + ", \"nodes\": " + nodes_json(children.back().nodes));
                           }
                           opened();
                         },
                         [=](caf::error& e) {
                           joining_.erase(name);
-                          if (log) log("\"join_failed\": \"" + name + "\", \"reason\": \"" + to_string(e) + "\"");
+                          if (log) log("\"join_failed\": " + json_quote(name) + ", \"reason\": " + json_quote(to_string(e)));
                           opened();
                         });
               }
@@ -365,7 +389,7 @@ class Router {
       outs = std::move(it->second);
       outstanding_.erase(it);
     }
-    if (log) log("\"node_lost\": \"" + name + "\", \"reason\": \"" + why + "\"");
+    if (log) log("\"node_lost\": " + json_quote(name) + ", \"reason\": " + json_quote(why));
     for (auto& o : outs) {
       auto j = o.join.lock();
       if (!j || j->part_done[o.part]) continue;
@@ -375,7 +399,7 @@ class Router {
     }
   }
   void log_bad(const std::string& name, const std::string& what) {
-    if (log) log("\"rejected_tile\": \"" + name + "\", \"reason\": \"" + what + "\"");
+    if (log) log("\"rejected_tile\": " + json_quote(name) + ", \"reason\": " + json_quote(what));
   }
   void opened() {
     if (--opening_ == 0) run_after();

@@ -538,6 +538,7 @@ session_actor::behavior_type session_impl(self_ptr self, std::shared_ptr<ClientS
   // reconnect period, on children that came back).
   st.router.layout = st.layout;
   st.router.log = [self](const std::string& line) { log(self, line); };
+  st.router.keepalive_ms = st.settings->reconnect_ms;  // the tick below sends the keep-alives
   st.node = caf::actor_cast<node_actor>(st.settings->node.lock());
   self->set_down_handler([=](caf::down_msg& m) { self->state.router.child_failed(m.source, to_string(m.reason)); });
   if (st.node) {
@@ -582,6 +583,7 @@ session_actor::behavior_type session_impl(self_ptr self, std::shared_ptr<ClientS
                          "no handshake within " + std::to_string(st.settings->handshake_timeout_ms) + " ms", kNoRecord});
       },
       [=](tick_atom) {
+        self->state.router.keepalive(self);  // the workers below end when these stop (cluster.cpp)
         join_children(self);
         self->delayed_send(self, std::chrono::milliseconds(self->state.settings->reconnect_ms), tick_atom::value);
       },

@@ -44,7 +44,10 @@ NodeConfig::NodeConfig() {
       .add(http, "http", "serve HTTP and WebSocket clients (false: worker or hub only)")
       .add(name, "name", "this node's name in node lists and logs (default host:cluster-port)")
       .add(task_timeout_ms, "task-timeout-ms", "fail a sub-tree that has not returned its tiles after this long")
-      .add(reconnect_ms, "reconnect-ms", "retry period for lost child nodes");
+      .add(reconnect_ms, "reconnect-ms", "retry period for lost child nodes; keep-alive period to workers below")
+      .add(max_workers, "max-workers", "live session workers on this node; more opens are refused (0: 2 x max-clients)")
+      .add(keepalive_misses, "keepalive-misses",
+           "a worker whose parent sent nothing for this many keep-alive periods ends itself");
 }
 
 std::shared_ptr<NodeSettings> NodeConfig::node_settings() const {
@@ -70,7 +73,7 @@ std::shared_ptr<NodeSettings> NodeConfig::node_settings() const {
     s->preload = std::make_shared<const Scene>(std::move(loaded.scene));
   }
   if (task_timeout_ms < 50) throw std::invalid_argument("tessera.task-timeout-ms must be >= 50");
-  if (reconnect_ms < 10) throw std::invalid_argument("tessera.reconnect-ms must be >= 10");
+  if (reconnect_ms < 10 || reconnect_ms > 60000) throw std::invalid_argument("tessera.reconnect-ms must be in 10..60000");
   if (cluster_port < -1 || cluster_port > 65535) throw std::invalid_argument("tessera.cluster-port must be in -1..65535");
   if (handshake_timeout_ms < 10) throw std::invalid_argument("tessera.handshake-timeout-ms must be >= 10");
   if (max_node_bytes < 0) throw std::invalid_argument("tessera.max-node-bytes must be >= 0 (0: half the physical memory)");
@@ -80,6 +83,12 @@ std::shared_ptr<NodeSettings> NodeConfig::node_settings() const {
   s->children = children;
   s->task_timeout_ms = uint32_t(task_timeout_ms);
   s->reconnect_ms = uint32_t(reconnect_ms);
+  if (max_workers < 0 || max_workers > 100000) throw std::invalid_argument("tessera.max-workers must be in 0..100000");
+  if (max_clients < 1) throw std::invalid_argument("tessera.max-clients must be >= 1");
+  s->max_workers = uint32_t(max_workers > 0 ? max_workers : 2 * std::min(max_clients, 50000));
+  if (keepalive_misses < 2 || keepalive_misses > 1000)
+    throw std::invalid_argument("tessera.keepalive-misses must be in 2..1000");
+  s->keepalive_misses = uint32_t(keepalive_misses);
   s->name = !name.empty() ? name
             : cluster_port > 0  ? cluster_host + ":" + std::to_string(cluster_port)
             : cluster_port == 0 ? cluster_host + ":any/pid" + std::to_string(getpid())

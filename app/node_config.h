@@ -43,7 +43,9 @@ struct NodeConfig : caf::actor_system_config {
   bool http = true;               // false: no HTTP/WebSocket endpoint (a worker or hub only)
   std::string name;               // in node lists and logs (default host:cluster-port)
   int task_timeout_ms = 5000;
-  int reconnect_ms = 1000;
+  int reconnect_ms = 1000;        // also the period of the keep-alives sent to workers below
+  int max_workers = 0;            // live workers on this node (0: 2 x max-clients)
+  int keepalive_misses = 10;      // a worker ends after this many keep-alive periods of silence
   bool cluster() const { return cluster_port >= 0 || !children.empty(); }
 
   NodeConfig();

@@ -7,6 +7,7 @@
 #include <caf/test/unit_test_impl.hpp>
 
 #include <chrono>
+#include <functional>
 #include <memory>
 #include <thread>
 
@@ -320,7 +321,199 @@ CAF_TEST(a worker whose parent gave up on its open ends itself after twice the t
   sched.run();
 }
 
+// An actor that opens a worker on `node` as a session would, and keeps what came back.
+struct Opened {
+  std::vector<worker_actor> workers;
+  std::vector<std::string> errors;
+};
+caf::behavior opener(caf::event_based_actor* self, node_actor node, std::shared_ptr<Opened> out) {
+  return {
+      [=](open_atom, OpenRequest req) {
+        self->request(node, caf::infinite, open_atom::value, req)
+            .then([=](OpenReply& r) { out->workers.push_back(caf::actor_cast<worker_actor>(r.worker)); },
+                  [=](caf::error& e) { out->errors.push_back(to_string(e)); });
+      },
+  };
+}
+
+OpenRequest good_open(uint64_t session) {
+  OpenRequest r{session, "master:1", 2, 2};
+  r.timeout_ms = 1000;
+  r.keepalive_ms = 100;
+  return r;
+}
+
+CAF_TEST(a worker opened through a node ends when the actor that opened it ends) {
+  settings->node = {};
+  settings->name = "n";
+  auto node = spawn_node(sys, settings);
+  auto out = std::make_shared<Opened>();
+  auto op = sys.spawn(opener, node, out);
+  self->send(op, open_atom::value, good_open(5));
+  sched.run();
+  CAF_REQUIRE_EQUAL(out->workers.size(), 1u);
+  CAF_CHECK_EQUAL(logged("\"worker_opened\": 5, \"master\": \"master:1\", \"live_workers\": 1"), 1u);
+  // The session (here: the opener) ends: its worker must go too. The node used to read the
+  // sender after make_response_promise had taken it over, so workers watched nobody.
+  self->send_exit(op, caf::exit_reason::user_shutdown);
+  sched.run();
+  CAF_CHECK_EQUAL(logged("\"ended\": \"parent down\""), 1u);
+  CAF_CHECK_EQUAL(logged("\"worker_closed\": 5, \"live_workers\": 0"), 1u);
+  self->send_exit(node, caf::exit_reason::user_shutdown);
+  sched.run();
+}
+
+CAF_TEST(a node refuses malformed opens and opens beyond max_workers) {
+  settings->node = {};
+  settings->name = "n";
+  settings->max_workers = 2;
+  auto node = spawn_node(sys, settings);
+  auto out = std::make_shared<Opened>();
+  auto op = sys.spawn(opener, node, out);
+  auto bad = [&](auto mutate) {
+    OpenRequest r = good_open(9);
+    mutate(r);
+    self->send(op, open_atom::value, r);
+    sched.run();
+  };
+  bad([](OpenRequest& r) { r.session = 0; });
+  bad([](OpenRequest& r) { r.master = "m\", \"forged\": \"yes"; });
+  bad([](OpenRequest& r) { r.master = std::string(300, 'm'); });
+  bad([](OpenRequest& r) { r.master = "a\nb"; });
+  bad([](OpenRequest& r) { r.packet_w = 3; });
+  bad([](OpenRequest& r) { r.packet_w = 16, r.packet_h = 16; });
+  bad([](OpenRequest& r) { r.keepalive_ms = 0; });
+  bad([](OpenRequest& r) { r.keepalive_ms = 1'000'000; });
+  bad([](OpenRequest& r) { r.timeout_ms = 4'000'000; });
+  CAF_CHECK_EQUAL(out->workers.size(), 0u);
+  CAF_REQUIRE_EQUAL(out->errors.size(), 9u);
+  for (auto& e : out->errors) CAF_CHECK(e.find("open refused") != std::string::npos);
+  CAF_CHECK_EQUAL(logged("\"open_refused\""), 9u);
+  CAF_CHECK_EQUAL(logged("forged"), 0u);  // the name was refused, never logged
+  for (uint64_t s = 1; s <= 3; ++s) self->send(op, open_atom::value, good_open(s));
+  sched.run();
+  CAF_CHECK_EQUAL(out->workers.size(), 2u);
+  CAF_REQUIRE_EQUAL(out->errors.size(), 10u);
+  CAF_CHECK(out->errors.back().find("has 2 live workers, its max-workers") != std::string::npos);
+  // One ends: there is room again.
+  self->send_exit(out->workers[0], caf::exit_reason::user_shutdown);
+  sched.run();
+  self->send(op, open_atom::value, good_open(4));
+  sched.run();
+  CAF_CHECK_EQUAL(out->workers.size(), 3u);
+  self->send_exit(op, caf::exit_reason::user_shutdown);
+  sched.run();
+  CAF_CHECK_EQUAL(logged("\"live_workers\": 0"), 1u);
+  self->send_exit(node, caf::exit_reason::user_shutdown);
+  sched.run();
+}
+
+CAF_TEST(a worker ends after keepalive_misses periods without a word from its parent) {
+  settings->reconnect_ms = 100;  // the worker checks every 100 ms
+  settings->keepalive_misses = 3;
+  OpenRequest req = good_open(3);  // the parent promises something every 100 ms
+  auto w = spawn_worker(sys, settings, node_actor{}, req, caf::actor_cast<caf::strong_actor_ptr>(self));
+  sched.run();
+  // Keep-alives (empty updates from the parent) every period: it lives on.
+  for (int i = 0; i < 10; ++i) {
+    self->send(w, update_atom::value, std::vector<uint8_t>{}, false);
+    sched.run();
+    sched.advance_time(std::chrono::milliseconds(100));
+    sched.run();
+  }
+  CAF_CHECK_EQUAL(logged("\"ended\""), 0u);
+  // The parent falls silent (it was last heard 100 ms ago); messages from others do not count.
+  for (int i = 0; i < 2; ++i) {
+    caf::anon_send(w, update_atom::value, std::vector<uint8_t>{}, false);
+    sched.advance_time(std::chrono::milliseconds(100));
+    sched.run();
+  }
+  CAF_CHECK_EQUAL(logged("\"ended\""), 0u);  // 300 ms: not more than 3 periods yet
+  sched.advance_time(std::chrono::milliseconds(100));
+  sched.run();
+  CAF_CHECK_EQUAL(logged("\"ended\": \"parent silent\", \"silent_ms\": 400"), 1u);
+}
+
+// A batch as a session of a 16x16 client sends it to a worker that renders one node.
+RenderBatch good_batch() {
+  RenderBatch b;
+  b.frame = 1;
+  b.width = kSize;
+  b.height = kSize;
+  b.ao_samples = 1;
+  b.max_depth = 2;
+  b.timeout_ms = 1000;
+  b.tasks = {Rect{0, 0, kSize, kSize}};
+  return b;
+}
+
+CAF_TEST(a worker fails every tile of a batch outside the node limits and serves on) {
+  settings->limits.max_width = 64;
+  settings->limits.max_height = 64;
+  settings->limits.max_ao_samples = 8;
+  settings->limits.max_depth = 4;
+  OpenRequest req = good_open(3);
+  auto w = spawn_worker(sys, settings, node_actor{}, req, caf::actor_cast<caf::strong_actor_ptr>(self));
+  self->send(w, update_atom::value, encode(tiny_scene()), true);
+  sched.run();
+  auto replies = std::make_shared<std::vector<BatchReply>>();
+  auto asker = sys.spawn([=](caf::event_based_actor* a) -> caf::behavior {
+    return {[=](RenderBatch& b) {
+      a->request(w, caf::infinite, render_atom::value, std::move(b)).then([=](BatchReply& r) { replies->push_back(r); });
+    }};
+  });
+  std::vector<std::function<void(RenderBatch&)>> bad = {
+      [](RenderBatch& b) { b.width = 100000; },
+      [](RenderBatch& b) { b.height = 0; },
+      [](RenderBatch& b) { b.ao_samples = 100000; },
+      [](RenderBatch& b) { b.ao_samples = -1; },
+      [](RenderBatch& b) { b.max_depth = 100000; },
+      [](RenderBatch& b) { b.renderer = 7; },
+      [](RenderBatch& b) { b.timeout_ms = 0; },
+      [](RenderBatch& b) { b.tasks = {Rect{0, 0, kSize + 1, kSize}}; },
+      [](RenderBatch& b) { b.tasks = {Rect{-4, 0, 4, 4}}; },
+      [](RenderBatch& b) { b.tasks = {Rect{0, 0, 4, 4}, Rect{4, 4, 8, 8}}; },  // 2 tasks, 1 node
+  };
+  for (auto& mutate : bad) {
+    RenderBatch b = good_batch();
+    mutate(b);
+    self->send(asker, b);
+    sched.run();
+  }
+  self->send(asker, good_batch());
+  sched.run();
+  CAF_REQUIRE_EQUAL(replies->size(), bad.size() + 1);
+  for (size_t i = 0; i < bad.size(); ++i) {
+    CAF_CHECK(!(*replies)[i].tiles.empty());
+    for (auto& t : (*replies)[i].tiles) {
+      CAF_CHECK(!t.error.empty());
+      CAF_CHECK(t.rgba.empty());
+    }
+  }
+  CAF_CHECK_EQUAL(logged("\"bad_batch\""), bad.size() - 1);  // the last one is the router's count check
+  const BatchReply& ok = replies->back();
+  CAF_REQUIRE_EQUAL(ok.tiles.size(), 1u);
+  CAF_CHECK_EQUAL(ok.tiles[0].error, "");
+  CAF_CHECK_EQUAL(ok.tiles[0].rgba.size(), size_t(kSize * kSize * 4));
+  self->send_exit(asker, caf::exit_reason::user_shutdown);
+  self->send_exit(w, caf::exit_reason::user_shutdown);
+  sched.run();
+}
+
 CAF_TEST_FIXTURE_SCOPE_END()
+
+// Log lines carry names and messages from clients and peers: they must stay one JSON object.
+CAF_TEST(json_quote escapes what could forge a log line and nodes_json uses it) {
+  CAF_CHECK_EQUAL(json_quote("plain"), "\"plain\"");
+  CAF_CHECK_EQUAL(json_quote("a\"b\\c"), "\"a\\\"b\\\\c\"");
+  CAF_CHECK_EQUAL(json_quote("x\n{\"node\": 1}"), "\"x\\u000a{\\\"node\\\": 1}\"");
+  CAF_CHECK_EQUAL(json_quote(std::string("\x01\x7f", 2)), "\"\\u0001\\u007f\"");
+  CAF_CHECK_EQUAL(json_quote("caf\xc3\xa9 \xe2\x82\xac"), "\"caf\xc3\xa9 \xe2\x82\xac\"");  // UTF-8 kept
+  CAF_CHECK_EQUAL(json_quote("\xff\xc3"), "\"\\ufffd\\ufffd\"");  // not UTF-8
+  CAF_CHECK_EQUAL(json_quote("\xed\xa0\x80"), "\"\\ufffd\\ufffd\\ufffd\"");  // a surrogate
+  CAF_CHECK_EQUAL(nodes_json({NodeInfo{"n\"}, {\"x", 2, 1.5}}),
+                  "[{\"name\": \"n\\\"}, {\\\"x\", \"cores\": 2, \"perf\": 1.5}]");
+}
 
 // The checks a parent applies to what its children send.
 CAF_TEST(check_tile and check_nodes reject impossible tiles and node lists) {
