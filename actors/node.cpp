@@ -1,6 +1,12 @@
 #include "actors/node.h"
 
+#include <condition_variable>
 #include <cstdio>
+#include <mutex>
+#include <thread>
+#ifdef __GLIBC__
+#include <malloc.h>
+#endif
 
 #include <caf/all.hpp>
 
@@ -82,6 +88,46 @@ std::string json_quote(const std::string& s) {
     }
   }
   return o + "\"";
+}
+
+namespace {
+
+// One trimmer per process: a deadline that later calls push out, and a thread that waits for it.
+struct HeapTrimmer {
+  std::mutex m;
+  std::condition_variable cv;
+  std::chrono::steady_clock::time_point due{};
+  bool pending = false;
+  std::once_flag started;
+
+  void schedule(uint32_t delay_ms) {
+    std::call_once(started, [this] { std::thread([this] { run(); }).detach(); });
+    std::lock_guard<std::mutex> l(m);
+    due = std::chrono::steady_clock::now() + std::chrono::milliseconds(delay_ms);
+    pending = true;
+    cv.notify_one();
+  }
+  [[noreturn]] void run() {
+    std::unique_lock<std::mutex> l(m);
+    for (;;) {
+      cv.wait(l, [this] { return pending; });
+      if (cv.wait_until(l, due, [this] { return std::chrono::steady_clock::now() >= due; })) {
+        pending = false;
+        l.unlock();
+#ifdef __GLIBC__
+        malloc_trim(0);
+#endif
+        l.lock();
+      }
+    }
+  }
+};
+
+}  // namespace
+
+void schedule_heap_trim(uint32_t delay_ms) {
+  static HeapTrimmer* trimmer = new HeapTrimmer;  // never destroyed: its thread may outlive main
+  trimmer->schedule(delay_ms);
 }
 
 void node_log(const NodeSettings& settings, const std::string& line) {

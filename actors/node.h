@@ -62,6 +62,12 @@ void register_message_types(caf::actor_system_config& cfg);
 
 // Writes a log line through settings.log, or to stderr.
 void node_log(const NodeSettings& settings, const std::string& line);
+
+// Hands the heap that ended sessions and workers freed back to the OS (glibc keeps freed
+// memory in its arenas: without this an idle node's RSS stays at its peak). Debounced: one
+// trim about `delay_ms` after the last call, on a background thread of its own, so neither an
+// actor nor the network thread waits for it. No-op where the C library has no malloc_trim.
+void schedule_heap_trim(uint32_t delay_ms = 500);
 // A string as a JSON string literal, quotes included: '"', '\\' and control characters escaped,
 // bytes that are not UTF-8 replaced by U+FFFD. Every string a client, a peer or an error
 // message supplies goes into a log line through this, so no text can forge log lines.

@@ -532,6 +532,7 @@ session_actor::behavior_type session_impl(self_ptr self, std::shared_ptr<ClientS
   // Linked children end with the session (it always quits with a non-normal reason).
   self->attach_functor([settings = st.settings, id](const caf::error& reason) {
     node_log(*settings, "{\"session\": " + std::to_string(id) + ", \"closed\": true}");
+    schedule_heap_trim();  // its scene, BVH and frames are freed as its linked actors end
   });
   log(self, "\"opened\": true, \"token\": \"" + json_escape(st.sink->token()) + "\"");
   // The client's tree: workers on the children this node is connected to (and, every

@@ -19,6 +19,8 @@ NodeConfig::NodeConfig() {
       .add(host, "host", "listen address (default 127.0.0.1: local only)")
       .add(port, "port", "TCP port of HTTP + WebSocket (0: any free port)")
       .add(web_root, "web-root", "folder served over HTTP (web client, demo pages)")
+      .add(web_public, "web-public",
+           "further folders of the web root to serve, as [\"dir/\", ...] (default: index.html, src/, demo/, three.js)")
       .add(scene, "scene", "glTF scene given to clients that connect with an empty scene")
       .add(max_clients, "max-clients", "simultaneous WebSocket clients")
       .add(render_threads, "render-threads", "TBB threads for rendering and encoding (0: all)")
@@ -106,6 +108,11 @@ ServerOptions NodeConfig::server_options() const {
   o.host = host;
   o.port = uint16_t(port);
   o.web_root = web_root;
+  for (const std::string& p : web_public) {
+    if (p.empty() || p.back() != '/' || p.front() == '/' || p.find("..") != std::string::npos)
+      throw std::invalid_argument("tessera.web-public: '" + p + "' is not a relative folder ending in '/'");
+    o.web_public.push_back(p);
+  }
   o.max_clients = size_t(max_clients);
   if (max_mjpeg_per_session < 1) throw std::invalid_argument("tessera.max-mjpeg-per-session must be >= 1");
   if (max_mjpeg_viewers < 1) throw std::invalid_argument("tessera.max-mjpeg-viewers must be >= 1");

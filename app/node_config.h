@@ -18,6 +18,7 @@ struct NodeConfig : caf::actor_system_config {
   std::string host = "127.0.0.1";
   int port = 8080;
   std::string web_root = "web";
+  std::vector<std::string> web_public;  // further public folders of the web root ("dir/")
   std::string scene;            // preloaded for clients that connect with an empty scene
   int max_clients = 16;
   int render_threads = 0;       // TBB threads (0: all hardware threads)

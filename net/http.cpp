@@ -102,21 +102,24 @@ std::optional<std::string> resolve_static(const std::string& root, const std::st
   return f;
 }
 
-bool public_path(const std::string& rel) {
+bool public_path(const std::string& rel, const std::vector<std::string>& extra) {
   static const char* kPrefixes[] = {"src/", "demo/", "node_modules/three/build/"};
   if (rel == "index.html") return true;
   for (const char* p : kPrefixes)
     if (rel.compare(0, std::strlen(p), p) == 0 && rel.size() > std::strlen(p)) return true;
+  for (const std::string& p : extra)
+    if (!p.empty() && p.back() == '/' && rel.compare(0, p.size(), p) == 0 && rel.size() > p.size()) return true;
   return false;
 }
 
-std::optional<std::string> resolve_public(const std::string& root, const std::string& target) {
+std::optional<std::string> resolve_public(const std::string& root, const std::string& target,
+                                          const std::vector<std::string>& extra) {
   auto file = resolve_static(root, target);
   if (!file) return std::nullopt;
   std::error_code ec;
   const std::string base = fs::weakly_canonical(fs::path(root), ec).string();
   if (ec || file->size() <= base.size() + 1) return std::nullopt;
-  return public_path(file->substr(base.size() + 1)) ? file : std::nullopt;
+  return public_path(file->substr(base.size() + 1), extra) ? file : std::nullopt;
 }
 
 namespace {

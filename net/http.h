@@ -22,8 +22,11 @@ std::optional<std::string> resolve_static(const std::string& root, const std::st
 // index page and the three.js build the pages import (node_modules/three/build/); never
 // package.json, tools/, test/ or other packages. resolve_static, then this allow-list on the
 // resolved path relative to the root (so neither a symlink nor an escape gets round it).
-std::optional<std::string> resolve_public(const std::string& root, const std::string& target);
-bool public_path(const std::string& relative);  // "demo/index.html" -> true
+// `extra`: further public folders an operator named (ServerOptions::web_public, each ending
+// in '/', e.g. "test/browser/pages/").
+std::optional<std::string> resolve_public(const std::string& root, const std::string& target,
+                                          const std::vector<std::string>& extra = {});
+bool public_path(const std::string& relative, const std::vector<std::string>& extra = {});  // "demo/index.html" -> true
 
 // A Range request header (RFC 9110 14.2) against a file of `size` bytes. Only one range of
 // unit "bytes" is served: "a-b", "a-" or "-n" (the last n bytes).

@@ -454,12 +454,12 @@ void Server::Impl::on_http(connection_hdl h) {
   }
   std::optional<std::string> file;
   if (path == "/") {
-    file = http::resolve_public(opts.web_root, "/index.html");
-    if (!file) file = http::resolve_public(opts.web_root, "/demo/index.html");
+    file = http::resolve_public(opts.web_root, "/index.html", opts.web_public);
+    if (!file) file = http::resolve_public(opts.web_root, "/demo/index.html", opts.web_public);
   } else if (target.rfind("/scenes/", 0) == 0) {
     file = http::resolve_static(opts.scenes_root, target.substr(7));
   } else {
-    file = http::resolve_public(opts.web_root, target);
+    file = http::resolve_public(opts.web_root, target, opts.web_public);
   }
   std::ifstream in;
   if (file) in.open(*file, std::ios::binary);

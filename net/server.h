@@ -21,6 +21,7 @@ struct ServerOptions {
   std::string host = "127.0.0.1";
   uint16_t port = 8080;        // 0: any free port (see Server::port())
   std::string web_root = "web";
+  std::vector<std::string> web_public;  // further folders of the web root to serve (each "dir/sub/")
   std::string scenes_root = "../shared/scenes";  // served at /scenes/ (the demo pages' glTF files)
   size_t max_clients = 16;     // further WebSocket handshakes get HTTP 503
   size_t max_mjpeg_per_session = 4;  // MJPEG viewers of one session token; further ones get HTTP 503

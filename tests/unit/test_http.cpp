@@ -52,6 +52,14 @@ TEST_CASE("Only the client, the demo pages, the index page and the three.js buil
   for (const char* no : {"/package.json", "/package-lock.json", "/tools/static-server.js", "/test/run-unit.js",
                          "/%70ackage.json", "/demo/../package.json", "/src/../tools/static-server.js"})
     CHECK_FALSE(resolve_public("web", no));
+  // An operator's further public folders (tessera.web-public) add exactly those folders.
+  const std::vector<std::string> extra{"test/browser/pages/"};
+  CHECK(public_path("test/browser/pages/node.html", extra));
+  CHECK_FALSE(public_path("test/browser/pages/node.html"));
+  CHECK_FALSE(public_path("test/browser/node-e2e.test.js", extra));
+  CHECK_FALSE(public_path("test/browser/pages", extra));
+  CHECK(resolve_public("web", "/test/browser/pages/node.html", extra));
+  CHECK_FALSE(resolve_public("web", "/test/browser/pages/../node-e2e.test.js", extra));
 }
 
 TEST_CASE("Range headers: one byte range is served, several or malformed ones mean the whole file", "[unit]") {

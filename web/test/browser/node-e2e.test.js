@@ -32,7 +32,7 @@ before(async () => {
       frame: k, width: W, height: H, out: path.join(tmp, `ref${k}.png`) });
     refs.push(fs.readFileSync(out).toString('base64'));
   }
-  node = await startNode(BIN, { threads: 2 });
+  node = await startNode(BIN, { threads: 2, args: ['--tessera.web-public=["test/browser/pages/"]'] });
   env = await launch();
 });
 after(async () => {
@@ -104,9 +104,10 @@ async function openNodePage(query) {
   page.logs = [];
   page.on('console', (m) => page.logs.push(`${m.type()}: ${m.text()}`));
   page.on('pageerror', (e) => page.logs.push(`pageerror: ${e.message}`));
-  // The page comes from the test's static server: a node serves only the client and demo files
-  // of its web root, never test/ (docs/operations.md); the page's WebSocket goes to the node.
-  await page.goto(`${env.base}/test/browser/pages/node.html?server=${node.host}:${node.port}&${query}`);
+  // The page comes from the node itself (same origin as its MJPEG stream, so the test can read
+  // the shown pixels): a node serves only the client and demo files of its web root unless told
+  // otherwise, so startNode below names the test pages' folder in tessera.web-public.
+  await page.goto(`${node.base}/test/browser/pages/node.html?server=${node.host}:${node.port}&${query}`);
   return page;
 }
 
