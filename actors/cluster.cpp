@@ -409,7 +409,10 @@ node_actor::behavior_type node_impl(node_ptr self, std::shared_ptr<const NodeSet
     if (auto w = st.workers.find(m.source); w != st.workers.end()) {
       const uint64_t session = w->second;
       st.workers.erase(w);
+      // The last worker gone: trim (and log it) on the node's tick; while others live, every
+      // ended worker's heap goes back all the same (one debounced trim, actors/node.h).
       if (st.workers.empty()) st.trim_in = 2;
+      else schedule_heap_trim(1000);
       node_event(self, "\"worker_closed\": " + std::to_string(session) +
                            ", \"live_workers\": " + std::to_string(st.workers.size()));
       return;
