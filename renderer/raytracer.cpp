@@ -6,6 +6,7 @@
 #include <tbb/blocked_range2d.h>
 #include <tbb/combinable.h>
 #include <tbb/parallel_for.h>
+#include <cpuid.h>
 #include <x86intrin.h>
 
 #include <algorithm>
@@ -48,9 +49,14 @@ static bool cpu_avx512() {
                           __builtin_cpu_supports("fma") && __builtin_cpu_supports("bmi2");
   return yes;
 }
+// F16C from CPUID leaf 1 (ECX bit 29): clang 14's __builtin_cpu_supports does not know "f16c".
+static bool cpu_f16c() {
+  unsigned a = 0, b = 0, c = 0, d = 0;
+  return __get_cpuid(1, &a, &b, &c, &d) && (c & bit_F16C);
+}
 static bool cpu_avx2() {
   static const bool yes = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma") &&
-                          __builtin_cpu_supports("bmi2") && __builtin_cpu_supports("f16c");
+                          __builtin_cpu_supports("bmi2") && cpu_f16c();
   return yes;
 }
 

@@ -1,0 +1,102 @@
+// libFuzzer target: what a hostile cluster peer can send (actors/cluster_protocol.h). The
+// first byte picks the message; the rest is read by CAF 0.17's binary_deserializer, as the
+// middleman reads a message's fields, into:
+//   0  RenderBatch (parent -> worker), then the worker's task_of for each task
+//   1  BatchReply (worker -> parent), each tile checked by check_tile (router.h) against a
+//      task of the parent's own 64x48 frame, as Router does
+//   2  TileResult alone, checked the same way
+//   3  OpenRequest (parent -> node)
+//   4  std::vector<NodeInfo> (a nodes query's answer), checked by check_nodes
+//   5  SceneSnapshot: its load callback runs scene_snapshot_from_bytes, i.e. apply_records
+//      of the client-protocol records inside (actors/node.h)
+//   6  the raw payload of an update (update_atom, bytes, reset) given to apply_records with
+//      a node's default limits
+// Messages holding actor handles (OpenReply, ChildLink) are left out: deserialising a handle
+// needs the middleman's proxy registry, CAF's code rather than ours.
+#include <cstdint>
+#include <cstdio>
+#include <cstdlib>
+
+#include <caf/binary_deserializer.hpp>
+#include <caf/error.hpp>
+
+#include "actors/messages.h"
+#include "actors/node.h"
+#include "actors/router.h"
+
+using namespace tessera;
+
+namespace {
+
+constexpr uint32_t kFrame = 7;
+constexpr int32_t kWidth = 64, kHeight = 48;
+const Rect kTasks[2] = {{0, 0, 32, 48}, {32, 0, 64, 48}};
+
+template <class T>
+bool read(const uint8_t* data, size_t size, T& x) {
+  caf::binary_deserializer src{nullptr, reinterpret_cast<const char*>(data), size};
+  caf::error err = src(x);
+  return !err;
+}
+
+void check(const TileResult& t, size_t i, PacketLayout layout) {
+  std::string bad = check_tile(t, kFrame, kTasks[i % 2], layout, kWidth, kHeight);
+  if (bad.empty() && t.rgba.size() != size_t(kTasks[i % 2].area()) * 4) {
+    std::fprintf(stderr, "check_tile passed a tile with %zu bytes of pixels\n", t.rgba.size());
+    std::abort();
+  }
+}
+
+}  // namespace
+
+extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+  if (size == 0) return 0;
+  const uint8_t mode = data[0] % 7;
+  const PacketLayout layout = (data[0] & 0x80) ? PacketLayout{4, 2} : PacketLayout{4, 4};
+  ++data;
+  --size;
+  switch (mode) {
+    case 0: {
+      RenderBatch b;
+      if (read(data, size, b))
+        for (const Rect& r : b.tasks) (void)task_of(b, r);
+      break;
+    }
+    case 1: {
+      BatchReply r;
+      if (read(data, size, r))
+        for (size_t i = 0; i < r.tiles.size(); ++i) check(r.tiles[i], i, layout);
+      break;
+    }
+    case 2: {
+      TileResult t;
+      if (read(data, size, t)) check(t, 0, layout);
+      break;
+    }
+    case 3: {
+      OpenRequest o;
+      (void)read(data, size, o);
+      break;
+    }
+    case 4: {
+      std::vector<NodeInfo> nodes;
+      if (read(data, size, nodes) && check_nodes(nodes).empty()) (void)nodes_json(nodes);
+      break;
+    }
+    case 5: {
+      SceneSnapshot s;
+      if (read(data, size, s)) {
+        if (!s.scene) std::abort();  // accepted without a scene
+        (void)scene_snapshot_bytes(s);
+      }
+      break;
+    }
+    case 6: {
+      static const NodeSettings settings;
+      Scene scene;
+      (void)apply_records(scene, std::vector<uint8_t>(data, data + size), settings.limits);
+      break;
+    }
+  }
+  return 0;
+}
