@@ -248,7 +248,8 @@ worker_actor::behavior_type worker_impl(worker_ptr self, std::shared_ptr<const N
   join();
   self->delayed_send(self, std::chrono::milliseconds(st.settings->reconnect_ms), tick_atom::value);
   return {
-      [=](update_atom, std::vector<uint8_t>& bytes, bool reset) {
+      [=](update_atom, Payload& payload, bool reset) {
+        std::vector<uint8_t>& bytes = payload.bytes;
         auto& st = self->state;
         heard(self);
         st.adopted = true;

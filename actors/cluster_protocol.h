@@ -37,7 +37,7 @@
 
 namespace tessera {
 
-using worker_actor = caf::typed_actor<caf::reacts_to<update_atom, std::vector<uint8_t>, bool>,
+using worker_actor = caf::typed_actor<caf::reacts_to<update_atom, Payload, bool>,
                                       caf::replies_to<render_atom, RenderBatch>::with<BatchReply>,
                                       caf::replies_to<nodes_atom>::with<std::vector<NodeInfo>>,
                                       caf::reacts_to<tick_atom>>;

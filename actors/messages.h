@@ -12,6 +12,8 @@
 #include <vector>
 
 #include <caf/atom.hpp>
+#include <caf/binary_deserializer.hpp>
+#include <caf/sec.hpp>
 #include <caf/meta/type_name.hpp>
 #include <caf/meta/load_callback.hpp>
 #include <caf/actor.hpp>
@@ -37,6 +39,48 @@ using nodes_atom = caf::atom_constant<caf::atom("nodes")>;
 using links_atom = caf::atom_constant<caf::atom("links")>;
 using tick_atom = caf::atom_constant<caf::atom("tick")>;
 
+// --- Byte vectors from other processes ----------------------------------------------------
+//
+// CAF 0.17 loads a byte vector by resizing it to the length its stream claims and only then
+// reading the bytes (data_processor::apply_sequence), so a peer's 166-byte message claiming
+// 2^32-1 bytes of tile pixels made a node allocate and zero 4 GiB (tests/fuzz: fuzz_cluster).
+// Every byte-vector field of a message that can cross a process boundary goes through
+// BytesField, which refuses a claimed length beyond what the stream still holds (a
+// binary_deserializer, as CAF's middleman uses) before anything is allocated, or beyond
+// kMaxPeerBytes where the deserializer cannot tell.
+constexpr size_t kMaxPeerBytes = size_t(1) << 30;  // a scene snapshot of the largest client scene
+
+struct BytesField {
+  std::vector<uint8_t>& v;
+};
+template <class Inspector>
+typename std::enable_if<Inspector::reads_state, typename Inspector::result_type>::type inspect(Inspector& f,
+                                                                                               BytesField& x) {
+  return f(x.v);
+}
+template <class Inspector>
+typename std::enable_if<Inspector::writes_state, typename Inspector::result_type>::type inspect(Inspector& f,
+                                                                                                BytesField& x) {
+  size_t n = 0;
+  if (auto err = f.begin_sequence(n)) return err;
+  size_t left = kMaxPeerBytes;
+  if (auto* bin = dynamic_cast<caf::binary_deserializer*>(&f)) left = std::min(left, bin->remaining());
+  if (n > left) return caf::make_error(caf::sec::end_of_stream);
+  x.v.resize(n);
+  if (n > 0)
+    if (auto err = f.apply_raw(n, x.v.data())) return err;
+  return f.end_sequence();
+}
+
+// The encoded client-protocol records of a scene update sent down the tree (update_atom).
+struct Payload {
+  std::vector<uint8_t> bytes;
+};
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, Payload& x) {
+  return f(caf::meta::type_name("tessera::payload"), BytesField{x.bytes});
+}
+
 template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, Rect& x) {
   return f(caf::meta::type_name("tessera::rect"), x.x0, x.y0, x.x1, x.y1);
@@ -56,14 +100,14 @@ template <class Inspector>
 typename std::enable_if<Inspector::reads_state, typename Inspector::result_type>::type inspect(Inspector& f,
                                                                                                SceneSnapshot& x) {
   auto bytes = scene_snapshot_bytes(x);
-  return f(caf::meta::type_name("tessera::scene_snapshot"), bytes);
+  return f(caf::meta::type_name("tessera::scene_snapshot"), BytesField{bytes});
 }
 template <class Inspector>
 typename std::enable_if<Inspector::writes_state, typename Inspector::result_type>::type inspect(Inspector& f,
                                                                                                 SceneSnapshot& x) {
   std::vector<uint8_t> bytes;
   auto load = caf::meta::load_callback([&]() -> caf::error { return scene_snapshot_from_bytes(bytes, x); });
-  return f(caf::meta::type_name("tessera::scene_snapshot"), bytes, load);
+  return f(caf::meta::type_name("tessera::scene_snapshot"), BytesField{bytes}, load);
 }
 
 // One rendering task: a pixel rectangle of frame `frame` at width x height.
@@ -94,7 +138,7 @@ struct TileResult {
 };
 template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, TileResult& x) {
-  return f(caf::meta::type_name("tessera::tile_result"), x.frame, x.pixels, x.rgba, x.sat, x.kernel_ms,
+  return f(caf::meta::type_name("tessera::tile_result"), x.frame, x.pixels, BytesField{x.rgba}, BytesField{x.sat}, x.kernel_ms,
            x.rendering_ms, x.sat_ms, x.rays, x.error);
 }
 
@@ -171,7 +215,7 @@ struct EncodeJob {
 };
 template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, EncodeJob& x) {
-  return f(caf::meta::type_name("tessera::encode_job"), x.meta, x.rgba);
+  return f(caf::meta::type_name("tessera::encode_job"), x.meta, BytesField{x.rgba});
 }
 // Encoder -> display: the encoded frame. `message` starts with header_bytes of room for the
 // protocol header (the display writes it when it knows the pipeline time) followed by the
@@ -186,7 +230,7 @@ struct EncodedFrame {
 };
 template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, EncodedFrame& x) {
-  return f(caf::meta::type_name("tessera::encoded_frame"), x.meta, x.message, x.header_bytes, x.encode_ms,
+  return f(caf::meta::type_name("tessera::encoded_frame"), x.meta, BytesField{x.message}, x.header_bytes, x.encode_ms,
            x.encode_start_ns, x.encode_end_ns, x.error);
 }
 

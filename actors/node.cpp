@@ -29,7 +29,7 @@ caf::error scene_snapshot_from_bytes(const std::vector<uint8_t>& bytes, SceneSna
 }
 
 void register_message_types(caf::actor_system_config& cfg) {
-  cfg.add_message_type<std::vector<uint8_t>>("tessera::bytes");
+  cfg.add_message_type<Payload>("tessera::payload");  // not std::vector<uint8_t>: see BytesField
   cfg.add_message_type<SceneSnapshot>("tessera::scene_snapshot");
   cfg.add_message_type<RenderTask>("tessera::render_task");
   cfg.add_message_type<TileResult>("tessera::tile_result");
@@ -92,34 +92,32 @@ std::string json_quote(const std::string& s) {
 
 namespace {
 
-// One trimmer per process: a deadline that later calls push out, and a thread that waits for it.
+// One trimmer per process: a deadline that later calls push out, and a thread that waits for
+// it, trims, and ends (so an idle node keeps no thread for it).
 struct HeapTrimmer {
   std::mutex m;
   std::condition_variable cv;
   std::chrono::steady_clock::time_point due{};
-  bool pending = false;
-  std::once_flag started;
+  bool running = false;
 
   void schedule(uint32_t delay_ms) {
-    std::call_once(started, [this] { std::thread([this] { run(); }).detach(); });
     std::lock_guard<std::mutex> l(m);
     due = std::chrono::steady_clock::now() + std::chrono::milliseconds(delay_ms);
-    pending = true;
-    cv.notify_one();
-  }
-  [[noreturn]] void run() {
-    std::unique_lock<std::mutex> l(m);
-    for (;;) {
-      cv.wait(l, [this] { return pending; });
-      if (cv.wait_until(l, due, [this] { return std::chrono::steady_clock::now() >= due; })) {
-        pending = false;
-        l.unlock();
-#ifdef __GLIBC__
-        malloc_trim(0);
-#endif
-        l.lock();
-      }
+    if (running) {
+      cv.notify_one();
+      return;
     }
+    running = true;
+    std::thread([this] { run(); }).detach();
+  }
+  void run() {
+    std::unique_lock<std::mutex> l(m);
+    while (std::chrono::steady_clock::now() < due) cv.wait_until(l, due);  // a later call moves `due`
+    running = false;
+    l.unlock();
+#ifdef __GLIBC__
+    malloc_trim(0);
+#endif
   }
 };
 

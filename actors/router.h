@@ -130,7 +130,7 @@ class Router {
   template <class Self>
   void forward(Self* self, const std::vector<uint8_t>& records, bool reset) {
     for (auto& c : children)
-      if (c.alive) self->send(c.worker, update_atom::value, records, reset);
+      if (c.alive) self->send(c.worker, update_atom::value, Payload{records}, reset);
   }
 
   // Tells every live child that its parent is alive (an empty update, as the adoption notice):
@@ -139,7 +139,7 @@ class Router {
   template <class Self>
   void keepalive(Self* self) {
     for (auto& c : children)
-      if (c.alive) self->send(c.worker, update_atom::value, std::vector<uint8_t>{}, false);
+      if (c.alive) self->send(c.worker, update_atom::value, Payload{}, false);
   }
 
   // Splits a batch indexed by list() between the local renderer and the children.
@@ -343,8 +343,8 @@ class Router {
                             self->monitor(w);
                             // First an empty update, the worker's sign that it was adopted: it
                             // arrives at once, however long the scene takes (cluster.cpp).
-                            self->send(w, update_atom::value, std::vector<uint8_t>{}, false);
-                            for (auto& [bytes, reset] : snapshot()) self->send(w, update_atom::value, bytes, reset);
+                            self->send(w, update_atom::value, Payload{}, false);
+                            for (auto& [bytes, reset] : snapshot()) self->send(w, update_atom::value, Payload{bytes}, reset);
                             RouterChild c;
                             c.name = name;
                             c.worker = w;

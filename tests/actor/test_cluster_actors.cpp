@@ -40,7 +40,8 @@ struct FakeLog {
 // A worker that answers (or not) as its mode says; one node named `name`.
 worker_actor::behavior_type fake_worker(worker_actor::pointer self, Mode mode, std::shared_ptr<FakeLog> log) {
   return {
-      [=](update_atom, std::vector<uint8_t>& bytes, bool reset) {
+      [=](update_atom, Payload& payload, bool reset) {
+        auto& bytes = payload.bytes;
         if (!bytes.empty() || reset) log->updates++;  // not the adoption notice
       },
       [=](render_atom, RenderBatch& b) -> caf::result<BatchReply> {
@@ -310,7 +311,7 @@ CAF_TEST(a worker whose parent gave up on its open ends itself after twice the t
   auto orphan = spawn_worker(sys, settings, node_actor{}, req, caf::actor_cast<caf::strong_actor_ptr>(self));
   auto adopted = spawn_worker(sys, settings, node_actor{}, req, caf::actor_cast<caf::strong_actor_ptr>(self));
   sched.run();
-  self->send(adopted, update_atom::value, std::vector<uint8_t>{}, false);  // the adoption notice
+  self->send(adopted, update_atom::value, Payload{}, false);  // the adoption notice
   sched.run();
   std::this_thread::sleep_for(std::chrono::milliseconds(5));  // past 2 x 1 ms (a real clock)
   self->send(orphan, tick_atom::value);
@@ -416,7 +417,7 @@ CAF_TEST(a worker ends after keepalive_misses periods without a word from its pa
   sched.run();
   // Keep-alives (empty updates from the parent) every period: it lives on.
   for (int i = 0; i < 10; ++i) {
-    self->send(w, update_atom::value, std::vector<uint8_t>{}, false);
+    self->send(w, update_atom::value, Payload{}, false);
     sched.run();
     sched.advance_time(std::chrono::milliseconds(100));
     sched.run();
@@ -424,7 +425,7 @@ CAF_TEST(a worker ends after keepalive_misses periods without a word from its pa
   CAF_CHECK_EQUAL(logged("\"ended\""), 0u);
   // The parent falls silent (it was last heard 100 ms ago); messages from others do not count.
   for (int i = 0; i < 2; ++i) {
-    caf::anon_send(w, update_atom::value, std::vector<uint8_t>{}, false);
+    caf::anon_send(w, update_atom::value, Payload{}, false);
     sched.advance_time(std::chrono::milliseconds(100));
     sched.run();
   }
@@ -454,7 +455,7 @@ CAF_TEST(a worker fails every tile of a batch outside the node limits and serves
   settings->limits.max_depth = 4;
   OpenRequest req = good_open(3);
   auto w = spawn_worker(sys, settings, node_actor{}, req, caf::actor_cast<caf::strong_actor_ptr>(self));
-  self->send(w, update_atom::value, encode(tiny_scene()), true);
+  self->send(w, update_atom::value, Payload{encode(tiny_scene())}, true);
   sched.run();
   auto replies = std::make_shared<std::vector<BatchReply>>();
   auto asker = sys.spawn([=](caf::event_based_actor* a) -> caf::behavior {

@@ -256,7 +256,7 @@ TEST_CASE("A hostile peer on the cluster port gets refusals and failed tiles; th
     std::string err;
     worker_actor wk = open(good, &err);
     REQUIRE(wk);
-    self->send(wk, update_atom::value, protocol::encode(protocol::scene_to_records(pavilion().scene)), true);
+    self->send(wk, update_atom::value, Payload{protocol::encode(protocol::scene_to_records(pavilion().scene))}, true);
     auto batch = [] {
       RenderBatch b;
       b.frame = 1;

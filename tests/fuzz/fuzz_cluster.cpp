@@ -11,6 +11,7 @@
 //      of the client-protocol records inside (actors/node.h)
 //   6  the raw payload of an update (update_atom, bytes, reset) given to apply_records with
 //      a node's default limits
+//   7  an update's Payload as the middleman deserialises it, then given to apply_records
 // Messages holding actor handles (OpenReply, ChildLink) are left out: deserialising a handle
 // needs the middleman's proxy registry, CAF's code rather than ours.
 #include <cstdint>
@@ -51,7 +52,7 @@ void check(const TileResult& t, size_t i, PacketLayout layout) {
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   if (size == 0) return 0;
-  const uint8_t mode = data[0] % 7;
+  const uint8_t mode = data[0] % 8;
   const PacketLayout layout = (data[0] & 0x80) ? PacketLayout{4, 2} : PacketLayout{4, 4};
   ++data;
   --size;
@@ -95,6 +96,15 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       static const NodeSettings settings;
       Scene scene;
       (void)apply_records(scene, std::vector<uint8_t>(data, data + size), settings.limits);
+      break;
+    }
+    case 7: {  // an update message's payload as the middleman reads it, then applied
+      static const NodeSettings settings;
+      Payload p;
+      if (read(data, size, p)) {
+        Scene scene;
+        (void)apply_records(scene, p.bytes, settings.limits);
+      }
       break;
     }
   }

@@ -297,6 +297,8 @@ void cluster_corpus() {
   SceneSnapshot snap{scene};
   put("cluster", "scene_snapshot", caf_bytes(5, snap));
   put("cluster", "update", std::string(1, char(6)) + std::string(records.begin(), records.end()));
+  Payload payload{records};
+  put("cluster", "update_message", caf_bytes(7, payload));
 }
 
 // --- render ----------------------------------------------------------------------------------

@@ -4,6 +4,9 @@
 // port) is refused with a message and never reaches the worker's renderer.
 #include <catch2/catch.hpp>
 
+#include <caf/binary_deserializer.hpp>
+#include <caf/binary_serializer.hpp>
+
 #include "actors/node.h"
 #include "net/protocol.h"
 #include "renderer/raytracer.h"
@@ -73,4 +76,53 @@ TEST_CASE("apply_records refuses singular, nearly singular and huge transforms a
   TaskResult res;
   rt.render({0, 0, 8, 8}, RenderSettings{}, res);
   CHECK(res.image.width == 8);
+}
+
+// What a hostile peer's message costs before it is refused: CAF 0.17 sizes a byte vector by
+// the length its stream claims, so a 40-byte message claiming 1 TiB of tile pixels threw
+// std::bad_alloc (and 2^32-1 bytes made the node allocate and zero 4 GiB). BytesField
+// (actors/messages.h) refuses the claim before anything is allocated.
+TEST_CASE("A byte-vector field claiming more bytes than its message holds is refused before any allocation",
+          "[cluster][peer]") {
+  auto claim = [](uint64_t n, size_t skip_fields) {
+    // skip_fields uint32/int32 fields (frame, rect), then the claimed length as CAF writes it (varbyte).
+    std::vector<char> buf(skip_fields * 4, 0);
+    for (uint64_t x = n;;) {
+      uint8_t b = uint8_t(x & 0x7f);
+      x >>= 7;
+      buf.push_back(char(x ? (b | 0x80) : b));
+      if (!x) break;
+    }
+    buf.resize(buf.size() + 16, 1);  // a few bytes of "pixels"
+    return buf;
+  };
+  for (uint64_t n : {uint64_t(1) << 40, uint64_t(0xffffffffu), uint64_t(17)}) {
+    INFO("claimed " << n << " bytes");
+    auto buf = claim(n, 5);  // TileResult: frame, then the pixel rectangle (x0, y0, x1, y1)
+    TileResult t;
+    caf::binary_deserializer src{nullptr, buf.data(), buf.size()};
+    caf::error err;
+    REQUIRE_NOTHROW(err = src(t));
+    CHECK(err);
+    CHECK(t.rgba.capacity() <= buf.size());
+    Payload p;
+    auto pbuf = claim(n, 0);
+    caf::binary_deserializer psrc{nullptr, pbuf.data(), pbuf.size()};
+    REQUIRE_NOTHROW(err = psrc(p));
+    CHECK(err);
+    CHECK(p.bytes.capacity() <= pbuf.size());
+  }
+  // A claim the message does hold loads as before.
+  TileResult ok;
+  ok.frame = 3;
+  ok.pixels = {0, 0, 2, 1};
+  ok.rgba = {1, 2, 3, 4, 5, 6, 7, 8};
+  std::vector<char> buf;
+  caf::binary_serializer sink{nullptr, buf};
+  REQUIRE(!sink(ok));
+  TileResult back;
+  caf::binary_deserializer src{nullptr, buf.data(), buf.size()};
+  REQUIRE(!src(back));
+  CHECK(back.rgba == ok.rgba);
+  CHECK(back.frame == 3);
 }
