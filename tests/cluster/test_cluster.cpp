@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "tests/e2e/node_fixture.h"
+#include "tests/cluster/serve_node.h"
 #include "tests/e2e/process.h"
 
 using namespace tessera;
@@ -21,32 +22,7 @@ namespace {
 
 constexpr int W = 240, H = 136;
 
-std::string field(const std::string& line, const std::string& key) {
-  auto at = line.find("\"" + key + "\": \"");
-  if (at == std::string::npos) return {};
-  at += key.size() + 5;
-  return line.substr(at, line.find('"', at) - at);
-}
-
-// One `tessera serve` process; its first stdout line names its endpoints.
-struct Node {
-  std::unique_ptr<Process> p;
-  uint16_t http = 0, cluster = 0;
-
-  explicit Node(std::vector<std::string> extra) {
-    std::vector<std::string> a{TESSERA_BINARY, "serve", "--threads", "1", "--tessera.reconnect-ms=200",
-                               "--tessera.task-timeout-ms=3000", "--web-root", "web"};
-    a.insert(a.end(), extra.begin(), extra.end());
-    p = std::make_unique<Process>(a);
-    auto line = p->first_line(30000);
-    INFO("stderr: " << p->err());
-    REQUIRE(line);
-    std::string url = field(*line, "listening"), cl = field(*line, "cluster");
-    if (!url.empty()) http = uint16_t(std::stoi(url.substr(url.rfind(':') + 1)));
-    if (!cl.empty()) cluster = uint16_t(std::stoi(cl.substr(cl.rfind(':') + 1)));
-  }
-  std::string addr() const { return "127.0.0.1:" + std::to_string(cluster); }
-};
+using Node = ServeNode;
 
 Node worker(const std::string& name, uint16_t port = 0) {
   return Node({"--no-http", "--cluster-port", std::to_string(port), "--tessera.name=" + name});

@@ -22,6 +22,7 @@
 
 #include "net/scene_records.h"
 #include "tests/e2e/node_fixture.h"
+#include "tests/cluster/serve_node.h"
 #include "tests/e2e/process.h"
 
 using namespace tessera;
@@ -33,32 +34,14 @@ namespace {
 constexpr int W = 96, H = 64;
 using clock_type = std::chrono::steady_clock;
 
-std::string field(const std::string& line, const std::string& key) {
-  auto at = line.find("\"" + key + "\": \"");
-  if (at == std::string::npos) return {};
-  at += key.size() + 5;
-  return line.substr(at, line.find('"', at) - at);
-}
-
-// One `tessera serve` process; its first stdout line names its endpoints. Keep-alives every
-// 200 ms (reconnect-ms); a worker ends after 5 silent periods (1 s).
-struct Node {
-  std::unique_ptr<Process> p;
-  uint16_t http = 0, cluster = 0;
-
-  explicit Node(std::vector<std::string> extra) {
-    std::vector<std::string> a{TESSERA_BINARY, "serve", "--threads", "1", "--tessera.reconnect-ms=200",
-                               "--tessera.keepalive-misses=5", "--tessera.task-timeout-ms=3000", "--web-root", "web"};
-    a.insert(a.end(), extra.begin(), extra.end());
-    p = std::make_unique<Process>(a);
-    auto line = p->first_line(30000);
-    INFO("stderr: " << p->err());
-    REQUIRE(line);
-    std::string url = field(*line, "listening"), cl = field(*line, "cluster");
-    if (!url.empty()) http = uint16_t(std::stoi(url.substr(url.rfind(':') + 1)));
-    if (!cl.empty()) cluster = uint16_t(std::stoi(cl.substr(cl.rfind(':') + 1)));
+// A node of this test: keep-alives every 200 ms (reconnect-ms); a worker ends after 5 silent
+// periods (1 s).
+struct Node : ServeNode {
+  explicit Node(std::vector<std::string> extra) : ServeNode(with_keepalive(std::move(extra))) {}
+  static std::vector<std::string> with_keepalive(std::vector<std::string> extra) {
+    extra.insert(extra.begin(), "--tessera.keepalive-misses=5");
+    return extra;
   }
-  std::string addr() const { return "127.0.0.1:" + std::to_string(cluster); }
   // The live-worker count of the node's last worker_opened / worker_closed line (-1: none yet).
   long live_workers() {
     const std::string& e = p->err();
