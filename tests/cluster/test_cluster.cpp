@@ -93,7 +93,11 @@ TEST_CASE("A hub relays a sub-tree; when it dies its sub-tree leaves and the res
   REQUIRE(c.upload(pavilion().scene));
   uint32_t n = 1;
   for (size_t k : {0, 50}) check_frame(c, k, n++, *m.p);
-  CHECK(w3.p->err_count("\"worker_opened\"") == 1);  // opened by the hub's worker, not by the master
+  // Opened by the hub's worker, not by the master (on a loaded machine an open that timed out is
+  // retried, so count the opener rather than the opens).
+  INFO("w3 stderr: " << w3.p->err());
+  CHECK(w3.p->err_count("\"worker_opened\"") >= 1);
+  CHECK(w3.p->err_count("\"master\": \"hub\"") == w3.p->err_count("\"worker_opened\""));
 
   // A page may limit the node count: the strongest nodes first (here all equal: list order).
   ProtoClient limited;

@@ -32,6 +32,20 @@ using protocol::DisplayKind;
 namespace {
 
 constexpr int W = 96, H = 64;
+
+// ASan keeps freed memory in its quarantine (256 MB by default) and its own shadow, so RSS says
+// nothing about our leaks there; threads still do (and LeakSanitizer checks the heap).
+#if defined(__SANITIZE_ADDRESS__)
+constexpr bool kAsan = true;
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+constexpr bool kAsan = true;
+#else
+constexpr bool kAsan = false;
+#endif
+#else
+constexpr bool kAsan = false;
+#endif
 using clock_type = std::chrono::steady_clock;
 
 // A node of this test: keep-alives every 200 ms (reconnect-ms); a worker ends after 5 silent
@@ -132,7 +146,7 @@ TEST_CASE("50 sessions through a master leave its worker at the baseline: no liv
       [&] {
         rss = proc_status(pid, "VmRSS");
         threads = proc_status(pid, "Threads");
-        return threads <= threads0 && rss <= rss0 + 48 * 1024;
+        return threads <= threads0 && (kAsan || rss <= rss0 + 48 * 1024);
       },
       3000);
   INFO("baseline RSS " << rss0 << " kB, " << threads0 << " threads; after 50 sessions " << rss << " kB, " << threads
@@ -185,12 +199,16 @@ TEST_CASE("A master that stops answering or is killed takes its workers with it"
       REQUIRE(c->render(pavilion_loop().camera(0), 1));
     }
     REQUIRE(w.live_workers() == 2);
+    const size_t silent_before = w.p->err_count("\"ended\": \"parent silent\"");
     m.p->signal(SIGKILL);
     const auto t0 = clock_type::now();
     CHECK(wait_for([&] { return w.live_workers() == 0; }, 1000));
     const double ended_s = seconds_since(t0);
     INFO("worker stderr: " << w.p->err());
-    CHECK(w.p->err_count("\"ended\": \"parent down\"") == 2);
+    // The link's end is seen at once ("parent down"); on a loaded machine (sanitizer builds) the
+    // keep-alive rule can come first ("parent silent"). Either way both end, within the bound.
+    CHECK(w.p->err_count("\"ended\": \"parent down\"") + w.p->err_count("\"ended\": \"parent silent\"") ==
+          2 + silent_before);
     WARN("killed master: its 2 workers ended after " << ended_s << " s");
   }
   CHECK(w.p->wait(0) == std::nullopt);  // the worker process itself runs on

@@ -953,7 +953,14 @@ TEST_CASE("The checked-in fuzz corpus holds valid messages", "[protocol]") {
       std::vector<uint8_t> m((std::istreambuf_iterator<char>(f)), {});
       INFO(entry.path().string());
       bool server = m.size() > 3 && m[3] == uint8_t(Channel::server);
-      CHECK((server ? decode_server(m.data(), m.size(), Limits{}).ok() : dec(m).ok()));
+      // The render target's seeds that aborted the node inside Embree (issue 16) are refused
+      // where they enter now: a transform or camera outside renderer/validate.h's bounds.
+      const std::string name = entry.path().filename().string();
+      if (name.rfind("abort_", 0) == 0 || name.rfind("render_found_", 0) == 0) {
+        CHECK(dec(m).code() == ErrorCode::out_of_range);
+      } else {
+        CHECK((server ? decode_server(m.data(), m.size(), Limits{}).ok() : dec(m).ok()));
+      }
       ++n;
     }
   }
