@@ -28,6 +28,9 @@ double ms_since(std::chrono::steady_clock::time_point t0) {
 }
 
 renderer_actor::behavior_type renderer_impl(renderer_actor::stateful_pointer<renderer_state> self, PacketLayout layout) {
+  // Its scene copy, BVH and buffers are the bulk of a session's memory, and they are freed when
+  // this actor ends, which on a busy node can be well after its session ended: trim after it.
+  self->attach_functor([] { schedule_heap_trim(); });
   return {
       [=](render_atom, const SceneSnapshot& snap, const RenderTask& task) -> TileResult {
         TileResult out;
