@@ -20,6 +20,7 @@
 #include "codecs/jpeg.h"
 #include "renderer/gltf_loader.h"
 #include "renderer/raytracer.h"
+#include "tests/e2e/time_scale.h"
 
 namespace tessera::test {
 
