@@ -20,6 +20,7 @@
 #include "codecs/jpeg.h"
 #include "renderer/gltf_loader.h"
 #include "renderer/raytracer.h"
+#include "tests/e2e/time_scale.h"
 
 namespace tessera::test {
 
@@ -36,15 +37,24 @@ struct TestNode {
   caf::actor_system sys{cfg};
   std::shared_ptr<NodeSettings> settings = std::make_shared<NodeSettings>();
   std::unique_ptr<Server> server;
-  std::mutex mu;
-  std::vector<std::string> log;
+  // The node's log lines. Shared with the log callback rather than a member the callback
+  // reaches through `this`: a session's attach_functor logs `"closed": true` from CAF's
+  // cleanup, which runs after the actor left the registry's running count, so it can still
+  // run after await_all_actors_done() returned and ~TestNode freed the members (TSan:
+  // heap-use-after-free in the log callback, found in the TSan build). The callback's copy
+  // keeps the buffer alive until CAF drops the last NodeSettings.
+  struct Log {
+    std::mutex mu;
+    std::vector<std::string> lines;
+  };
+  std::shared_ptr<Log> log = std::make_shared<Log>();
 
   // `configure` may change the settings and options before the server starts.
   explicit TestNode(size_t max_clients = 8,
                     const std::function<void(NodeSettings&, ServerOptions&)>& configure = nullptr) {
-    settings->log = [this](const std::string& line) {
-      std::lock_guard<std::mutex> l(mu);
-      log.push_back(line);
+    settings->log = [log = log](const std::string& line) {
+      std::lock_guard<std::mutex> l(log->mu);
+      log->lines.push_back(line);
     };
     ServerOptions o;
     o.host = "127.0.0.1";
@@ -62,9 +72,9 @@ struct TestNode {
   }
   uint16_t port() const { return server->port(); }
   size_t log_count(const std::string& needle) {
-    std::lock_guard<std::mutex> l(mu);
+    std::lock_guard<std::mutex> l(log->mu);
     size_t n = 0;
-    for (auto& s : log) n += s.find(needle) != std::string::npos;
+    for (auto& s : log->lines) n += s.find(needle) != std::string::npos;
     return n;
   }
 };

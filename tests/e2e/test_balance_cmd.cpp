@@ -13,6 +13,7 @@
 #include <unistd.h>
 
 #include "renderer/image.h"
+#include "tests/e2e/time_scale.h"
 
 using nlohmann::json;
 
@@ -180,8 +181,14 @@ TEST_CASE("tessera locality: one line per frame, thread count and node count, gr
     CHECK(double(l["full_kernel_ms"]) > 0);
     for (const char* k : {"tiles_ratio", "warm_ratio", "rendering_ratio", "drift_ratio", "full_warm_ratio"}) {
       INFO(k);
-      CHECK(double(l[k]) > 0.05);  // a ratio of two renders of the same work on one machine
-      CHECK(double(l[k]) < 20);
+      // A ratio of two renders of the same work on one machine. Under a sanitizer
+      // (time_scale() > 1) only its sign: the TSan step measured 0.025 and 82 for 64x36
+      // frames of a fraction of a millisecond on a loaded 2-core machine.
+      CHECK(double(l[k]) > 0);
+      if (tessera::test::time_scale() == 1) {
+        CHECK(double(l[k]) > 0.05);
+        CHECK(double(l[k]) < 20);
+      }
     }
   }
   for (size_t i = 8; i < 12; ++i) CHECK(r.lines[i]["group_summary"] == true);
