@@ -2,6 +2,8 @@
 // broken files throw std::runtime_error naming the file, never crash.
 #include <catch2/catch.hpp>
 
+#include "tests/unit/temp_files.h"
+
 #include <algorithm>
 #include <cstdio>
 #include <cstdlib>
@@ -157,30 +159,8 @@ TEST_CASE("kitchen lights and materials match its README", "[gltf][scenes]") {
 // ---------------------------------------------------------------------------------------
 namespace {
 
-struct TempDir {
-  std::string path;
-  TempDir() {
-    char tmpl[] = "/tmp/tessera-gltf-XXXXXX";
-    char* p = mkdtemp(tmpl);
-    if (!p) throw std::runtime_error("mkdtemp failed");
-    path = p;
-  }
-  ~TempDir() { std::system(("rm -rf '" + path + "'").c_str()); }
-  std::string write(const std::string& name, const std::string& data) const {
-    std::string p = path + "/" + name;
-    std::ofstream(p, std::ios::binary) << data;
-    return p;
-  }
-};
-
-// One triangle (float3 positions, uint16 indices) in tri.bin: 36 + 6 bytes (+2 padding).
-std::string tri_bin() {
-  float pos[9] = {0, 0, 0, 1, 0, 0, 0, 1, 0};
-  uint16_t idx[4] = {0, 1, 2, 0};
-  std::string s(reinterpret_cast<const char*>(pos), sizeof(pos));
-  s.append(reinterpret_cast<const char*>(idx), sizeof(idx));
-  return s;
-}
+using test::TempDir;
+using test::tri_bin;
 
 // A valid glTF instancing the triangle twice (once mirrored); fields can be overridden.
 std::string tri_gltf(const std::string& buffer_uri = "tri.bin", int pos_count = 3, int pos_accessor = 0,

@@ -6,6 +6,8 @@
 // Before these checks the transforms below aborted the whole process inside Embree.
 #include <catch2/catch.hpp>
 
+#include "tests/unit/temp_files.h"
+
 #include <cmath>
 #include <cstdlib>
 #include <fstream>
@@ -199,30 +201,8 @@ TEST_CASE("apply refuses a mesh whose vertices its transform puts beyond the wor
 // ---------------------------------------------------------------------------------------
 namespace {
 
-struct TempDir {
-  std::string path;
-  TempDir() {
-    char tmpl[] = "/tmp/tessera-validate-XXXXXX";
-    char* p = mkdtemp(tmpl);
-    if (!p) throw std::runtime_error("mkdtemp failed");
-    path = p;
-  }
-  ~TempDir() { std::system(("rm -rf '" + path + "'").c_str()); }
-  std::string write(const std::string& name, const std::string& data) const {
-    std::string p = path + "/" + name;
-    std::ofstream(p, std::ios::binary) << data;
-    return p;
-  }
-};
-
-// One triangle in tri.bin (36 bytes of float3 positions + 6 of uint16 indices + 2 padding).
-std::string tri_bin() {
-  float pos[9] = {0, 0, 0, 1, 0, 0, 0, 1, 0};
-  uint16_t idx[4] = {0, 1, 2, 0};
-  std::string s(reinterpret_cast<const char*>(pos), sizeof(pos));
-  s.append(reinterpret_cast<const char*>(idx), sizeof(idx));
-  return s;
-}
+using test::TempDir;
+using test::tri_bin;
 
 struct GltfParts {
   std::string nodes = R"({"mesh":0,"name":"good"})";
