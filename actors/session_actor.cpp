@@ -32,9 +32,9 @@ struct session_state {
   // Frame pipeline.
   std::vector<ClientRecord> cached;  // scene updates that arrived while a frame was rendering
   PendingBytes cached_bytes;         // their buffers and textures count against max_client_bytes
-  uint64_t cached_payload = 0;       // bytes those cached buffers and textures hold
   // This session's part of the node-wide budget (NodeSettings::budget): its scene's buffers
-  // and textures plus cached_payload, and, while a message is decoded, what it declares.
+  // and textures plus what the cached updates hold, and, while a message is decoded, what it
+  // declares.
   BudgetShare share;
   bool in_flight = false;
   std::optional<uint32_t> pending;   // the latest render request that arrived while rendering
@@ -60,16 +60,6 @@ int64_t now_ns() {
       .count();
 }
 
-std::string json_escape(const std::string& s) {
-  std::string o;
-  for (char c : s) {
-    if (c == '"' || c == '\\') o += '\\', o += c;
-    else if (static_cast<unsigned char>(c) < 0x20) o += ' ';
-    else o += c;
-  }
-  return o;
-}
-
 void log(self_ptr self, const std::string& what) {
   node_log(*self->state.settings, "{\"session\": " + std::to_string(self->state.id) + ", " + what + "}");
 }
@@ -83,7 +73,7 @@ void fail(self_ptr self, const Error& e) {
   st.sink->send(encode(ServerRecord{r}));
   log(self, std::string("\"error\": \"") + to_string(e.code) + "\", \"fatal\": " + (r.fatal ? "true" : "false") +
                 ", \"record\": " + std::to_string(int64_t(e.record == kNoRecord ? -1 : int64_t(e.record))) +
-                ", \"message\": \"" + json_escape(e.message) + "\"");
+                ", \"message\": " + json_quote(e.message));
   if (r.fatal) {
     st.closed = true;
     st.sink->close(e.message);
@@ -91,18 +81,11 @@ void fail(self_ptr self, const Error& e) {
   }
 }
 
-// Bytes a scene update holds while it waits (buffers and textures).
-uint64_t payload_of(const ClientRecord& rec) {
-  if (const auto* b = std::get_if<SetBuffer>(&rec)) return b->buffer.bytes();
-  if (const auto* t = std::get_if<SetTexture>(&rec)) return t->texture.rgba.size();
-  return 0;
-}
-
 // The session's share of the node budget becomes what it holds now. Never more than it had
 // reserved: every update grows the scene by at most the size its message declared.
 void settle_budget(self_ptr self) {
   auto& st = self->state;
-  st.share.set(scene_bytes(*st.scene) + st.cached_payload);
+  st.share.set(scene_bytes(*st.scene) + st.cached_bytes.waiting_bytes());
 }
 
 void apply_update(self_ptr self, ClientRecord&& rec, uint32_t index) {
@@ -132,7 +115,6 @@ void apply_cached(self_ptr self) {
   auto cached = std::move(st.cached);
   st.cached.clear();
   st.cached_bytes.clear();
-  st.cached_payload = 0;
   for (auto& r : cached) {
     if (st.closed) return;
     apply_update(self, std::move(r), kNoRecord);  // deferred: the record index is no longer meaningful
@@ -295,7 +277,7 @@ void recover(self_ptr self, BatchReply&& r) {
   }
   std::string names;
   for (size_t i : lost) {
-    names += (names.empty() ? "" : ", ") + std::string("\"") + json_escape(r.tiles[i].error) + "\"";
+    names += (names.empty() ? "" : ", ") + json_quote(r.tiles[i].error);
   }
   log(self, "\"recovering\": " + std::to_string(lost.size()) + ", \"frame\": " + std::to_string(st.meta.client_frame) +
                 ", \"errors\": [" + names + "]");
@@ -491,7 +473,6 @@ void on_client_records(self_ptr self, std::vector<uint8_t>& bytes, const std::ve
         fail(self, e);
         continue;
       }
-      st.cached_payload += payload_of(rec);
       st.cached.push_back(std::move(rec));
     } else {
       apply_update(self, std::move(rec), original(i));
@@ -534,7 +515,7 @@ session_actor::behavior_type session_impl(self_ptr self, std::shared_ptr<ClientS
     node_log(*settings, "{\"session\": " + std::to_string(id) + ", \"closed\": true}");
     schedule_heap_trim();  // its scene, BVH and frames are freed as its linked actors end
   });
-  log(self, "\"opened\": true, \"token\": \"" + json_escape(st.sink->token()) + "\"");
+  log(self, "\"opened\": true, \"token\": " + json_quote(st.sink->token()));
   // The client's tree: workers on the children this node is connected to (and, every
   // reconnect period, on children that came back).
   st.router.layout = st.layout;

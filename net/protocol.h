@@ -298,6 +298,7 @@ class PendingBytes {
  public:
   Status admit(const Scene& scene, const ClientRecord& record, const Limits& limits);
   void clear();  // the waiting updates were applied (or dropped)
+  uint64_t waiting_bytes() const { return added_; }  // bytes the admitted updates hold while they wait
  private:
   uint64_t size_of(const Scene& scene, RecordType what, Id id) const;  // as the waiting updates leave it
   std::map<std::pair<RecordType, Id>, uint64_t> latest_;  // last waiting size per entry

@@ -163,11 +163,6 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl> {
     v.erase(std::remove_if(v.begin(), v.end(), [](auto& s) { return s->dead; }), v.end());
     return v.size();
   }
-  size_t live_viewers() {
-    size_t n = 0;
-    for (auto& [t, v] : mjpeg) n += live_viewers(t);
-    return n;
-  }
   void end_mjpeg(const std::string& token) {
     last_mjpeg.erase(token);
     auto it = mjpeg.find(token);
@@ -419,7 +414,7 @@ void Server::Impl::on_http(connection_hdl h) {
       respond(con, head, sc::not_found, "no session with this token\n");
       return;
     }
-    const size_t of_session = live_viewers(token), all = live_viewers();
+    const size_t of_session = live_viewers(token), all = viewers;  // viewers: kept by start/shutdown
     if (of_session >= opts.max_mjpeg_per_session || all >= opts.max_mjpeg_viewers) {
       const bool session_full = of_session >= opts.max_mjpeg_per_session;
       respond(con, head, sc::service_unavailable,
