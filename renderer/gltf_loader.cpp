@@ -397,12 +397,13 @@ LoadedScene load_gltf(const std::string& path) {
     const std::string node_name = path + ": node " + std::to_string(ni) + " '" + node.name + "'";
     // A zero or nearly zero scale is a common way to hide a node: its meshes are left out
     // with a warning and the rest of the scene loads (renderer/validate.h has the bounds).
-    const std::string mesh_why = check_transform(world, kMeshLimits);
+    const TransformFigures figures = transform_figures(world);  // finite: checked above
+    const std::string mesh_why = check_transform(figures, kMeshLimits);
     if (node.mesh >= 0 && size_t(node.mesh) < prims.size() && !mesh_why.empty())
       out.warnings.push_back(node_name + ": world transform: " + mesh_why + "; its meshes are left out");
     if (node.mesh >= 0 && size_t(node.mesh) < prims.size() && mesh_why.empty()) {
       for (const Prim& prim : prims[node.mesh]) {
-        if (std::string why = check_world_extent(world, prim.max_abs); !why.empty()) {
+        if (std::string why = check_world_extent(figures, prim.max_abs); !why.empty()) {
           out.warnings.push_back(node_name + ": world transform: " + why + "; mesh left out");
           continue;
         }

@@ -56,8 +56,9 @@ std::string Scene::validate_mesh(const Mesh& m) const {
     return "non-indexed mesh needs a multiple of 3 vertices, has " + std::to_string(nv);
   }
   if (!m.transform.finite()) return "mesh transform holds NaN or Inf";
-  std::string why = check_transform(m.transform, kMeshLimits);
-  if (why.empty()) why = check_world_extent(m.transform, pos_index.max_abs);
+  const TransformFigures f = transform_figures(m.transform);  // once a sync per mesh: computed once
+  std::string why = check_transform(f, kMeshLimits);
+  if (why.empty()) why = check_world_extent(f, pos_index.max_abs);
   if (!why.empty()) return "mesh transform: " + why;
   return {};
 }

@@ -52,7 +52,10 @@ TransformFigures transform_figures(const Mat4& m) {
 
 std::string check_transform(const Mat4& m, const TransformLimits& lim) {
   if (!m.finite()) return "holds NaN or Inf";
-  const TransformFigures f = transform_figures(m);
+  return check_transform(transform_figures(m), lim);
+}
+
+std::string check_transform(const TransformFigures& f, const TransformLimits& lim) {
   if (f.norm > lim.max_norm)
     return "scale too large: the upper 3x3's norm (max row sum) is " + num(f.norm) + ", at most " + num(lim.max_norm);
   if (f.max_translation > lim.max_translation)
@@ -88,8 +91,7 @@ std::string check_direction(const Vec3& d) {
   return {};
 }
 
-std::string check_world_extent(const Mat4& m, float max_abs_vertex) {
-  const TransformFigures f = transform_figures(m);
+std::string check_world_extent(const TransformFigures& f, float max_abs_vertex) {
   const double extent = f.norm * double(max_abs_vertex) + f.max_translation;
   if (!(extent <= kWorldLimit))
     return "places vertices up to " + num(extent) + " from the origin, beyond the world limit " + num(kWorldLimit);

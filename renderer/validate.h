@@ -67,6 +67,9 @@ TransformFigures transform_figures(const Mat4& m);
 
 // Empty when all 16 elements are finite and the figures are within `lim`.
 std::string check_transform(const Mat4& m, const TransformLimits& lim);
+// The same for the figures of a transform already known to be finite (callers that also
+// check the world extent compute the figures once).
+std::string check_transform(const TransformFigures& f, const TransformLimits& lim);
 // A camera: its transform within kCameraLimits and fov_y in (0, pi).
 std::string check_camera(const Camera& c);
 // A point: finite and every component within kWorldLimit.
@@ -74,7 +77,8 @@ std::string check_point(const Vec3& p);
 // A direction: finite, and normalising it in float gives a unit vector (not zero, no overflow).
 std::string check_direction(const Vec3& d);
 // The world box a transform puts vertices with components up to max_abs_vertex in:
-// ||A|| max_abs_vertex + max|t_i| <= kWorldLimit. Assumes check_transform passed.
-std::string check_world_extent(const Mat4& m, float max_abs_vertex);
+// ||A|| max_abs_vertex + max|t_i| <= kWorldLimit, from the transform's figures. Assumes
+// check_transform passed.
+std::string check_world_extent(const TransformFigures& f, float max_abs_vertex);
 
 }  // namespace tessera
