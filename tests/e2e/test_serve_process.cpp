@@ -169,3 +169,27 @@ TEST_CASE("tessera serve takes the resource bounds from its settings", "[e2e]") 
     CHECK(p.err().find("handshake-timeout-ms") != std::string::npos);
   }
 }
+
+TEST_CASE("tessera.web-public takes only relative folders ending in '/', and serves exactly those", "[e2e]") {
+  for (const char* bad : {"[\"/etc/\"]", "[\"test\"]", "[\"../\"]", "[\"a/../../\"]", "[\"\"]"}) {
+    INFO("web-public = " << bad);
+    Process p(serve({"--port", "0", std::string("--tessera.web-public=") + bad}));
+    auto status = p.wait(15000);
+    REQUIRE(status);
+    CHECK(WIFEXITED(*status));
+    CHECK(WEXITSTATUS(*status) != 0);
+    CHECK(p.err().find("web-public") != std::string::npos);
+  }
+  Process p(serve({"--port", "0", "--tessera.web-public=[\"test/browser/pages/\"]"}));
+  auto line = p.first_line(30000);
+  REQUIRE(line);
+  const uint16_t port = listening_port(*line);
+  auto page = http::get("127.0.0.1", port, "/test/browser/pages/node.html");
+  REQUIRE(page);
+  CHECK(page->status == 200);
+  auto other = http::get("127.0.0.1", port, "/test/run-unit.js");
+  REQUIRE(other);
+  CHECK(other->status == 404);
+  p.signal(SIGTERM);
+  REQUIRE(p.wait(15000));
+}
