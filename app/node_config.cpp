@@ -11,6 +11,24 @@
 
 namespace tessera::app {
 
+namespace {
+
+// A list-of-strings option whose meta state is ours. CAF's make_config_option<T> keeps it in
+// a function-local static of a template that libcaf_core (built by g++) instantiates for
+// std::vector<std::string> as well; in a clang-built binary the two copies of that static and
+// its guard disagree, and parsing `--tessera.web-public=[...]` on the command line calls a
+// null function pointer (tests/e2e/test_serve_process.cpp caught it under ASan and TSan).
+caf::config_option string_list_option(std::vector<std::string>& storage, caf::string_view category,
+                                      caf::string_view name, caf::string_view description) {
+  using T = std::vector<std::string>;
+  static caf::config_option::meta_state meta{caf::detail::check_impl<T>, caf::detail::store_impl<T>,
+                                             caf::detail::get_impl<T>, caf::detail::parse_impl_delegate<T>,
+                                             caf::select_config_value_access_t<T>::type_name()};
+  return {category, name, description, &meta, &storage};
+}
+
+}  // namespace
+
 NodeConfig::NodeConfig() {
   register_message_types(*this);
   // The ray tracer and the DXT1 encoder run on TBB in this process: keep CAF's scheduler small.
@@ -19,8 +37,6 @@ NodeConfig::NodeConfig() {
       .add(host, "host", "listen address (default 127.0.0.1: local only)")
       .add(port, "port", "TCP port of HTTP + WebSocket (0: any free port)")
       .add(web_root, "web-root", "folder served over HTTP (web client, demo pages)")
-      .add(web_public, "web-public",
-           "further folders of the web root to serve, as [\"dir/\", ...] (default: index.html, src/, demo/, three.js)")
       .add(scene, "scene", "glTF scene given to clients that connect with an empty scene")
       .add(max_clients, "max-clients", "simultaneous WebSocket clients")
       .add(render_threads, "render-threads", "TBB threads for rendering and encoding (0: all)")
@@ -41,7 +57,6 @@ NodeConfig::NodeConfig() {
       .add(max_mjpeg_viewers, "max-mjpeg-viewers", "MJPEG viewers on the node")
       .add(cluster_port, "cluster-port", "publish this node to parent nodes on this port (-1: off, 0: any)")
       .add(cluster_host, "cluster-host", "address of the cluster port (0.0.0.0: all interfaces)")
-      .add(children, "children", "child nodes as [\"host:port\", ...]")
       .add(renders, "render", "render tasks here (false: hub or dedicated master)")
       .add(http, "http", "serve HTTP and WebSocket clients (false: worker or hub only)")
       .add(name, "name", "this node's name in node lists and logs (default host:cluster-port)")
@@ -50,6 +65,10 @@ NodeConfig::NodeConfig() {
       .add(max_workers, "max-workers", "live session workers on this node; more opens are refused (0: 2 x max-clients)")
       .add(keepalive_misses, "keepalive-misses",
            "a worker whose parent sent nothing for this many keep-alive periods ends itself");
+  custom_options_.add(string_list_option(
+      web_public, "tessera", "web-public",
+      "further folders of the web root to serve, as [\"dir/\", ...] (default: index.html, src/, demo/, three.js)"));
+  custom_options_.add(string_list_option(children, "tessera", "children", "child nodes as [\"host:port\", ...]"));
 }
 
 std::shared_ptr<NodeSettings> NodeConfig::node_settings() const {

@@ -193,3 +193,15 @@ TEST_CASE("tessera.web-public takes only relative folders ending in '/', and ser
   p.signal(SIGTERM);
   REQUIRE(p.wait(15000));
 }
+
+TEST_CASE("tessera.children given on the command line is a list the node reads", "[e2e]") {
+  // List options are parsed through Tessera's own option meta state (app/node_config.cpp):
+  // a clang-built binary crashed here when CAF's template static was used.
+  Process p(serve({"--port", "0", "--tessera.children=[\"127.0.0.1:1\"]"}));
+  auto line = p.first_line(30000);
+  INFO("stderr: " << p.err());
+  REQUIRE(line);
+  CHECK(line->find("\"children\": [\"127.0.0.1:1\"]") != std::string::npos);
+  p.signal(SIGTERM);
+  REQUIRE(p.wait(15000));
+}
