@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 #include <map>
+#include <utility>
 
 #include <malloc.h>
 
@@ -138,6 +139,9 @@ struct worker_state {
   caf::actor_addr parent;
   std::shared_ptr<Scene> scene = std::make_shared<Scene>();
   std::vector<std::pair<std::vector<uint8_t>, bool>> cached;  // updates that arrived while rendering
+  std::vector<uint8_t> partial;  // the chunks of an update received so far (cluster_protocol.h)
+  bool partial_reset = false;
+  bool partial_dropped = false;  // the update being received went over kMaxPeerBytes
   bool in_flight = false;
   std::string broken;  // an update this node could not apply: its tiles would be wrong
   // A parent that adopts this worker (the open's reply reached it in time) sends it an empty
@@ -191,6 +195,15 @@ void worker_apply(worker_ptr self, const std::vector<uint8_t>& bytes, bool reset
     st.broken = err;
     worker_log(self, "\"update_failed\": " + json_quote(err));
   }
+}
+
+// A whole update from the parent: down to the children, and applied here now or after the
+// render in flight.
+void worker_update(worker_ptr self, std::vector<uint8_t> bytes, bool reset) {
+  auto& st = self->state;
+  st.router.forward(self, bytes, reset);
+  if (st.in_flight) st.cached.emplace_back(std::move(bytes), reset);
+  else worker_apply(self, bytes, reset);
 }
 
 void worker_apply_cached(worker_ptr self) {
@@ -249,14 +262,32 @@ worker_actor::behavior_type worker_impl(worker_ptr self, std::shared_ptr<const N
   self->delayed_send(self, std::chrono::milliseconds(st.settings->reconnect_ms), tick_atom::value);
   return {
       [=](update_atom, Payload& payload, bool reset) {
-        std::vector<uint8_t>& bytes = payload.bytes;
+        heard(self);
+        self->state.adopted = true;
+        if (payload.bytes.empty() && !reset) return;  // the parent's notice that it adopted this worker
+        worker_update(self, std::move(payload.bytes), reset);
+      },
+      [=](update_atom, Payload& chunk, bool reset, bool last) -> uint64_t {
         auto& st = self->state;
         heard(self);
         st.adopted = true;
-        if (bytes.empty() && !reset) return;  // the parent's notice that it adopted this worker
-        st.router.forward(self, bytes, reset);
-        if (st.in_flight) st.cached.emplace_back(std::move(bytes), reset);
-        else worker_apply(self, bytes, reset);
+        const uint64_t n = chunk.bytes.size();
+        if (st.partial.empty() && !st.partial_dropped) st.partial_reset = reset;
+        if (st.partial_dropped || st.partial.size() + n > kMaxPeerBytes) {
+          if (!st.partial_dropped) {
+            st.broken = "a scene update over " + std::to_string(kMaxPeerBytes) + " bytes";
+            worker_log(self, "\"update_failed\": " + json_quote(st.broken));
+          }
+          st.partial_dropped = true;
+          st.partial = {};
+        } else {
+          st.partial.insert(st.partial.end(), chunk.bytes.begin(), chunk.bytes.end());
+        }
+        if (last) {
+          if (!st.partial_dropped) worker_update(self, std::exchange(st.partial, {}), st.partial_reset);
+          st.partial_dropped = false;
+        }
+        return n;
       },
       [=](render_atom, RenderBatch& batch) -> caf::result<BatchReply> {
         heard(self);

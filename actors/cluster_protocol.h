@@ -22,6 +22,10 @@
 //                  replaces the whole scene (a node that joins a running session). Applied at
 //                  once, or cached while this node renders, and forwarded to the children.
 //                  Empty and reset=false: the parent adopted this worker (its first message).
+//     update chunk -> (bytes, reset, last): a piece of one update, acknowledged with its size
+//                  when the worker takes it; the worker applies the update at `last`. Parents
+//                  send updates this way, a window of chunks at a time (Outbox, router.h), so
+//                  no burst of uploads piles up in a connection's buffers.
 //     render    -> BatchReply: renders its own task, relays the others, validates what the
 //                  children return, fails the tasks of a child that is down or too late. A
 //                  batch outside this node's limits fails every tile (check_batch, router.h).
@@ -38,6 +42,7 @@
 namespace tessera {
 
 using worker_actor = caf::typed_actor<caf::reacts_to<update_atom, Payload, bool>,
+                                      caf::replies_to<update_atom, Payload, bool, bool>::with<uint64_t>,
                                       caf::replies_to<render_atom, RenderBatch>::with<BatchReply>,
                                       caf::replies_to<nodes_atom>::with<std::vector<NodeInfo>>,
                                       caf::reacts_to<tick_atom>>;

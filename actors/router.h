@@ -9,6 +9,7 @@
 // all of it runs on that actor's thread.
 #include <chrono>
 #include <algorithm>
+#include <deque>
 #include <functional>
 #include <map>
 #include <memory>
@@ -63,12 +64,32 @@ inline RenderTask task_of(const RenderBatch& b, const Rect& pixels) {
   return t;
 }
 
+// What waits to go to one child, in order: scene updates, sent in chunks of at most
+// kUpdateChunkBytes with at most kUpdateWindowBytes sent and not yet acknowledged, and the
+// batches that must reach the child after them. Without the window a burst of uploads went
+// into the CAF connection's write buffers whole, and those buffers keep their largest size
+// for as long as the connection lives (a dedicated master held 248 MB of them after six
+// 15.6 MB uploads to two workers; docs/results/soak.md).
+struct Outbox {
+  struct Item {
+    std::shared_ptr<const std::vector<uint8_t>> update;  // null: `send` is a deferred batch
+    size_t offset = 0;                                   // bytes of `update` already sent
+    bool reset = false;
+    std::function<void()> send;
+  };
+  std::deque<Item> items;
+  size_t in_flight = 0;  // chunk bytes sent and not yet acknowledged
+};
+constexpr size_t kUpdateChunkBytes = size_t(256) << 10;
+constexpr size_t kUpdateWindowBytes = size_t(1) << 20;
+
 struct RouterChild {
   std::string name;            // the child's cluster address as this node knows it
   worker_actor worker;
   std::vector<NodeInfo> nodes; // its flattened list as of the last commit
   bool alive = true;
   bool routed = false;         // part of the committed list (batches are indexed by it)
+  Outbox outbox;
 };
 
 // One batch in flight: the reply being assembled, part by part (this node's own task, then
@@ -126,11 +147,27 @@ class Router {
       }
   }
 
-  // Sends encoded scene records to every live child (routed or joining).
+  // Sends encoded scene records to every live child (routed or joining), in chunks behind
+  // what is already queued for it (Outbox).
   template <class Self>
   void forward(Self* self, const std::vector<uint8_t>& records, bool reset) {
+    std::shared_ptr<const std::vector<uint8_t>> data;
     for (auto& c : children)
-      if (c.alive) self->send(c.worker, update_atom::value, Payload{records}, reset);
+      if (c.alive) {
+        if (!data) data = std::make_shared<const std::vector<uint8_t>>(records);
+        enqueue_update(self, c, data, reset);
+      }
+  }
+
+  // Bytes of scene updates queued or unacknowledged, over all children (for tests and logs).
+  size_t update_backlog() const {
+    size_t n = 0;
+    for (auto& c : children) {
+      n += c.outbox.in_flight;
+      for (auto& it : c.outbox.items)
+        if (it.update) n += it.update->size() - it.offset;
+    }
+    return n;
   }
 
   // Tells every live child that its parent is alive (an empty update, as the adoption notice):
@@ -213,7 +250,11 @@ class Router {
       out.push_back({join, my_part, begin, count});
       const std::string name = c.name;
       const caf::actor_addr addr = c.worker.address();
-      self->request(c.worker, std::chrono::milliseconds(b.timeout_ms), render_atom::value, std::move(sub))
+      const worker_actor worker = c.worker;
+      // The batch goes after the updates queued for this child (the worker renders the scene
+      // as of the frame); its timeout runs from when it is sent.
+      auto send = [=, sub = std::move(sub)]() mutable {
+      self->request(worker, std::chrono::milliseconds(b.timeout_ms), render_atom::value, std::move(sub))
           .then(
               [=](BatchReply& r) {
                 if (join->part_done[my_part]) return;
@@ -247,6 +288,14 @@ class Router {
                 fail_range(*join, begin, count, "node " + name + ": " + to_string(e));
                 join->finish_part(my_part);
               });
+      };
+      if (c.outbox.items.empty()) {
+        send();
+      } else {
+        Outbox::Item item;
+        item.send = std::move(send);
+        c.outbox.items.push_back(std::move(item));
+      }
     }
     join->reply.changed = changed;
     join->finish_part(parts);  // the guard: done runs once, after every part was started
@@ -344,12 +393,14 @@ class Router {
                             // First an empty update, the worker's sign that it was adopted: it
                             // arrives at once, however long the scene takes (cluster.cpp).
                             self->send(w, update_atom::value, Payload{}, false);
-                            for (auto& [bytes, reset] : snapshot()) self->send(w, update_atom::value, Payload{bytes}, reset);
                             RouterChild c;
                             c.name = name;
                             c.worker = w;
                             c.nodes = std::move(r.nodes);
                             children.push_back(std::move(c));
+                            for (auto& [bytes, reset] : snapshot())
+                              enqueue_update(self, children.back(),
+                                             std::make_shared<const std::vector<uint8_t>>(std::move(bytes)), reset);
                             changed = true;
                             if (log) log("\"joined\": " + json_quote(name) + ", \"nodes\": " + nodes_json(children.back().nodes));
                           }
@@ -367,6 +418,53 @@ class Router {
   }
 
  private:
+  template <class Self>
+  void enqueue_update(Self* self, RouterChild& c, std::shared_ptr<const std::vector<uint8_t>> data, bool reset) {
+    Outbox::Item item;
+    item.update = std::move(data);
+    item.reset = reset;
+    c.outbox.items.push_back(std::move(item));
+    pump(self, c);
+  }
+
+  // Sends what the child's window allows: chunks of the update at the head, and the batches
+  // queued behind an update once all of it has been sent. An acknowledgement opens the window
+  // again; an error fails the child.
+  template <class Self>
+  void pump(Self* self, RouterChild& c) {
+    Outbox& box = c.outbox;
+    while (!box.items.empty()) {
+      Outbox::Item& it = box.items.front();
+      if (!it.update) {
+        auto send = std::move(it.send);
+        box.items.pop_front();
+        send();
+        continue;
+      }
+      if (box.in_flight >= kUpdateWindowBytes) return;
+      const size_t n = std::min(kUpdateChunkBytes, it.update->size() - it.offset);
+      Payload chunk;
+      chunk.bytes.assign(it.update->begin() + long(it.offset), it.update->begin() + long(it.offset + n));
+      it.offset += n;
+      const bool last = it.offset == it.update->size();
+      const bool reset = it.reset;
+      if (last) box.items.pop_front();
+      box.in_flight += n;
+      const caf::actor_addr addr = c.worker.address();
+      self->request(c.worker, caf::infinite, update_atom::value, std::move(chunk), reset, last)
+          .then(
+              [=](uint64_t) {
+                for (auto& x : children)
+                  if (x.alive && x.worker.address() == addr) {
+                    x.outbox.in_flight -= std::min(n, x.outbox.in_flight);
+                    pump(self, x);
+                    return;
+                  }
+              },
+              [=](caf::error& e) { child_failed(addr, "scene update: " + to_string(e)); });
+    }
+  }
+
   struct Outstanding {
     std::weak_ptr<BatchJoin> join;
     size_t part, begin, count;
@@ -382,6 +480,7 @@ class Router {
   void mark_dead(RouterChild& c, const std::string& why) {
     c.alive = false;
     changed = true;
+    c.outbox = Outbox{};  // its queued batches are failed below, through outstanding_
     const std::string name = c.name;
     auto it = outstanding_.find(c.worker.address());
     std::vector<Outstanding> outs;

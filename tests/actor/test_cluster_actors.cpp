@@ -29,12 +29,18 @@ namespace {
 constexpr int kSize = 16;
 
 // What a fake child does with its tasks.
-enum class Mode { liar, hang, straggler, bad_info };
+enum class Mode { liar, hang, straggler, bad_info, slow_acks };
 
 struct FakeLog {
   std::vector<RenderBatch> batches;
-  size_t updates = 0;
-  std::vector<caf::response_promise> held;  // hang: never answered
+  size_t updates = 0;      // whole updates (the last chunk of each)
+  size_t chunks = 0;       // update chunks received
+  size_t chunk_bytes = 0;  // their bytes
+  size_t max_chunk = 0;    // the largest chunk
+  std::vector<std::string> order;  // "u" per whole update, "b" per batch, as they arrived
+  std::vector<caf::response_promise> held;
+  std::vector<caf::typed_response_promise<uint64_t>> held_acks;  // slow_acks: not yet acknowledged
+  std::vector<uint64_t> held_ack_sizes;  // hang: never answered
 };
 
 // A worker that answers (or not) as its mode says; one node named `name`.
@@ -44,8 +50,24 @@ worker_actor::behavior_type fake_worker(worker_actor::pointer self, Mode mode, s
         auto& bytes = payload.bytes;
         if (!bytes.empty() || reset) log->updates++;  // not the adoption notice
       },
+      [=](update_atom, Payload& chunk, bool, bool last) -> caf::result<uint64_t> {
+        log->chunks++;
+        log->chunk_bytes += chunk.bytes.size();
+        log->max_chunk = std::max(log->max_chunk, chunk.bytes.size());
+        if (last) {
+          log->updates++;
+          log->order.push_back("u");
+        }
+        if (mode == Mode::slow_acks) {  // acknowledged when the test says so
+          log->held_acks.push_back(self->make_response_promise<uint64_t>());
+          log->held_ack_sizes.push_back(chunk.bytes.size());
+          return caf::delegated<uint64_t>{};
+        }
+        return uint64_t(chunk.bytes.size());
+      },
       [=](render_atom, RenderBatch& b) -> caf::result<BatchReply> {
         log->batches.push_back(b);
+        log->order.push_back("b");
         if (mode == Mode::hang) {
           log->held.push_back(self->make_response_promise());
           return caf::delegated<BatchReply>{};
@@ -75,7 +97,13 @@ worker_actor::behavior_type fake_worker(worker_actor::pointer self, Mode mode, s
         // bad_info: a node that claims an impossible coefficient (it would get all the work).
         return std::vector<NodeInfo>{mode == Mode::bad_info ? NodeInfo{"fake", -3, 1e300} : NodeInfo{"fake", 1, 1.0}};
       },
-      [=](tick_atom) {},
+      [=](tick_atom) {
+        auto acks = std::move(log->held_acks);
+        auto sizes = std::move(log->held_ack_sizes);
+        log->held_acks.clear();
+        log->held_ack_sizes.clear();
+        for (size_t i = 0; i < acks.size(); ++i) acks[i].deliver(sizes[i]);
+      },
   };
 }
 
@@ -191,6 +219,49 @@ CAF_TEST(a real child node renders its share and gets every accepted scene recor
   CAF_CHECK_EQUAL(frames_sent(), std::vector<uint32_t>{1});
   CAF_CHECK_EQUAL(logged("\"recovering\""), 0u);
   CAF_CHECK_EQUAL(logged("\"cluster_frame\": 1"), 1u);
+  CAF_CHECK_EQUAL(sink->all<ErrorReply>().size(), 0u);
+}
+
+CAF_TEST(a big update goes down in chunks within the window and the batch of the frame waits behind it) {
+  auto log = std::make_shared<FakeLog>();
+  auto last = std::make_shared<worker_actor>();
+  add_child("slow:1", caf::actor_cast<caf::actor>(sys.spawn(fake_node, Mode::slow_acks, log, last)));
+  auto release_acks = [&] {  // the fake worker acknowledges what it holds on a tick
+    const size_t n = log->held_acks.size();
+    if (n > 0) {
+      self->send(*last, tick_atom::value);
+      sched.run();
+    }
+    return n;
+  };
+  start();
+  while (release_acks() > 0) {
+  }
+  CAF_REQUIRE_EQUAL(log->updates, 2u);  // the snapshot at join, then the uploaded records
+  const size_t before = log->chunk_bytes;
+  // 3 MiB of vertex data: 12 chunks of 256 KiB and some.
+  SetBuffer big;
+  big.id = 50;
+  big.buffer.type = Buffer::Type::f32;
+  big.buffer.components = 3;
+  big.buffer.f.assign(3 * 262144, 0.5f);
+  self->send(session, client_atom::value, encode(std::vector<ClientRecord>{big}));
+  request_frame(1);
+  sched.run();
+  // Nothing acknowledged yet: exactly one window went down, and the batch waits.
+  CAF_CHECK_EQUAL(log->chunk_bytes - before, kUpdateWindowBytes);
+  CAF_CHECK_EQUAL(log->max_chunk, kUpdateChunkBytes);
+  CAF_CHECK_EQUAL(log->batches.size(), 0u);
+  CAF_CHECK(frames_sent().empty());
+  size_t rounds = 0;
+  while (release_acks() > 0) ++rounds;
+  CAF_CHECK_GREATER_OR_EQUAL(rounds, 3u);  // a window at a time
+  CAF_CHECK_GREATER(log->chunk_bytes - before, 3u * 262144u * 4u);
+  CAF_CHECK_EQUAL(log->updates, 4u);  // + the big buffer, + the camera of the frame
+  CAF_REQUIRE_EQUAL(log->batches.size(), 1u);
+  CAF_CHECK_EQUAL(log->order.back(), "b");  // after the update it renders
+  CAF_CHECK_EQUAL(log->order[log->order.size() - 2], "u");
+  CAF_CHECK_EQUAL(frames_sent(), std::vector<uint32_t>{1});
   CAF_CHECK_EQUAL(sink->all<ErrorReply>().size(), 0u);
 }
 
