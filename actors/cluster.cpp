@@ -14,7 +14,7 @@
 
 #include "actors/node.h"
 #include "actors/router.h"
-#include "renderer/sat.h"
+#include "lb/sat.h"
 
 namespace tessera {
 

@@ -18,7 +18,7 @@
 //     links     -> the children this node is connected to now (used by its own workers to
 //                  notice children that came back)
 //   worker_actor (one per session per node)
-//     update    -> encoded client-protocol scene records (net/scene_records.h); reset=true
+//     update    -> encoded client-protocol scene records (protocol/scene_records.h); reset=true
 //                  replaces the whole scene (a node that joins a running session). Applied at
 //                  once, or cached while this node renders, and forwarded to the children.
 //                  Empty and reset=false: the parent adopted this worker (its first message).

@@ -6,7 +6,7 @@
 #include <caf/all.hpp>
 
 #include "actors/node.h"
-#include "renderer/image.h"
+#include "core/image.h"
 
 namespace tessera {
 namespace {

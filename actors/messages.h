@@ -19,8 +19,8 @@
 #include <caf/actor.hpp>
 #include <caf/error.hpp>
 
-#include "renderer/rect.h"
-#include "renderer/scene.h"
+#include "core/rect.h"
+#include "core/scene.h"
 
 namespace tessera {
 
@@ -88,7 +88,7 @@ typename Inspector::result_type inspect(Inspector& f, Rect& x) {
 
 // The scene a renderer renders, as of the start of a frame. In one process it is a shared,
 // read-only pointer (the session changes its scene only between frames, so nothing is
-// copied); serialised it becomes the client protocol's records (net/scene_records.h), so a
+// copied); serialised it becomes the client protocol's records (protocol/scene_records.h), so a
 // remote renderer rebuilds the same scene.
 struct SceneSnapshot {
   std::shared_ptr<const Scene> scene;

@@ -10,7 +10,7 @@
 
 #include <caf/all.hpp>
 
-#include "net/scene_records.h"
+#include "protocol/scene_records.h"
 
 namespace tessera {
 

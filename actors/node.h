@@ -20,9 +20,9 @@
 #include "actors/renderer_protocol.h"
 #include "actors/session_protocol.h"
 #include "actors/tiler_protocol.h"
-#include "net/memory_budget.h"
-#include "net/protocol.h"
-#include "renderer/tiler.h"
+#include "protocol/memory_budget.h"
+#include "protocol/protocol.h"
+#include "lb/tiler.h"
 
 namespace tessera {
 

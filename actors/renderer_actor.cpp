@@ -11,7 +11,7 @@
 #include "actors/node.h"
 #include "renderer/rasterizer.h"
 #include "renderer/raytracer.h"
-#include "renderer/sat.h"
+#include "lb/sat.h"
 
 namespace tessera {
 namespace {

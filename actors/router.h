@@ -22,7 +22,7 @@
 
 #include "actors/cluster_protocol.h"
 #include "actors/node.h"
-#include "renderer/rect.h"
+#include "core/rect.h"
 
 namespace tessera {
 

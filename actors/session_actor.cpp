@@ -6,7 +6,7 @@
 
 #include "actors/node.h"
 #include "actors/router.h"
-#include "net/scene_records.h"
+#include "protocol/scene_records.h"
 #include "renderer/raytracer.h"
 
 namespace tessera {

@@ -1,4 +1,4 @@
-// Tiler actor: the SAT array of the last frame -> the tasks of the next (renderer/tiler.h).
+// Tiler actor: the SAT array of the last frame -> the tasks of the next (lb/tiler.h).
 #include <chrono>
 #include <cmath>
 #include <optional>
@@ -6,8 +6,8 @@
 #include <caf/all.hpp>
 
 #include "actors/node.h"
-#include "renderer/sat.h"
-#include "renderer/tiler.h"
+#include "lb/sat.h"
+#include "lb/tiler.h"
 
 namespace tessera {
 namespace {

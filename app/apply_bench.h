@@ -1,7 +1,7 @@
 #pragma once
 // The core of `tessera applybench`: times protocol::apply on a scene of many small meshes, as
-// a client uploading a large scene sends it. Header-only and dependent only on net/protocol.h
-// and renderer/scene.h, so bench/apply_before_after.sh can compile it against an older
+// a client uploading a large scene sends it. Header-only and dependent only on protocol/protocol.h
+// and core/scene.h, so bench/apply_before_after.sh can compile it against an older
 // protocol.cpp/scene.cpp to show the before/after figures in one run.
 #include <chrono>
 #include <cstdint>
@@ -9,8 +9,8 @@
 #include <string>
 #include <vector>
 
-#include "net/protocol.h"
-#include "renderer/scene.h"
+#include "protocol/protocol.h"
+#include "core/scene.h"
 
 namespace tessera::bench {
 

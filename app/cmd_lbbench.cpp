@@ -14,8 +14,8 @@
 #include <tbb/task_arena.h>
 
 #include "app/command.h"
-#include "renderer/sat.h"
-#include "renderer/tiler.h"
+#include "lb/sat.h"
+#include "lb/tiler.h"
 
 namespace tessera::app {
 namespace {

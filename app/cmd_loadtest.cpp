@@ -18,8 +18,9 @@
 #include "app/command.h"
 #include "app/common.h"
 #include "app/node_config.h"
-#include "net/scene_records.h"
+#include "protocol/scene_records.h"
 #include "net/server.h"
+#include "net/ws_client.h"
 
 namespace tessera::app {
 namespace {

@@ -13,8 +13,8 @@
 #include "app/command.h"
 #include "app/common.h"
 #include "renderer/raytracer.h"
-#include "renderer/sat.h"
-#include "renderer/tiler.h"
+#include "lb/sat.h"
+#include "lb/tiler.h"
 
 namespace tessera::app {
 namespace {

@@ -49,9 +49,9 @@
 
 #include "app/command.h"
 #include "app/common.h"
-#include "net/protocol.h"
-#include "net/scene_records.h"
-#include "net/server.h"
+#include "protocol/protocol.h"
+#include "protocol/scene_records.h"
+#include "net/ws_client.h"
 #include "renderer/raytracer.h"
 
 namespace tessera::app {

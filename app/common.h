@@ -7,7 +7,7 @@
 #include <tbb/global_control.h>
 
 #include "app/args.h"
-#include "renderer/gltf_loader.h"
+#include "core/gltf_loader.h"
 #include "renderer/renderer.h"
 
 namespace tessera::app {

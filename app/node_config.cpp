@@ -7,7 +7,7 @@
 #include <caf/all.hpp>
 
 #include "app/common.h"
-#include "renderer/gltf_loader.h"
+#include "core/gltf_loader.h"
 
 namespace tessera::app {
 

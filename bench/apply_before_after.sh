@@ -4,6 +4,9 @@
 # commit (default bc6a3c8, before the change) and of the working tree, with the same flags,
 # and runs both in one go. Needs build/ (the codec and image libraries) built first.
 # Usage: bench/apply_before_after.sh [BASE_COMMIT] [MESH_COUNTS]   (default bc6a3c8 5000,10000,20000)
+# Written for the layout before the layer folders (renderer/scene.*, net/protocol.*): it
+# reproduces docs/results/node.md's apply figures from a checkout of bedf1d3 or earlier, e.g.
+#   git worktree add /tmp/pre-layers bedf1d3 && cd /tmp/pre-layers && cmake ... && bench/apply_before_after.sh
 set -euo pipefail
 cd "$(dirname "$0")/.."
 BASE=${1:-bc6a3c8}; LIST=${2:-5000,10000,20000}

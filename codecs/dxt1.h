@@ -19,7 +19,7 @@
 #include <cstdint>
 #include <vector>
 
-#include "renderer/image.h"
+#include "core/image.h"
 
 namespace tessera {
 

@@ -5,7 +5,7 @@
 #include <string>
 #include <vector>
 
-#include "renderer/image.h"
+#include "core/image.h"
 
 namespace tessera {
 

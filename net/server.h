@@ -4,7 +4,7 @@
 //                        one session actor per connection;
 //   /mjpeg/TOKEN         the MJPEG stream of session TOKEN (multipart/x-mixed-replace);
 //   everything else      static files from the web root (the web client and demo pages).
-// websocketpp lives only in server.cpp (with the test/load-test client below).
+// websocketpp lives only in server.cpp (and in the client, net/ws_client.cpp).
 #include <cstdint>
 #include <memory>
 #include <optional>
@@ -50,32 +50,6 @@ class Server {
 
  private:
   std::shared_ptr<Impl> impl_;
-};
-
-// A blocking WebSocket client (tests, `tessera loadtest`): a network thread and a queue of
-// received binary messages.
-class WsClient {
- public:
-  WsClient();
-  ~WsClient();
-  WsClient(const WsClient&) = delete;
-  WsClient& operator=(const WsClient&) = delete;
-
-  // ws://host:port + resource (e.g. "/ws"). False and *error (e.g. "HTTP 503") on failure.
-  bool connect(const std::string& host, uint16_t port, const std::string& resource, std::string* error,
-               int timeout_ms = 5000);
-  bool send(const std::vector<uint8_t>& message);
-  bool send_text(const std::string& text);
-  // The next received message; nullopt on timeout, or when closed and nothing is left.
-  std::optional<std::vector<uint8_t>> receive(int timeout_ms);
-  bool closed() const;
-  void close();   // close handshake
-  void abort();   // drops the TCP connection without a close handshake (a crashed client)
-
-  struct Impl;
-
- private:
-  std::unique_ptr<Impl> impl_;
 };
 
 }  // namespace tessera

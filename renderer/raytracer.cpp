@@ -1,6 +1,6 @@
 #include "renderer/raytracer.h"
 
-#include "renderer/validate.h"
+#include "core/validate.h"
 
 #include <embree3/rtcore.h>
 #include <tbb/blocked_range2d.h>
@@ -506,7 +506,7 @@ void RayTracer::Impl::sync(const Scene& scene, std::vector<std::string>& warning
   // Camera-relative rebasing: keep world coordinates small around the camera so that a
   // scene far from the origin keeps its float precision. The origin moves in steps of
   // 1024 units, so ordinary scenes keep origin 0 and never rebuild for it.
-  // A camera outside the bounds of renderer/validate.h (possible only for scenes built in code:
+  // A camera outside the bounds of core/validate.h (possible only for scenes built in code:
   // every entry point refuses it) renders the background and moves no origin: its rays
   // would not be finite or within what Embree accepts. The field of view is clamped by the
   // kernel, so only the transform counts here.

@@ -76,7 +76,7 @@ class RayTracer final : public Renderer {
   void render_scheduled(const Rect& pixels, const RenderSettings& settings, ThreadSchedule schedule,
                         const std::vector<Rect>& tiles, int threads, TaskResult& out);
 
-  // Tests only: with false, sync uses a camera outside renderer/validate.h's bounds as it is
+  // Tests only: with false, sync uses a camera outside core/validate.h's bounds as it is
   // (and rebases on it) instead of rendering the background, so that its rays reach the
   // kernel's second line (rays not finite or beyond kRayLimit are dropped before Embree).
   void set_camera_check(bool on);

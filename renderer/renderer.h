@@ -5,10 +5,10 @@
 #include <string>
 #include <vector>
 
-#include "renderer/cost_map.h"
-#include "renderer/image.h"
-#include "renderer/rect.h"
-#include "renderer/scene.h"
+#include "core/cost_map.h"
+#include "core/image.h"
+#include "core/rect.h"
+#include "core/scene.h"
 
 namespace tessera {
 

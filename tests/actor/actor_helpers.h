@@ -9,7 +9,7 @@
 #include <caf/test/dsl.hpp>
 
 #include "actors/node.h"
-#include "net/protocol.h"
+#include "protocol/protocol.h"
 
 namespace tessera::test {
 

@@ -15,9 +15,9 @@
 
 #include "actors/node.h"
 #include "actors/router.h"
-#include "net/protocol.h"
-#include "net/scene_records.h"
-#include "renderer/sat.h"
+#include "protocol/protocol.h"
+#include "protocol/scene_records.h"
+#include "lb/sat.h"
 #include "tests/actor/actor_helpers.h"
 
 using namespace tessera;

@@ -9,7 +9,7 @@
 #include <mutex>
 
 #include "actors/node.h"
-#include "net/protocol.h"
+#include "protocol/protocol.h"
 #include "tests/actor/actor_helpers.h"
 
 using namespace tessera;

@@ -20,7 +20,7 @@
 #include <caf/all.hpp>
 #include <caf/io/all.hpp>
 
-#include "net/scene_records.h"
+#include "protocol/scene_records.h"
 #include "tests/e2e/node_fixture.h"
 #include "tests/cluster/serve_node.h"
 #include "tests/e2e/process.h"

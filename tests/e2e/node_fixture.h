@@ -14,11 +14,12 @@
 #include <caf/all.hpp>
 
 #include "actors/node.h"
-#include "net/protocol.h"
-#include "net/scene_records.h"
+#include "protocol/protocol.h"
+#include "protocol/scene_records.h"
 #include "net/server.h"
+#include "net/ws_client.h"
 #include "codecs/jpeg.h"
-#include "renderer/gltf_loader.h"
+#include "core/gltf_loader.h"
 #include "renderer/raytracer.h"
 #include "tests/e2e/time_scale.h"
 

@@ -12,7 +12,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
-#include "renderer/image.h"
+#include "core/image.h"
 #include "tests/e2e/time_scale.h"
 
 using nlohmann::json;

@@ -1,10 +1,10 @@
-// libFuzzer target: the camera-loop reader (renderer/gltf_loader.h load_camera_loop) on
+// libFuzzer target: the camera-loop reader (core/gltf_loader.h load_camera_loop) on
 // arbitrary files. It may only throw (std::exception); every frame of a loop it accepts is
 // turned into a camera as `tessera render/bench --camera-loop` do.
 #include <cstdint>
 #include <exception>
 
-#include "renderer/gltf_loader.h"
+#include "core/gltf_loader.h"
 #include "tests/fuzz/fuzz_common.h"
 
 using namespace tessera;

@@ -1,4 +1,4 @@
-// libFuzzer target: the glTF loader (renderer/gltf_loader.h load_gltf) on arbitrary files.
+// libFuzzer target: the glTF loader (core/gltf_loader.h load_gltf) on arbitrary files.
 // The input is written to a temporary file (.glb when it starts with the binary magic
 // "glTF", else .gltf) and loaded; the loader may only throw (std::exception), never crash,
 // and a scene it returns must hold only meshes whose buffers exist.
@@ -7,7 +7,7 @@
 #include <cstring>
 #include <exception>
 
-#include "renderer/gltf_loader.h"
+#include "core/gltf_loader.h"
 #include "tests/fuzz/fuzz_common.h"
 
 using namespace tessera;

@@ -7,7 +7,7 @@
 #include <cstdlib>
 #include <cstdio>
 
-#include "net/protocol.h"
+#include "protocol/protocol.h"
 
 using namespace tessera;
 using namespace tessera::protocol;

@@ -1,5 +1,5 @@
 // libFuzzer target: decoded scenes all the way through a small render. An input is either a
-// client-protocol message (net/protocol.h) whose scene updates are applied to a fresh Scene
+// client-protocol message (protocol/protocol.h) whose scene updates are applied to a fresh Scene
 // as a session applies them, or, when it starts with '{', a glTF file loaded by load_gltf.
 // The scene is then synced into the ray tracer and rendered at 16x16 twice: with the general
 // kernel (AO 1, depth 2) and the plain one (no AO, depth 1). Nothing may abort; a renderer may
@@ -14,8 +14,8 @@
 
 #include <tbb/global_control.h>
 
-#include "net/protocol.h"
-#include "renderer/gltf_loader.h"
+#include "protocol/protocol.h"
+#include "core/gltf_loader.h"
 #include "renderer/raytracer.h"
 #include "tests/fuzz/fuzz_common.h"
 

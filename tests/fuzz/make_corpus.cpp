@@ -14,9 +14,9 @@
 
 #include "actors/messages.h"
 #include "codecs/jpeg.h"
-#include "net/protocol.h"
-#include "net/scene_records.h"
-#include "renderer/sat.h"
+#include "protocol/protocol.h"
+#include "protocol/scene_records.h"
+#include "lb/sat.h"
 
 using namespace tessera;
 using namespace tessera::protocol;

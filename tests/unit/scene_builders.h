@@ -7,9 +7,9 @@
 #include <string>
 #include <vector>
 
-#include "renderer/image.h"
+#include "core/image.h"
 #include "renderer/raytracer.h"
-#include "renderer/scene.h"
+#include "core/scene.h"
 
 namespace tessera::testing {
 

@@ -13,8 +13,8 @@
 #include <string>
 #include <unistd.h>
 
-#include "renderer/gltf_loader.h"
-#include "renderer/image.h"
+#include "core/gltf_loader.h"
+#include "core/image.h"
 
 using namespace tessera;
 

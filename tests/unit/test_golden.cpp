@@ -17,8 +17,8 @@
 #include <cstdlib>
 #include <string>
 
-#include "renderer/gltf_loader.h"
-#include "renderer/image.h"
+#include "core/gltf_loader.h"
+#include "core/image.h"
 #include "renderer/raytracer.h"
 
 using namespace tessera;

@@ -1,12 +1,12 @@
-// The node-wide memory budget (net/memory_budget.h): thread-safe accounting, per-holder
+// The node-wide memory budget (protocol/memory_budget.h): thread-safe accounting, per-holder
 // shares, and the payload sizes a client message declares before it is decoded.
 #include <catch2/catch.hpp>
 
 #include <thread>
 #include <vector>
 
-#include "net/memory_budget.h"
-#include "net/protocol.h"
+#include "protocol/memory_budget.h"
+#include "protocol/protocol.h"
 
 using namespace tessera;
 using namespace tessera::protocol;

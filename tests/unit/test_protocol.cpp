@@ -14,8 +14,8 @@
 #include "codecs/deflate.h"
 #include "codecs/dxt1.h"
 #include "codecs/jpeg.h"
-#include "net/protocol.h"
-#include "renderer/image.h"
+#include "protocol/protocol.h"
+#include "core/image.h"
 
 using namespace tessera;
 using namespace tessera::protocol;
@@ -954,7 +954,7 @@ TEST_CASE("The checked-in fuzz corpus holds valid messages", "[protocol]") {
       INFO(entry.path().string());
       bool server = m.size() > 3 && m[3] == uint8_t(Channel::server);
       // The render target's seeds that aborted the node inside Embree (issue 16) are refused
-      // where they enter now: a transform or camera outside renderer/validate.h's bounds.
+      // where they enter now: a transform or camera outside core/validate.h's bounds.
       const std::string name = entry.path().filename().string();
       if (name.rfind("abort_", 0) == 0 || name.rfind("render_found_", 0) == 0) {
         CHECK(dec(m).code() == ErrorCode::out_of_range);

@@ -26,8 +26,8 @@
 #include <cstring>
 #include <string>
 
-#include "renderer/gltf_loader.h"
-#include "renderer/image.h"
+#include "core/gltf_loader.h"
+#include "core/image.h"
 #include "renderer/rasterizer.h"
 #include "renderer/raytracer.h"
 #include "scene_builders.h"

@@ -7,7 +7,7 @@
 
 #include <tbb/task_arena.h>
 
-#include "renderer/sat.h"
+#include "lb/sat.h"
 
 using tessera::CostMap;
 using tessera::Rect;

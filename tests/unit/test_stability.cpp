@@ -508,7 +508,7 @@ TEST_CASE("1x1 images, 0-sized images and 0-sized tasks", "[stability][sizes]") 
 }
 
 // ---------------------------------------------------------------------------------------
-// Fault containment (renderer/validate.h): a scene built in code, never validated, with
+// Fault containment (core/validate.h): a scene built in code, never validated, with
 // transforms and cameras that made Embree abort the process (`all(valid, ray.valid())`,
 // `diag[dim] > 0.0f`): it renders, the bad entries left out, and every pixel is written.
 // ---------------------------------------------------------------------------------------

@@ -16,7 +16,7 @@
 
 #include <tbb/task_arena.h>
 
-#include "renderer/tiler.h"
+#include "lb/tiler.h"
 
 using tessera::CostMap;
 using tessera::Rect;

@@ -1,4 +1,4 @@
-// Fault containment at every entry point (renderer/validate.h, docs/renderer.md "Fault
+// Fault containment at every entry point (core/validate.h, docs/renderer.md "Fault
 // containment: what may reach Embree"): transforms and cameras that are singular, nearly so
 // or huge, lights beyond the world box, camera loops that overflow float, oversized glTF
 // accessors and bufferViews, and external URIs that leave the glTF file's folder. Each is
@@ -15,11 +15,11 @@
 #include <sstream>
 #include <string>
 
-#include "net/protocol.h"
-#include "renderer/gltf_loader.h"
-#include "renderer/image.h"
+#include "protocol/protocol.h"
+#include "core/gltf_loader.h"
+#include "core/image.h"
 #include "renderer/raytracer.h"
-#include "renderer/validate.h"
+#include "core/validate.h"
 
 using namespace tessera;
 

@@ -1,5 +1,5 @@
 // Cluster workers apply forwarded client records through apply_records (actors/cluster.cpp):
-// the same validation as a client's decode (renderer/validate.h), so a singular, nearly
+// the same validation as a client's decode (core/validate.h), so a singular, nearly
 // singular or huge transform forwarded by a master (or sent straight to a worker's cluster
 // port) is refused with a message and never reaches the worker's renderer.
 #include <catch2/catch.hpp>
@@ -8,7 +8,7 @@
 #include <caf/binary_serializer.hpp>
 
 #include "actors/node.h"
-#include "net/protocol.h"
+#include "protocol/protocol.h"
 #include "renderer/raytracer.h"
 
 using namespace tessera;

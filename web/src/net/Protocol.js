@@ -1,4 +1,4 @@
-// Tessera's binary client protocol (net/protocol.h in the repository, byte for byte): every
+// Tessera's binary client protocol (protocol/protocol.h in the repository, byte for byte): every
 // constant of the wire format lives here, with encoders and decoders for both directions
 // (the browser encodes client records and decodes server records; tests and mock servers
 // do the reverse).

@@ -1,5 +1,5 @@
 // The page's render settings for the node: <xml3d ao-samples="N" max-depth="D">, sent as the
-// protocol's settings record (net/protocol.h Settings) after the handshake and whenever the
+// protocol's settings record (protocol/protocol.h Settings) after the handshake and whenever the
 // attributes change. Bad values are reported (console warning, status line) and the default
 // is used instead, so a typo never makes the node refuse the session.
 

@@ -1,5 +1,5 @@
 // The scene as both backends see it: entries keyed by stable numeric ids (from 1), mirroring
-// the server's scene model (renderer/scene.h) plus what only the browser needs (elements for
+// the server's scene model (core/scene.h) plus what only the browser needs (elements for
 // picking and events, vertex colours, texture image elements).
 //
 // buffers:   id -> {id, type: 'f32'|'u32', components, data: Float32Array|Uint32Array}

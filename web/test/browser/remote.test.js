@@ -1,6 +1,6 @@
 // The server path against a mock Tessera node: a WebSocket server in Node that checks the
 // handshake and every record the page sends against the protocol (decoded with our own
-// decoder, byte-checked against net/protocol.cpp in the unit tests) and answers render
+// decoder, byte-checked against protocol/protocol.cpp in the unit tests) and answers render
 // requests with a JPEG (or DXT1) frame.
 // TODO(e2e): the same checks against a real node belong in web/test/browser/node-e2e.test.js
 // (start app/tessera-node serving web/ and ../shared/scenes, open /demo/pavilion.html?server=...).

@@ -1,10 +1,10 @@
-// Decodes client messages written by the web client with net/protocol.cpp and applies them to
+// Decodes client messages written by the web client with protocol/protocol.cpp and applies them to
 // a Scene (a check that JS-encoded bytes are accepted by the server's decoder).
 //   decode_check msg1.bin [msg2.bin ...]
 #include <cstdio>
 #include <fstream>
 #include <iterator>
-#include "net/protocol.h"
+#include "protocol/protocol.h"
 using namespace tessera;
 using namespace tessera::protocol;
 int main(int argc, char** argv) {

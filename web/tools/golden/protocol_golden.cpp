@@ -1,11 +1,11 @@
-// Writes golden protocol messages (hex, one JSON object) encoded by net/protocol.cpp, for the
+// Writes golden protocol messages (hex, one JSON object) encoded by protocol/protocol.cpp, for the
 // web client's byte-for-byte tests (web/test/unit/net/golden.json). Not part of the CMake build:
 //   g++ -std=c++17 -I../../.. protocol_golden.cpp ../../../build/net/libtessera_protocol.a \
 //       ../../../build/codecs/libtessera_codecs.a ../../../build/renderer/libtessera_scene.a -lturbojpeg -lz -o /tmp/golden
 //   /tmp/golden > ../../test/unit/net/golden.json
 #include <cstdio>
 #include <string>
-#include "net/protocol.h"
+#include "protocol/protocol.h"
 
 using namespace tessera;
 using namespace tessera::protocol;

@@ -3,7 +3,7 @@ import assert from 'node:assert/strict';
 import fs from 'node:fs';
 import { encodeClient, decodeClient, encodeServer, decodeServer, clientRecordSize, ProtocolError } from '../../../src/net/Protocol.js';
 
-// Golden messages encoded by the C++ implementation (net/protocol.cpp), made by
+// Golden messages encoded by the C++ implementation (protocol/protocol.cpp), made by
 // web/tools/golden/protocol_golden.cpp: the JS codec must match them byte for byte.
 const golden = JSON.parse(fs.readFileSync(new URL('./golden.json', import.meta.url)));
 const hex = (b) => Buffer.from(b).toString('hex');
@@ -30,7 +30,7 @@ const CLIENT = [
   { type: 'render', frame: 42 },
 ];
 
-test('client records encode exactly as net/protocol.cpp does', () => {
+test('client records encode exactly as protocol/protocol.cpp does', () => {
   assert.equal(hex(encodeClient([{ type: 'handshake', renderer: 'raytracer', display: 's3tc', jpegQuality: 80, maxNodes: 3, width: 320, height: 240 }])), golden.handshake);
   assert.equal(hex(encodeClient(CLIENT)), golden.client);
 });
@@ -54,7 +54,7 @@ test('record sizes match the encoder', () => {
   for (const r of CLIENT) assert.equal(clientRecordSize(r), encodeClient([r]).length - 8, r.type);
 });
 
-test('server records match net/protocol.cpp and round-trip', () => {
+test('server records match protocol/protocol.cpp and round-trip', () => {
   const SERVER = [
     { type: 'handshake_reply', renderer: 'raytracer', display: 'jpeg', jpegQuality: 85, nodes: 2, width: 320, height: 240,
       maxMessageBytes: 1000000, maxBufferBytes: 5000000000, serverVersion: 'tessera 0.1.0' },

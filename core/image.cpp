@@ -1,4 +1,4 @@
-#include "renderer/image.h"
+#include "core/image.h"
 
 #include <cmath>
 #include <cstring>

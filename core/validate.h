@@ -41,8 +41,8 @@
 // in words that name the bound (callers prefix the record, field, node or frame).
 #include <string>
 
-#include "renderer/math.h"
-#include "renderer/scene.h"
+#include "core/math.h"
+#include "core/scene.h"
 
 namespace tessera {
 

@@ -4,8 +4,8 @@
 #include <cstdint>
 #include <vector>
 
-#include "renderer/rect.h"
-#include "renderer/sat.h"
+#include "core/rect.h"
+#include "lb/sat.h"
 
 namespace tessera {
 

@@ -1,4 +1,4 @@
-#include "renderer/validate.h"
+#include "core/validate.h"
 
 #include <cmath>
 #include <cstdio>

@@ -1,9 +1,9 @@
-#include "renderer/scene.h"
+#include "core/scene.h"
 
 #include <algorithm>
 #include <cmath>
 
-#include "renderer/validate.h"
+#include "core/validate.h"
 
 namespace tessera {
 

@@ -1,4 +1,4 @@
-#include "renderer/sat.h"
+#include "lb/sat.h"
 
 #include <algorithm>
 #include <cmath>

@@ -9,7 +9,7 @@
 #include <cstdint>
 #include <vector>
 
-#include "renderer/rect.h"
+#include "core/rect.h"
 
 namespace tessera {
 

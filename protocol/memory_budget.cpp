@@ -1,4 +1,4 @@
-#include "net/memory_budget.h"
+#include "protocol/memory_budget.h"
 
 #include <unistd.h>
 

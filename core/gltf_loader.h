@@ -6,7 +6,7 @@
 #include <string>
 #include <vector>
 
-#include "renderer/scene.h"
+#include "core/scene.h"
 
 namespace tessera {
 

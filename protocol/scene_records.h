@@ -5,8 +5,8 @@
 #include <cstdint>
 #include <vector>
 
-#include "net/protocol.h"
-#include "renderer/scene.h"
+#include "protocol/protocol.h"
+#include "core/scene.h"
 
 namespace tessera::protocol {
 

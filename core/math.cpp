@@ -1,4 +1,4 @@
-#include "renderer/math.h"
+#include "core/math.h"
 
 namespace tessera {
 

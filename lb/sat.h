@@ -14,8 +14,8 @@
 #include <string>
 #include <vector>
 
-#include "renderer/cost_map.h"
-#include "renderer/rect.h"
+#include "core/cost_map.h"
+#include "core/rect.h"
 
 namespace tessera {
 

@@ -1,4 +1,4 @@
-#include "renderer/gltf_loader.h"
+#include "core/gltf_loader.h"
 
 #include <array>
 #include <cmath>
@@ -28,8 +28,8 @@
 #pragma GCC diagnostic pop
 #endif
 
-#include "renderer/image.h"
-#include "renderer/validate.h"
+#include "core/image.h"
+#include "core/validate.h"
 
 namespace tessera {
 namespace {
@@ -396,7 +396,7 @@ LoadedScene load_gltf(const std::string& path) {
     if (!world.finite()) throw LoadError(path + ": node '" + node.name + "' has a non-finite transform");
     const std::string node_name = path + ": node " + std::to_string(ni) + " '" + node.name + "'";
     // A zero or nearly zero scale is a common way to hide a node: its meshes are left out
-    // with a warning and the rest of the scene loads (renderer/validate.h has the bounds).
+    // with a warning and the rest of the scene loads (core/validate.h has the bounds).
     const TransformFigures figures = transform_figures(world);  // finite: checked above
     const std::string mesh_why = check_transform(figures, kMeshLimits);
     if (node.mesh >= 0 && size_t(node.mesh) < prims.size() && !mesh_why.empty())

@@ -16,7 +16,7 @@
 #include <variant>
 #include <vector>
 
-#include "renderer/scene.h"
+#include "core/scene.h"
 
 namespace tessera::protocol {
 

@@ -14,7 +14,7 @@
 #include <optional>
 #include <vector>
 
-#include "net/protocol.h"
+#include "protocol/protocol.h"
 
 namespace tessera {
 

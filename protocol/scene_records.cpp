@@ -1,4 +1,4 @@
-#include "net/scene_records.h"
+#include "protocol/scene_records.h"
 
 namespace tessera::protocol {
 

@@ -1,4 +1,4 @@
-#include "net/protocol.h"
+#include "protocol/protocol.h"
 
 #include <cmath>
 #include <cstring>
@@ -6,8 +6,8 @@
 
 #include "codecs/deflate.h"
 #include "codecs/jpeg.h"
-#include "renderer/image.h"
-#include "renderer/validate.h"
+#include "core/image.h"
+#include "core/validate.h"
 
 static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "the wire format is little endian and read with memcpy");
 
@@ -547,7 +547,7 @@ class ClientDecoder {
         if (!c.finite(s.camera.to_world, "to_world") || !c.finite(s.camera.fov_y, "fov_y")) return false;
         if (!(s.camera.fov_y > 0 && s.camera.fov_y < kPi))
           return c.fail(ErrorCode::out_of_range, "fov_y = " + std::to_string(s.camera.fov_y) + " outside (0, pi)");
-        // Invertible, well-conditioned and bounded (renderer/validate.h): a huge or nearly
+        // Invertible, well-conditioned and bounded (core/validate.h): a huge or nearly
         // singular camera would give rays that Embree asserts on.
         if (std::string why = check_transform(s.camera.to_world, kCameraLimits); !why.empty())
           return c.fail(ErrorCode::out_of_range, "to_world: " + why);
@@ -806,7 +806,7 @@ class ClientDecoder {
       return false;
     if (l.type != Light::Type::point && dot(l.direction, l.direction) == 0)
       return c.fail(ErrorCode::out_of_range, "direction is zero");
-    // Shadow rays aim at point and spot lights and along the others' directions (renderer/validate.h).
+    // Shadow rays aim at point and spot lights and along the others' directions (core/validate.h).
     if (l.type != Light::Type::directional)
       if (std::string why = check_point(l.position); !why.empty()) return c.fail(ErrorCode::out_of_range, "position " + why);
     if (l.type != Light::Type::point)

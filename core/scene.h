@@ -14,7 +14,7 @@
 #include <string>
 #include <vector>
 
-#include "renderer/math.h"
+#include "core/math.h"
 
 namespace tessera {
 
@@ -148,7 +148,7 @@ class Scene {
 
   // Checks a mesh against the buffers it references: existence, element types and
   // component counts, matching vertex counts, index range, finite positions, and its
-  // transform against the bounds of renderer/validate.h (check_transform with kMeshLimits,
+  // transform against the bounds of core/validate.h (check_transform with kMeshLimits,
   // and the world box its vertices land in), so that a scene built in code and never
   // validated still hands Embree nothing it asserts on. Returns an
   // empty string when the mesh can be rendered, else what is wrong. A missing material is

@@ -1,4 +1,4 @@
-#include "renderer/tiler.h"
+#include "lb/tiler.h"
 
 #include <cmath>
 #include <sstream>
