@@ -1,4 +1,5 @@
 #include "renderer/raytracer.h"
+#include "renderer/embree_device.h"
 
 #include "core/validate.h"
 
@@ -235,7 +236,8 @@ struct RayTracer::Impl {
   };
   using GeomKey = std::tuple<Id, Id, Id, Id>;  // positions, normals, texcoords, indices
 
-  RTCDevice device = nullptr;
+  std::shared_ptr<EmbreeDevice> shared_device = EmbreeDevice::acquire();  // one per process
+  RTCDevice device = shared_device->get();
   RTCScene top = nullptr;
   PacketLayout layout;
   std::map<GeomKey, Geom> geoms;
@@ -273,14 +275,13 @@ struct RayTracer::Impl {
   SyncStats stats;
   bool committed = false;
 
-  static void on_error(void*, RTCError code, const char* str) {
-    std::fprintf(stderr, "embree error %d: %s\n", int(code), str ? str : "");
+  // Throws what the device reported since `before` (EmbreeDevice::errors()): the frame or
+  // sync that saw it fails with Embree's message instead of going on with a broken scene.
+  void check_device(uint64_t before) const {
+    if (shared_device->errors() != before) throw std::runtime_error(shared_device->last_error());
   }
 
   explicit Impl(PacketLayout l) : layout(l) {
-    device = rtcNewDevice(nullptr);
-    if (!device) throw std::runtime_error("cannot create the Embree device");
-    rtcSetDeviceErrorFunction(device, on_error, nullptr);
     top = rtcNewScene(device);
     rtcSetSceneFlags(top, RTC_SCENE_FLAG_DYNAMIC);
     rtcSetSceneBuildQuality(top, RTC_BUILD_QUALITY_LOW);
@@ -290,7 +291,6 @@ struct RayTracer::Impl {
     for (auto& [id, inst] : insts) rtcReleaseGeometry(inst.geom);
     for (auto& [k, g] : geoms) rtcReleaseScene(g.blas);
     rtcReleaseScene(top);
-    rtcReleaseDevice(device);
   }
 
   static Material default_material() {  // XML3D: matte red
@@ -702,7 +702,11 @@ RayTracer::RayTracer(PacketLayout layout) {
 }
 RayTracer::~RayTracer() = default;
 
-void RayTracer::sync(const Scene& scene, std::vector<std::string>& warnings) { impl_->sync(scene, warnings); }
+void RayTracer::sync(const Scene& scene, std::vector<std::string>& warnings) {
+  const uint64_t before = impl_->shared_device->errors();
+  impl_->sync(scene, warnings);
+  impl_->check_device(before);
+}
 PacketLayout RayTracer::packet_layout() const { return impl_->layout; }
 void RayTracer::set_camera_check(bool on) { impl_->camera_check = on; }
 SceneFeatures RayTracer::features() const { return impl_->features; }
@@ -741,7 +745,9 @@ static void render_for_scene(const RayTracer& rt, const RayTracer::Impl& impl, c
 }
 
 void RayTracer::render(const Rect& pixels, const RenderSettings& settings, TaskResult& out) {
+  const uint64_t before = impl_->shared_device->errors();
   render_for_scene(*this, *impl_, pixels, settings, out);
+  impl_->check_device(before);
 }
 
 void RayTracer::render_general(const Rect& pixels, const RenderSettings& settings, TaskResult& out) {

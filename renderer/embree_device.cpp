@@ -1,0 +1,67 @@
+#include "renderer/embree_device.h"
+
+#include <cstdio>
+#include <stdexcept>
+
+namespace tessera {
+
+namespace {
+
+std::mutex g_mu;
+std::weak_ptr<EmbreeDevice> g_device;
+std::atomic<size_t> g_live{0};
+
+const char* code_name(RTCError code) {
+  switch (code) {
+    case RTC_ERROR_NONE: return "none";
+    case RTC_ERROR_UNKNOWN: return "unknown error";
+    case RTC_ERROR_INVALID_ARGUMENT: return "invalid argument";
+    case RTC_ERROR_INVALID_OPERATION: return "invalid operation";
+    case RTC_ERROR_OUT_OF_MEMORY: return "out of memory";
+    case RTC_ERROR_UNSUPPORTED_CPU: return "unsupported CPU";
+    case RTC_ERROR_CANCELLED: return "cancelled";
+  }
+  return "error";
+}
+
+}  // namespace
+
+std::shared_ptr<EmbreeDevice> EmbreeDevice::acquire() {
+  std::lock_guard<std::mutex> l(g_mu);
+  if (auto d = g_device.lock()) return d;
+  std::shared_ptr<EmbreeDevice> d(new EmbreeDevice());
+  g_device = d;
+  return d;
+}
+
+size_t EmbreeDevice::live() { return g_live.load(); }
+
+EmbreeDevice::EmbreeDevice() {
+  device_ = rtcNewDevice(nullptr);
+  if (!device_) throw std::runtime_error("cannot create the Embree device: " + std::string(code_name(rtcGetDeviceError(nullptr))));
+  rtcSetDeviceErrorFunction(device_, on_error, this);
+  ++g_live;
+}
+
+EmbreeDevice::~EmbreeDevice() {
+  rtcReleaseDevice(device_);
+  --g_live;
+}
+
+std::string EmbreeDevice::last_error() const {
+  std::lock_guard<std::mutex> l(mu_);
+  return last_;
+}
+
+void EmbreeDevice::on_error(void* self, RTCError code, const char* message) {
+  auto* d = static_cast<EmbreeDevice*>(self);
+  std::string what = std::string("embree: ") + code_name(code) + ": " + (message ? message : "");
+  std::fprintf(stderr, "%s\n", what.c_str());  // the operator sees it even when no frame fails
+  {
+    std::lock_guard<std::mutex> l(d->mu_);
+    d->last_ = std::move(what);
+  }
+  d->errors_.fetch_add(1, std::memory_order_release);
+}
+
+}  // namespace tessera

@@ -1,0 +1,45 @@
+#pragma once
+// One Embree device per process, shared by every ray tracer (issue 17): a session no longer
+// makes its own. The device lives while some ray tracer holds it (acquire()), and records the
+// errors Embree reports through its error callback: a count and the last message. Embree has
+// one callback per device, not per scene, so a ray tracer notices an error by the count moving
+// during its own sync or render; with several ray tracers at work at once, an error in one may
+// be seen by another as well (it then fails a frame it could have rendered: never the reverse).
+#include <atomic>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <string>
+
+#include <embree3/rtcore.h>
+
+namespace tessera {
+
+class EmbreeDevice {
+ public:
+  // The process's device, made on first use and again after the last holder released it.
+  // Throws std::runtime_error when Embree cannot make one.
+  static std::shared_ptr<EmbreeDevice> acquire();
+  // How many devices exist now (0 or 1; for tests).
+  static size_t live();
+
+  ~EmbreeDevice();
+  EmbreeDevice(const EmbreeDevice&) = delete;
+  EmbreeDevice& operator=(const EmbreeDevice&) = delete;
+
+  RTCDevice get() const { return device_; }
+  uint64_t errors() const { return errors_.load(std::memory_order_acquire); }
+  // "embree: <code name>: <message>" of the last error reported; empty before the first.
+  std::string last_error() const;
+
+ private:
+  EmbreeDevice();
+  static void on_error(void* self, RTCError code, const char* message);
+
+  RTCDevice device_ = nullptr;
+  std::atomic<uint64_t> errors_{0};
+  mutable std::mutex mu_;
+  std::string last_;
+};
+
+}  // namespace tessera
