@@ -136,8 +136,15 @@ int run(const std::vector<std::string>& argv) {
   }
   std::unique_ptr<Server> server;
   if (cfg.http) {
-    server = std::make_unique<Server>(sys, settings, opts);
-    server->start();
+    try {
+      server = std::make_unique<Server>(sys, settings, opts);
+      server->start();
+    } catch (...) {
+      // The node actor ticks forever: without its exit the actor system's destructor waited
+      // for it, and with the stop signals blocked the process hung on a port in use.
+      if (node) caf::anon_send_exit(node, caf::exit_reason::user_shutdown);
+      throw;
+    }
   }
   std::string kids;
   for (auto& c : cfg.children) kids += (kids.empty() ? "" : ", ") + json_str(c);

@@ -122,6 +122,16 @@ TEST_CASE("tessera serve exits non-zero with a clear error on a missing config, 
     INFO("stderr: " << second.err());
     CHECK(second.err().find(std::to_string(port)) != std::string::npos);
     CHECK(second.out().find("listening") == std::string::npos);
+    // A cluster master (its node actor ticks) on the port in use exits too; it used to hang
+    // waiting for the node actor, deaf to SIGTERM.
+    Process master(serve({"--port", std::to_string(port), "--no-render", "--children", "127.0.0.1:1"}));
+    auto mst = master.wait(15000);
+    if (!mst) master.signal(SIGKILL);
+    REQUIRE(mst);
+    CHECK(WIFEXITED(*mst));
+    CHECK(WEXITSTATUS(*mst) != 0);
+    INFO("master stderr: " << master.err());
+    CHECK(master.err().find(std::to_string(port)) != std::string::npos);
     // The first node is unaffected and still stops cleanly.
     auto page = http::get("127.0.0.1", port, "/");
     REQUIRE(page);
