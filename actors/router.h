@@ -159,17 +159,6 @@ class Router {
       }
   }
 
-  // Bytes of scene updates queued or unacknowledged, over all children (for tests and logs).
-  size_t update_backlog() const {
-    size_t n = 0;
-    for (auto& c : children) {
-      n += c.outbox.in_flight;
-      for (auto& it : c.outbox.items)
-        if (it.update) n += it.update->size() - it.offset;
-    }
-    return n;
-  }
-
   // Tells every live child that its parent is alive (an empty update, as the adoption notice):
   // called every keepalive_ms. A worker that hears nothing from its parent for
   // NodeSettings::keepalive_misses periods ends itself (cluster.cpp).

@@ -121,30 +121,28 @@ int run(const std::vector<std::string>& argv) {
   caf::actor_system sys{cfg};
   node_actor node;
   int published = -1;
-  if (cfg.cluster()) {
-    node = spawn_node(sys, settings);
-    settings->node = caf::actor_cast<caf::weak_actor_ptr>(node);
-    if (cfg.cluster_port >= 0) {
-      auto p = sys.middleman().publish(node, uint16_t(cfg.cluster_port), cfg.cluster_host.c_str(), true);
-      if (!p) {
-        caf::anon_send_exit(node, caf::exit_reason::user_shutdown);
-        throw std::invalid_argument("cannot publish the node on " + cfg.cluster_host + ":" +
-                                    std::to_string(cfg.cluster_port) + ": " + sys.render(p.error()));
-      }
-      published = *p;
-    }
-  }
   std::unique_ptr<Server> server;
-  if (cfg.http) {
-    try {
+  try {
+    if (cfg.cluster()) {
+      node = spawn_node(sys, settings);
+      settings->node = caf::actor_cast<caf::weak_actor_ptr>(node);
+      if (cfg.cluster_port >= 0) {
+        auto p = sys.middleman().publish(node, uint16_t(cfg.cluster_port), cfg.cluster_host.c_str(), true);
+        if (!p)
+          throw std::invalid_argument("cannot publish the node on " + cfg.cluster_host + ":" +
+                                      std::to_string(cfg.cluster_port) + ": " + sys.render(p.error()));
+        published = *p;
+      }
+    }
+    if (cfg.http) {
       server = std::make_unique<Server>(sys, settings, opts);
       server->start();
-    } catch (...) {
-      // The node actor ticks forever: without its exit the actor system's destructor waited
-      // for it, and with the stop signals blocked the process hung on a port in use.
-      if (node) caf::anon_send_exit(node, caf::exit_reason::user_shutdown);
-      throw;
     }
+  } catch (...) {
+    // The node actor ticks forever: without its exit the actor system's destructor waits for
+    // it, and with the stop signals blocked the process would hang (on a port in use, say).
+    if (node) caf::anon_send_exit(node, caf::exit_reason::user_shutdown);
+    throw;
   }
   std::string kids;
   for (auto& c : cfg.children) kids += (kids.empty() ? "" : ", ") + json_str(c);

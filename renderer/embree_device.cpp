@@ -9,7 +9,6 @@ namespace {
 
 std::mutex g_mu;
 std::weak_ptr<EmbreeDevice> g_device;
-std::atomic<size_t> g_live{0};
 
 const char* code_name(RTCError code) {
   switch (code) {
@@ -34,18 +33,19 @@ std::shared_ptr<EmbreeDevice> EmbreeDevice::acquire() {
   return d;
 }
 
-size_t EmbreeDevice::live() { return g_live.load(); }
+size_t EmbreeDevice::live() {
+  std::lock_guard<std::mutex> l(g_mu);
+  return g_device.expired() ? 0 : 1;
+}
 
 EmbreeDevice::EmbreeDevice() {
   device_ = rtcNewDevice(nullptr);
   if (!device_) throw std::runtime_error("cannot create the Embree device: " + std::string(code_name(rtcGetDeviceError(nullptr))));
   rtcSetDeviceErrorFunction(device_, on_error, this);
-  ++g_live;
 }
 
 EmbreeDevice::~EmbreeDevice() {
   rtcReleaseDevice(device_);
-  --g_live;
 }
 
 std::string EmbreeDevice::last_error() const {

@@ -68,6 +68,16 @@ struct fixture : test_coordinator_fixture<TestConfig> {
   }
 };
 
+// A buffer of n floats (0.5), id `id`: 4n bytes against the client's byte limits.
+SetBuffer floats(Id id, size_t n) {
+  SetBuffer b;
+  b.id = id;
+  b.buffer.type = Buffer::Type::f32;
+  b.buffer.components = 1;
+  b.buffer.f.assign(n, 0.5f);
+  return b;
+}
+
 }  // namespace
 
 CAF_TEST_FIXTURE_SCOPE(session_tests, fixture)
@@ -104,14 +114,6 @@ CAF_TEST(scene updates are applied at once between frames and cached while a fra
 
 CAF_TEST(updates cached during a frame count against the byte limit of the client as if applied) {
   settings->limits.max_client_bytes = 72 + 200;  // tiny_scene holds 72 bytes of buffers
-  auto floats = [](Id id, size_t n) {
-    SetBuffer b;
-    b.id = id;
-    b.buffer.type = Buffer::Type::f32;
-    b.buffer.components = 1;
-    b.buffer.f.assign(n, 0.5f);
-    return b;
-  };
   client({SetCamera{camera_at(3)}, RenderRequest{1}});
   deliver_client();
   // 160 bytes fit; 160 more would not, so that buffer is refused now, not after the frame.
@@ -237,15 +239,6 @@ CAF_TEST(malformed and inconsistent messages get errors and the session keeps re
   CAF_CHECK_EQUAL(errors[1].code, ErrorCode::bad_mesh);
   CAF_CHECK_EQUAL(errors[1].record, 0u);
   CAF_CHECK_EQUAL(frames_sent(), std::vector<uint32_t>{5});
-}
-
-SetBuffer floats(Id id, size_t n) {
-  SetBuffer b;
-  b.id = id;
-  b.buffer.type = Buffer::Type::f32;
-  b.buffer.components = 1;
-  b.buffer.f.assign(n, 0.5f);
-  return b;
 }
 
 CAF_TEST(the node budget holds the scene and refuses only the update that would cross it) {
