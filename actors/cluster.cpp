@@ -141,7 +141,7 @@ struct worker_state {
   std::vector<std::pair<std::vector<uint8_t>, bool>> cached;  // updates that arrived while rendering
   std::vector<uint8_t> partial;  // the chunks of an update received so far (cluster_protocol.h)
   bool partial_reset = false;
-  bool partial_dropped = false;  // the update being received went over kMaxPeerBytes
+  bool partial_dropped = false;  // the update being received went over settings->max_update_bytes
   bool in_flight = false;
   std::string broken;  // an update this node could not apply: its tiles would be wrong
   // A parent that adopts this worker (the open's reply reached it in time) sends it an empty
@@ -273,9 +273,9 @@ worker_actor::behavior_type worker_impl(worker_ptr self, std::shared_ptr<const N
         st.adopted = true;
         const uint64_t n = chunk.bytes.size();
         if (st.partial.empty() && !st.partial_dropped) st.partial_reset = reset;
-        if (st.partial_dropped || st.partial.size() + n > kMaxPeerBytes) {
+        if (st.partial_dropped || st.partial.size() + n > st.settings->max_update_bytes) {
           if (!st.partial_dropped) {
-            st.broken = "a scene update over " + std::to_string(kMaxPeerBytes) + " bytes";
+            st.broken = "a scene update over " + std::to_string(st.settings->max_update_bytes) + " bytes";
             worker_log(self, "\"update_failed\": " + json_quote(st.broken));
           }
           st.partial_dropped = true;

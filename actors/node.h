@@ -48,6 +48,9 @@ struct NodeSettings {
                                       // further open requests are refused
   uint32_t keepalive_misses = 10;     // a worker whose parent was silent for this many of the
                                       // parent's keep-alive periods ends itself
+  uint64_t max_update_bytes = kMaxPeerBytes;  // the largest scene update a worker reassembles
+                                              // from its parent's chunks; a larger one breaks
+                                              // its scene until a reset update replaces it
   caf::weak_actor_ptr node;           // this process's node actor (none: a single node)
   // --- Resource bounds (docs/operations.md, "Resource bounds") ---
   uint32_t handshake_timeout_ms = 5000;  // a session without a valid handshake by then is closed

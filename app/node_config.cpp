@@ -63,6 +63,7 @@ NodeConfig::NodeConfig() {
       .add(task_timeout_ms, "task-timeout-ms", "fail a sub-tree that has not returned its tiles after this long")
       .add(reconnect_ms, "reconnect-ms", "retry period for lost child nodes; keep-alive period to workers below")
       .add(max_workers, "max-workers", "live session workers on this node; more opens are refused (0: 2 x max-clients)")
+      .add(max_update_bytes, "max-update-bytes", "the largest scene update a worker takes from its parent (chunks)")
       .add(keepalive_misses, "keepalive-misses",
            "a worker whose parent sent nothing for this many keep-alive periods ends itself");
   custom_options_.add(string_list_option(
@@ -110,6 +111,9 @@ std::shared_ptr<NodeSettings> NodeConfig::node_settings() const {
   if (keepalive_misses < 2 || keepalive_misses > 1000)
     throw std::invalid_argument("tessera.keepalive-misses must be in 2..1000");
   s->keepalive_misses = uint32_t(keepalive_misses);
+  if (max_update_bytes < 1 || uint64_t(max_update_bytes) > kMaxPeerBytes)
+    throw std::invalid_argument("tessera.max-update-bytes must be in 1.." + std::to_string(kMaxPeerBytes));
+  s->max_update_bytes = uint64_t(max_update_bytes);
   s->name = !name.empty() ? name
             : cluster_port > 0  ? cluster_host + ":" + std::to_string(cluster_port)
             : cluster_port == 0 ? cluster_host + ":any/pid" + std::to_string(getpid())

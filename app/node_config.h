@@ -47,6 +47,7 @@ struct NodeConfig : caf::actor_system_config {
   int reconnect_ms = 1000;        // also the period of the keep-alives sent to workers below
   int max_workers = 0;            // live workers on this node (0: 2 x max-clients)
   int keepalive_misses = 10;      // a worker ends after this many keep-alive periods of silence
+  int64_t max_update_bytes = int64_t(kMaxPeerBytes);  // the largest scene update a worker takes
   bool cluster() const { return cluster_port >= 0 || !children.empty(); }
 
   NodeConfig();

@@ -572,6 +572,57 @@ CAF_TEST(a worker fails every tile of a batch outside the node limits and serves
   sched.run();
 }
 
+CAF_TEST(a worker refuses an update whose chunks add up to more than max_update_bytes and recovers on a reset) {
+  settings->max_update_bytes = 1000;
+  OpenRequest req = good_open(3);
+  auto w = spawn_worker(sys, settings, node_actor{}, req, caf::actor_cast<caf::strong_actor_ptr>(self));
+  sched.run();
+  auto acks = std::make_shared<std::vector<uint64_t>>();
+  auto replies = std::make_shared<std::vector<BatchReply>>();
+  auto parent = sys.spawn([=](caf::event_based_actor* a) -> caf::behavior {
+    return {
+        [=](Payload& chunk, bool reset, bool last) {
+          a->request(w, caf::infinite, update_atom::value, std::move(chunk), reset, last)
+              .then([=](uint64_t n) { acks->push_back(n); });
+        },
+        [=](RenderBatch& b) {
+          a->request(w, caf::infinite, render_atom::value, std::move(b)).then([=](BatchReply& r) { replies->push_back(r); });
+        },
+    };
+  });
+  auto chunk = [&](std::vector<uint8_t> bytes, bool reset, bool last) {
+    self->send(parent, Payload{std::move(bytes)}, reset, last);
+    sched.run();
+  };
+  // 600 + 600 bytes of one update: over the bound at the second chunk; the rest of it is
+  // taken and acknowledged, and nothing of it is applied.
+  chunk(std::vector<uint8_t>(600, 7), true, false);
+  chunk(std::vector<uint8_t>(600, 7), true, false);
+  chunk(std::vector<uint8_t>(10, 7), true, true);
+  CAF_CHECK_EQUAL(*acks, (std::vector<uint64_t>{600, 600, 10}));
+  CAF_CHECK_EQUAL(logged("\"update_failed\": \"a scene update over 1000 bytes\""), 1u);
+  self->send(parent, good_batch());
+  sched.run();
+  CAF_REQUIRE_EQUAL(replies->size(), 1u);
+  CAF_REQUIRE_EQUAL(replies->back().tiles.size(), 1u);
+  CAF_CHECK(replies->back().tiles[0].error.find("has no valid scene") != std::string::npos);
+  // A reset update within the bound, in two chunks, replaces the scene: it renders again.
+  const std::vector<uint8_t> scene = encode(tiny_scene());
+  CAF_REQUIRE_LESS(scene.size(), 1000u);
+  const size_t half = scene.size() / 2;
+  chunk(std::vector<uint8_t>(scene.begin(), scene.begin() + long(half)), true, false);
+  chunk(std::vector<uint8_t>(scene.begin() + long(half), scene.end()), true, true);
+  self->send(parent, good_batch());
+  sched.run();
+  CAF_REQUIRE_EQUAL(replies->size(), 2u);
+  CAF_REQUIRE_EQUAL(replies->back().tiles.size(), 1u);
+  CAF_CHECK_EQUAL(replies->back().tiles[0].error, "");
+  CAF_CHECK_EQUAL(replies->back().tiles[0].rgba.size(), size_t(kSize * kSize * 4));
+  self->send_exit(parent, caf::exit_reason::user_shutdown);
+  self->send_exit(w, caf::exit_reason::user_shutdown);
+  sched.run();
+}
+
 CAF_TEST_FIXTURE_SCOPE_END()
 
 // Log lines carry names and messages from clients and peers: they must stay one JSON object.

@@ -178,6 +178,14 @@ TEST_CASE("tessera serve takes the resource bounds from its settings", "[e2e]") 
     CHECK(WEXITSTATUS(*status) != 0);
     CHECK(p.err().find("handshake-timeout-ms") != std::string::npos);
   }
+  for (const char* bad : {"0", "-5", "2000000000000"}) {
+    INFO("max-update-bytes = " << bad);
+    Process p(serve({"--port", "0", std::string("--tessera.max-update-bytes=") + bad}));
+    auto status = p.wait(15000);
+    REQUIRE(status);
+    CHECK(WEXITSTATUS(*status) != 0);
+    CHECK(p.err().find("max-update-bytes") != std::string::npos);
+  }
 }
 
 TEST_CASE("tessera.web-public takes only relative folders ending in '/', and serves exactly those", "[e2e]") {
