@@ -25,7 +25,9 @@
 //     update chunk -> (bytes, reset, last): a piece of one update, acknowledged with its size
 //                  when the worker takes it; the worker applies the update at `last`. Parents
 //                  send updates this way, a window of chunks at a time (Outbox, router.h), so
-//                  no burst of uploads piles up in a connection's buffers.
+//                  no burst of uploads piles up in a connection's buffers; a small update
+//                  (a frame's camera) goes as one plain update while less than a chunk is
+//                  unacknowledged.
 //     render    -> BatchReply: renders its own task, relays the others, validates what the
 //                  children return, fails the tasks of a child that is down or too late. A
 //                  batch outside this node's limits fails every tile (check_batch, router.h).

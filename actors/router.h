@@ -66,7 +66,9 @@ inline RenderTask task_of(const RenderBatch& b, const Rect& pixels) {
 
 // What waits to go to one child, in order: scene updates, sent in chunks of at most
 // kUpdateChunkBytes with at most kUpdateWindowBytes sent and not yet acknowledged, and the
-// batches that must reach the child after them. Without the window a burst of uploads went
+// batches that must reach the child after them. A small update (a frame's camera) goes as one
+// plain message while less than a chunk is unacknowledged; the next acknowledged chunk
+// covers it, because a worker takes its messages in order. Without the window a burst of uploads went
 // into the CAF connection's write buffers whole, and those buffers keep their largest size
 // for as long as the connection lives (a dedicated master held 248 MB of them after six
 // 15.6 MB uploads to two workers; docs/results/soak.md).
@@ -78,7 +80,9 @@ struct Outbox {
     std::function<void()> send;
   };
   std::deque<Item> items;
-  size_t in_flight = 0;  // chunk bytes sent and not yet acknowledged
+  uint64_t sent = 0;   // update bytes sent to the child so far
+  uint64_t acked = 0;  // of those, the bytes up to the last acknowledged chunk
+  uint64_t in_flight() const { return sent - acked; }
 };
 constexpr size_t kUpdateChunkBytes = size_t(256) << 10;
 constexpr size_t kUpdateWindowBytes = size_t(1) << 20;
@@ -430,22 +434,30 @@ class Router {
         send();
         continue;
       }
-      if (box.in_flight >= kUpdateWindowBytes) return;
-      const size_t n = std::min(kUpdateChunkBytes, it.update->size() - it.offset);
+      const size_t size = it.update->size();
+      if (it.offset == 0 && box.in_flight() + size <= kUpdateChunkBytes) {
+        self->send(c.worker, update_atom::value, Payload{*it.update}, it.reset);
+        box.sent += size;
+        box.items.pop_front();
+        continue;
+      }
+      if (box.in_flight() >= kUpdateWindowBytes) return;
+      const size_t n = std::min(kUpdateChunkBytes, size - it.offset);
       Payload chunk;
       chunk.bytes.assign(it.update->begin() + long(it.offset), it.update->begin() + long(it.offset + n));
       it.offset += n;
       const bool last = it.offset == it.update->size();
       const bool reset = it.reset;
       if (last) box.items.pop_front();
-      box.in_flight += n;
+      box.sent += n;
+      const uint64_t mark = box.sent;
       const caf::actor_addr addr = c.worker.address();
       self->request(c.worker, caf::infinite, update_atom::value, std::move(chunk), reset, last)
           .then(
               [=](uint64_t) {
                 for (auto& x : children)
                   if (x.alive && x.worker.address() == addr) {
-                    x.outbox.in_flight -= std::min(n, x.outbox.in_flight);
+                    x.outbox.acked = std::max(x.outbox.acked, mark);
                     pump(self, x);
                     return;
                   }

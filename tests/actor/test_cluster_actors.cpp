@@ -36,6 +36,7 @@ struct FakeLog {
   size_t updates = 0;      // whole updates (the last chunk of each)
   size_t chunks = 0;       // update chunks received
   size_t chunk_bytes = 0;  // their bytes
+  size_t plain_bytes = 0;  // bytes of whole updates sent as one plain message
   size_t max_chunk = 0;    // the largest chunk
   std::vector<std::string> order;  // "u" per whole update, "b" per batch, as they arrived
   std::vector<caf::response_promise> held;
@@ -49,6 +50,7 @@ worker_actor::behavior_type fake_worker(worker_actor::pointer self, Mode mode, s
       [=](update_atom, Payload& payload, bool reset) {
         auto& bytes = payload.bytes;
         if (!bytes.empty() || reset) log->updates++;  // not the adoption notice
+        log->plain_bytes += bytes.size();
       },
       [=](update_atom, Payload& chunk, bool, bool last) -> caf::result<uint64_t> {
         log->chunks++;
@@ -262,6 +264,37 @@ CAF_TEST(a big update goes down in chunks within the window and the batch of the
   CAF_CHECK_EQUAL(log->order.back(), "b");  // after the update it renders
   CAF_CHECK_EQUAL(log->order[log->order.size() - 2], "u");
   CAF_CHECK_EQUAL(frames_sent(), std::vector<uint32_t>{1});
+  CAF_CHECK_EQUAL(sink->all<ErrorReply>().size(), 0u);
+}
+
+CAF_TEST(small updates go as plain messages while less than a chunk is unacknowledged and then through the window) {
+  auto log = std::make_shared<FakeLog>();
+  auto last = std::make_shared<worker_actor>();
+  add_child("slow:1", caf::actor_cast<caf::actor>(sys.spawn(fake_node, Mode::slow_acks, log, last)));
+  start();
+  const size_t plain_at_start = log->plain_bytes;  // the snapshot and the upload: small
+  CAF_CHECK_GREATER(plain_at_start, 0u);
+  CAF_CHECK_EQUAL(log->chunks, 0u);
+  // 2 MiB in 4 KiB updates, none acknowledged: a chunk's worth goes plain, then one window of
+  // acknowledged ones, and the rest waits.
+  for (Id i = 0; i < 512; ++i) {
+    SetBuffer b;
+    b.id = 100 + i;
+    b.buffer.type = Buffer::Type::f32;
+    b.buffer.components = 1;
+    b.buffer.f.assign(1000, 0.5f);
+    self->send(session, client_atom::value, encode(std::vector<ClientRecord>{b}));
+  }
+  sched.run();
+  CAF_CHECK_LESS_OR_EQUAL(log->plain_bytes, kUpdateChunkBytes);
+  CAF_CHECK_GREATER(log->chunks, 0u);
+  CAF_CHECK_LESS_OR_EQUAL(log->plain_bytes + log->chunk_bytes, kUpdateChunkBytes + kUpdateWindowBytes);
+  // Acknowledged, everything arrives.
+  for (int round = 0; round < 1000 && !log->held_acks.empty(); ++round) {
+    self->send(*last, tick_atom::value);
+    sched.run();
+  }
+  CAF_CHECK_EQUAL(log->updates, 2u + 512u);
   CAF_CHECK_EQUAL(sink->all<ErrorReply>().size(), 0u);
 }
 
