@@ -66,15 +66,12 @@ std::string check_nodes(const std::vector<NodeInfo>& nodes) {
   return {};
 }
 
-std::string nodes_json(const std::vector<NodeInfo>& nodes) {
-  std::string s = "[";
-  for (size_t i = 0; i < nodes.size(); ++i) {
-    char buf[64];
-    std::snprintf(buf, sizeof buf, ", \"cores\": %d, \"perf\": %.3g}", nodes[i].logical_cores,
-                  std::isfinite(nodes[i].single_core_perf) ? nodes[i].single_core_perf : 0.0);
-    s += (i ? ", " : "") + std::string("{\"name\": ") + json_quote(nodes[i].name) + buf;
-  }
-  return s + "]";
+Json nodes_value(const std::vector<NodeInfo>& nodes) {
+  std::vector<Json> out;
+  out.reserve(nodes.size());
+  for (const NodeInfo& n : nodes)
+    out.push_back(Json::object({{"name", n.name}, {"cores", n.logical_cores}, {"perf", Json::number(n.single_core_perf)}}));
+  return Json::array(std::move(out));
 }
 
 std::string check_open(const OpenRequest& req) {
@@ -159,10 +156,10 @@ struct worker_state {
 };
 using worker_ptr = worker_actor::stateful_pointer<worker_state>;
 
-void worker_log(worker_ptr self, const std::string& what) {
+void worker_log(worker_ptr self, Event e) {
   auto& st = self->state;
-  node_log(*st.settings, "{\"node\": " + json_quote(st.settings->name) + ", \"session\": " +
-                             std::to_string(st.req.session) + ", " + what + "}");
+  e.scope = {{"node", st.settings->name}, {"session", st.req.session}};
+  node_log(*st.settings, std::move(e));
 }
 
 // A message from this worker's parent (or from anyone, for a worker without one): it is alive.
@@ -193,7 +190,7 @@ void worker_apply(worker_ptr self, const std::vector<uint8_t>& bytes, bool reset
   std::string err = apply_records(*st.scene, bytes, st.settings->limits);
   if (!err.empty() && st.broken.empty()) {
     st.broken = err;
-    worker_log(self, "\"update_failed\": " + json_quote(err));
+    worker_log(self, Event(Ev::update_failed, err));
   }
 }
 
@@ -220,7 +217,7 @@ worker_actor::behavior_type worker_impl(worker_ptr self, std::shared_ptr<const N
   st.node = std::move(node);
   st.req = req;
   st.router.layout = {req.packet_w, req.packet_h};
-  st.router.log = [self](const std::string& line) { worker_log(self, line); };
+  st.router.log = [self](Event e) { worker_log(self, std::move(e)); };
   if (st.settings->render) {
     st.router.self_node = st.settings->info();
     st.renderer = spawn_renderer(self->system(), st.router.layout, st.settings->detached);
@@ -237,8 +234,7 @@ worker_actor::behavior_type worker_impl(worker_ptr self, std::shared_ptr<const N
     if (from_parent || (self->state.node && m.source == self->state.node.address())) {
       // The session ended (or the parent worker did), its connection to this node broke, or
       // this node is shutting down.
-      worker_log(self, std::string("\"ended\": ") + (from_parent ? "\"parent down\"" : "\"node down\"") +
-                           ", \"reason\": " + json_quote(to_string(m.reason)));
+      worker_log(self, Event(Ev::ended, from_parent ? "parent down" : "node down").with("reason", to_string(m.reason)));
       self->quit(caf::exit_reason::user_shutdown);
       return;
     }
@@ -276,7 +272,7 @@ worker_actor::behavior_type worker_impl(worker_ptr self, std::shared_ptr<const N
         if (st.partial_dropped || st.partial.size() + n > st.settings->max_update_bytes) {
           if (!st.partial_dropped) {
             st.broken = "a scene update over " + std::to_string(st.settings->max_update_bytes) + " bytes";
-            worker_log(self, "\"update_failed\": " + json_quote(st.broken));
+            worker_log(self, Event(Ev::update_failed, st.broken));
           }
           st.partial_dropped = true;
           st.partial = {};
@@ -294,7 +290,7 @@ worker_actor::behavior_type worker_impl(worker_ptr self, std::shared_ptr<const N
         // Checked like a client's requests on this node: a bad batch fails every tile and the
         // worker serves on.
         if (std::string bad = check_batch(batch, self->state.settings->limits); !bad.empty()) {
-          worker_log(self, "\"bad_batch\": " + json_quote(bad));
+          worker_log(self, Event(Ev::bad_batch, bad));
           return failed_batch(batch, "node " + self->state.settings->name + " refused the batch: " + bad);
         }
         auto rp = self->make_response_promise<BatchReply>();
@@ -352,7 +348,7 @@ worker_actor::behavior_type worker_impl(worker_ptr self, std::shared_ptr<const N
         // for its adoption notice (an empty update, sent before the scene) to arrive.
         if (!st.adopted && st.req.timeout_ms > 0 &&
             std::chrono::steady_clock::now() - st.opened_at > std::chrono::milliseconds(2 * uint64_t(st.req.timeout_ms))) {
-          worker_log(self, "\"orphaned\": true");
+          worker_log(self, Event(Ev::orphaned, true));
           self->quit(caf::exit_reason::user_shutdown);
           return;
         }
@@ -361,8 +357,8 @@ worker_actor::behavior_type worker_impl(worker_ptr self, std::shared_ptr<const N
         const auto silent = self->clock().now() - st.last_heard;
         if (st.req.keepalive_ms > 0 &&
             silent > std::chrono::milliseconds(uint64_t(st.req.keepalive_ms) * st.settings->keepalive_misses)) {
-          worker_log(self, "\"ended\": \"parent silent\", \"silent_ms\": " +
-                               std::to_string(std::chrono::duration_cast<std::chrono::milliseconds>(silent).count()));
+          worker_log(self, Event(Ev::ended, "parent silent")
+                               .with("silent_ms", std::chrono::duration_cast<std::chrono::milliseconds>(silent).count()));
           self->quit(caf::exit_reason::user_shutdown);
           return;
         }
@@ -394,8 +390,9 @@ struct node_state {
 };
 using node_ptr = node_actor::stateful_pointer<node_state>;
 
-void node_event(node_ptr self, const std::string& what) {
-  node_log(*self->state.settings, "{\"node\": " + json_quote(self->state.settings->name) + ", " + what + "}");
+void node_event(node_ptr self, Event e) {
+  e.scope = {{"node", self->state.settings->name}};
+  node_log(*self->state.settings, std::move(e));
 }
 
 void connect_child(node_ptr self, size_t i) {
@@ -412,14 +409,13 @@ void connect_child(node_ptr self, size_t i) {
             c.node = caf::actor_cast<node_actor>(p);
             c.reported = false;
             self->monitor(c.node);
-            node_event(self, "\"child_connected\": " + json_quote(c.name));
+            node_event(self, Event(Ev::child_connected, c.name));
           },
           [=](caf::error& e) {
             auto& c = self->state.children[i];
             c.connecting = false;
             if (!c.reported)
-              node_event(self, "\"child_unreachable\": " + json_quote(c.name) +
-                                   ", \"reason\": " + json_quote(self->system().render(e)));
+              node_event(self, Event(Ev::child_unreachable, c.name).with("reason", self->system().render(e)));
             c.reported = true;
           });
 }
@@ -445,14 +441,13 @@ node_actor::behavior_type node_impl(node_ptr self, std::shared_ptr<const NodeSet
       // ended worker's heap goes back all the same (one debounced trim, actors/node.h).
       if (st.workers.empty()) st.trim_in = 2;
       else schedule_heap_trim(1000);
-      node_event(self, "\"worker_closed\": " + std::to_string(session) +
-                           ", \"live_workers\": " + std::to_string(st.workers.size()));
+      node_event(self, Event(Ev::worker_closed, session).with("live_workers", st.workers.size()));
       return;
     }
     for (auto& c : st.children)
       if (c.node && c.node.address() == m.source) {
         c.node = nullptr;
-        node_event(self, "\"child_lost\": " + json_quote(c.name) + ", \"reason\": " + json_quote(to_string(m.reason)));
+        node_event(self, Event(Ev::child_lost, c.name).with("reason", to_string(m.reason)));
       }
   });
   self->delayed_send(self, std::chrono::milliseconds(st.settings->reconnect_ms), tick_atom::value);
@@ -467,16 +462,18 @@ node_actor::behavior_type node_impl(node_ptr self, std::shared_ptr<const NodeSet
           refused = "node " + st.settings->name + " has " + std::to_string(st.workers.size()) +
                     " live workers, its max-workers";
         if (!refused.empty()) {
-          node_event(self, "\"open_refused\": " + json_quote(refused) + ", \"session\": " + std::to_string(req.session) +
-                               ", \"from\": " + json_quote(parent ? to_string(parent->node()) : std::string("?")));
+          node_event(self, Event(Ev::open_refused, refused)
+                               .with("session", req.session)
+                               .with("from", parent ? to_string(parent->node()) : std::string("?")));
           return caf::make_error(full ? caf::sec::runtime_error : caf::sec::invalid_argument, "open refused: " + refused);
         }
         auto rp = self->make_response_promise<OpenReply>();
         auto w = spawn_worker(self->system(), st.settings, caf::actor_cast<node_actor>(self), req, parent);
         self->monitor(w);
         st.workers.emplace(w.address(), req.session);
-        node_event(self, "\"worker_opened\": " + std::to_string(req.session) + ", \"master\": " + json_quote(req.master) +
-                             ", \"live_workers\": " + std::to_string(st.workers.size()));
+        node_event(self, Event(Ev::worker_opened, req.session)
+                             .with("master", req.master)
+                             .with("live_workers", st.workers.size()));
         self->request(w, std::chrono::milliseconds(2 * st.settings->task_timeout_ms), nodes_atom::value)
             .then([=](std::vector<NodeInfo>& l) mutable { rp.deliver(OpenReply{caf::actor_cast<caf::actor>(w), l}); },
                   [=](caf::error& e) mutable {
@@ -499,7 +496,7 @@ node_actor::behavior_type node_impl(node_ptr self, std::shared_ptr<const NodeSet
         // hand the freed heap back to the OS, so an idle node's RSS returns to its baseline.
         if (st.trim_in > 0 && --st.trim_in == 0 && st.workers.empty()) {
           malloc_trim(0);
-          node_event(self, "\"heap_trimmed\": true");
+          node_event(self, Event(Ev::heap_trimmed, true));
         }
         self->delayed_send(self, std::chrono::milliseconds(st.settings->reconnect_ms), tick_atom::value);
       },

@@ -100,7 +100,9 @@ display_actor::behavior_type display_impl(display_actor::stateful_pointer<displa
                 protocol::ErrorReply e{protocol::ErrorCode::internal, false, protocol::kNoRecord,
                                        "frame " + std::to_string(m.client_frame) + ": " + ef.error};
                 st.sink->send(protocol::encode(protocol::ServerRecord{e}));
-                node_log(*st.settings, "{\"session\": " + std::to_string(st.session) + ", \"error\": \"encode\"}");
+                Event ev(Ev::error, "encode");
+                ev.scope = {{"session", st.session}};
+                node_log(*st.settings, std::move(ev));
                 return;
               }
               const bool mjpeg = DisplayKind(m.display) == DisplayKind::mjpeg;
@@ -139,19 +141,20 @@ display_actor::behavior_type display_impl(display_actor::stateful_pointer<displa
               st.bytes += bytes;
               maybe_send_stats(st, m, sent_ns, f.timings.pipeline_ms);
               auto rel = [&](int64_t ns) { return double(ns - st.t0_ns) / 1e6; };
-              char line[768];
-              std::snprintf(line, sizeof line,
-                            "{\"session\": %llu, \"frame\": %u, \"seq\": %u, \"width\": %d, \"height\": %d, "
-                            "\"display\": \"%s\", \"kernel_ms\": %.3f, \"rendering_ms\": %.3f, \"sat_ms\": %.3f, "
-                            "\"tiling_ms\": %.3f, \"encode_ms\": %.3f, \"pipeline_ms\": %.3f, \"bytes\": %zu, "
-                            "\"render_start_ms\": %.3f, \"render_end_ms\": %.3f, \"encode_start_ms\": %.3f, "
-                            "\"encode_end_ms\": %.3f, \"sent_ms\": %.3f}",
-                            (unsigned long long)st.session, m.client_frame, m.seq, m.width, m.height,
-                            mjpeg ? "mjpeg" : (f.encoding == protocol::FrameEncoding::dxt1 ? "s3tc" : "jpeg"),
-                            m.kernel_ms, m.rendering_ms, m.sat_ms, m.tiling_ms, ef.encode_ms, f.timings.pipeline_ms,
-                            bytes, rel(m.render_start_ns), rel(m.render_end_ns), rel(ef.encode_start_ns),
-                            rel(ef.encode_end_ns), rel(sent_ns));
-              node_log(*st.settings, line);
+              Event e(Ev::frame, m.client_frame);
+              e.scope = {{"session", st.session}};
+              e.with("seq", m.seq).with("width", m.width).with("height", m.height);
+              e.with("display", mjpeg ? "mjpeg" : (f.encoding == protocol::FrameEncoding::dxt1 ? "s3tc" : "jpeg"));
+              e.with("kernel_ms", Json::number(m.kernel_ms)).with("rendering_ms", Json::number(m.rendering_ms));
+              e.with("sat_ms", Json::number(m.sat_ms)).with("tiling_ms", Json::number(m.tiling_ms));
+              e.with("encode_ms", Json::number(ef.encode_ms)).with("pipeline_ms", Json::number(f.timings.pipeline_ms));
+              e.with("bytes", bytes);
+              e.with("render_start_ms", Json::number(rel(m.render_start_ns)));
+              e.with("render_end_ms", Json::number(rel(m.render_end_ns)));
+              e.with("encode_start_ms", Json::number(rel(ef.encode_start_ns)));
+              e.with("encode_end_ms", Json::number(rel(ef.encode_end_ns)));
+              e.with("sent_ms", Json::number(rel(sent_ns)));
+              node_log(*st.settings, std::move(e));
             });
       },
   };

@@ -128,12 +128,5 @@ void schedule_heap_trim(uint32_t delay_ms) {
   trimmer->schedule(delay_ms);
 }
 
-void node_log(const NodeSettings& settings, const std::string& line) {
-  if (settings.log) {
-    settings.log(line);
-  } else {
-    std::fprintf(stderr, "%s\n", line.c_str());
-  }
-}
 
 }  // namespace tessera

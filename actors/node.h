@@ -17,6 +17,7 @@
 #include "actors/cluster_protocol.h"
 #include "actors/display_protocol.h"
 #include "actors/encoder_protocol.h"
+#include "actors/event.h"
 #include "actors/renderer_protocol.h"
 #include "actors/session_protocol.h"
 #include "actors/tiler_protocol.h"
@@ -34,8 +35,12 @@ struct NodeSettings {
   bool detached = true;                 // renderer and encoder on their own threads (false in deterministic tests)
   std::shared_ptr<const Scene> preload; // given to sessions whose scene has no meshes at their first frame
   std::string server_version = "tessera 0.1.0";
-  // One line per event (JSON for per-frame figures); default: stderr. Called from actor threads.
-  std::function<void(const std::string&)> log;
+  // Where events go (actors/event.h). While the process's logger lives (spawn_logger; its
+  // owner holds the only strong handle, so it ends before the actor system), actors send their
+  // events to it and it calls `log`; otherwise node_log calls `log` on the caller's thread.
+  // Default `log`: one JSON line per event on stderr.
+  EventSink log;
+  caf::weak_actor_ptr logger;
   // --- Cluster (cluster_protocol.h, docs/operations.md) ---
   bool render = true;                 // false: a hub or a dedicated master (renders only lost tiles)
   std::string name = "local";         // this node in node lists and log lines (host:cluster-port)
@@ -63,8 +68,12 @@ struct NodeSettings {
 // Registers every message type of actors/messages.h (both sides of a remote link need it).
 void register_message_types(caf::actor_system_config& cfg);
 
-// Writes a log line through settings.log, or to stderr.
-void node_log(const NodeSettings& settings, const std::string& line);
+// Reports an event: to settings.logger if there is one, else straight to settings.log.
+void node_log(const NodeSettings& settings, Event e);
+// The process's logger actor: writes the events it receives through `sink` (default stderr).
+logger_actor spawn_logger(caf::actor_system& sys, EventSink sink);
+// Waits until the logger has written every event sent to it before (at a node's shutdown).
+void flush_logger(caf::actor_system& sys, const logger_actor& logger);
 
 // Hands the heap that ended sessions and workers freed back to the OS (glibc keeps freed
 // memory in its arenas: without this an idle node's RSS stays at its peak). Debounced: one

@@ -35,8 +35,8 @@ std::string check_tile(const TileResult& t, uint32_t frame, const Rect& expected
 // 1..65536 logical cores and a finite single-core performance in (0, 1000].
 std::string check_nodes(const std::vector<NodeInfo>& nodes);
 
-// The flattened list of a sub-tree and the JSON of a node list, for log lines.
-std::string nodes_json(const std::vector<NodeInfo>& nodes);
+// A node list as a JSON array of {"name", "cores", "perf"}, for events.
+Json nodes_value(const std::vector<NodeInfo>& nodes);
 
 // Why a peer's open request cannot be served (empty string: it can): a session id, a master
 // name like a node name (1..256 bytes, no control characters, quotes or backslashes), a packet
@@ -123,7 +123,7 @@ class Router {
   std::vector<RouterChild> children;
   bool changed = false;               // membership changed since the last commit
   PacketLayout layout;
-  std::function<void(const std::string&)> log;
+  std::function<void(Event)> log;
   uint32_t keepalive_ms = 1000;       // how often keepalive() is called (told to the workers opened)
 
   // The committed flattened list: this node first (if it renders), then each routed child's.
@@ -395,13 +395,13 @@ class Router {
                               enqueue_update(self, children.back(),
                                              std::make_shared<const std::vector<uint8_t>>(std::move(bytes)), reset);
                             changed = true;
-                            if (log) log("\"joined\": " + json_quote(name) + ", \"nodes\": " + nodes_json(children.back().nodes));
+                            if (log) log(Event(Ev::joined, name).with("nodes", nodes_value(children.back().nodes)));
                           }
                           opened();
                         },
                         [=](caf::error& e) {
                           joining_.erase(name);
-                          if (log) log("\"join_failed\": " + json_quote(name) + ", \"reason\": " + json_quote(to_string(e)));
+                          if (log) log(Event(Ev::join_failed, name).with("reason", to_string(e)));
                           opened();
                         });
               }
@@ -489,7 +489,7 @@ class Router {
       outs = std::move(it->second);
       outstanding_.erase(it);
     }
-    if (log) log("\"node_lost\": " + json_quote(name) + ", \"reason\": " + json_quote(why));
+    if (log) log(Event(Ev::node_lost, name).with("reason", why));
     for (auto& o : outs) {
       auto j = o.join.lock();
       if (!j || j->part_done[o.part]) continue;
@@ -499,7 +499,7 @@ class Router {
     }
   }
   void log_bad(const std::string& name, const std::string& what) {
-    if (log) log("\"rejected_tile\": " + json_quote(name) + ", \"reason\": " + json_quote(what));
+    if (log) log(Event(Ev::rejected_tile, name).with("reason", what));
   }
   void opened() {
     if (--opening_ == 0) run_after();

@@ -60,8 +60,9 @@ int64_t now_ns() {
       .count();
 }
 
-void log(self_ptr self, const std::string& what) {
-  node_log(*self->state.settings, "{\"session\": " + std::to_string(self->state.id) + ", " + what + "}");
+void log(self_ptr self, Event e) {
+  e.scope = {{"session", self->state.id}};
+  node_log(*self->state.settings, std::move(e));
 }
 
 // Sends an error record; a fatal one ends the session (and closes the connection).
@@ -71,9 +72,10 @@ void fail(self_ptr self, const Error& e) {
   ErrorReply r = to_reply(e);
   st.errors++;
   st.sink->send(encode(ServerRecord{r}));
-  log(self, std::string("\"error\": \"") + to_string(e.code) + "\", \"fatal\": " + (r.fatal ? "true" : "false") +
-                ", \"record\": " + std::to_string(int64_t(e.record == kNoRecord ? -1 : int64_t(e.record))) +
-                ", \"message\": " + json_quote(e.message));
+  log(self, Event(Ev::error, to_string(e.code))
+                .with("fatal", r.fatal)
+                .with("record", e.record == kNoRecord ? -1 : int64_t(e.record))
+                .with("message", e.message));
   if (r.fatal) {
     st.closed = true;
     st.sink->close(e.message);
@@ -136,7 +138,7 @@ void maybe_preload(self_ptr self) {
   if (own_camera) st.scene->set_camera(cam);
   if (st.router.alive_children() > 0) st.router.forward(self, scene_snapshot_bytes(SceneSnapshot{st.scene}), true);
   settle_budget(self);  // the preloaded scene is the node's own: counted, never refused
-  log(self, "\"preloaded_scene\": true, \"triangles\": " + std::to_string(st.scene->triangle_count()));
+  log(self, Event(Ev::preloaded_scene, true).with("triangles", st.scene->triangle_count()));
 }
 
 void render_batch(self_ptr self);
@@ -161,7 +163,7 @@ void on_nodes(self_ptr self, std::vector<NodeInfo> nodes) {
   st.committed = true;
   if (!coefficients.empty()) self->send(st.tiler, nodes_atom::value, std::move(coefficients));
   if (!same || st.seq <= 1)
-    log(self, "\"nodes\": " + nodes_json(st.nodes) + ", \"used\": " + std::to_string(st.used.size()));
+    log(self, Event(Ev::nodes, nodes_value(st.nodes)).with("used", st.used.size()));
 }
 
 void start_frame(self_ptr self, uint32_t client_frame) {
@@ -275,12 +277,11 @@ void recover(self_ptr self, BatchReply&& r) {
     finish_frame(self, std::move(r.tiles), std::move(perf));
     return;
   }
-  std::string names;
-  for (size_t i : lost) {
-    names += (names.empty() ? "" : ", ") + json_quote(r.tiles[i].error);
-  }
-  log(self, "\"recovering\": " + std::to_string(lost.size()) + ", \"frame\": " + std::to_string(st.meta.client_frame) +
-                ", \"errors\": [" + names + "]");
+  std::vector<Json> errors;
+  for (size_t i : lost) errors.emplace_back(r.tiles[i].error);
+  log(self, Event(Ev::recovering, lost.size())
+                .with("frame", st.meta.client_frame)
+                .with("errors", Json::array(std::move(errors))));
   st.recovered = uint32_t(lost.size());
   auto tiles = std::make_shared<std::vector<TileResult>>(std::move(r.tiles));
   auto perfs = std::make_shared<std::vector<double>>(std::move(perf));
@@ -305,7 +306,7 @@ void finish_frame(self_ptr self, std::vector<TileResult>&& tiles, std::vector<do
   std::string error;
   SatReport rep{st.seq, st.meta.width, st.meta.height, st.layout.w, st.layout.h, {}, {}};
   std::vector<TileResult> shown;
-  std::string per_node;
+  std::vector<Json> per_node;
   double max_norm = 0, sum_norm = 0;
   size_t rendered = 0;
   for (size_t i = 0; i < tiles.size(); ++i) {
@@ -321,10 +322,10 @@ void finish_frame(self_ptr self, std::vector<TileResult>&& tiles, std::vector<do
       max_norm = std::max(max_norm, norm);
       sum_norm += norm;
       ++rendered;
-      char buf[200];
-      std::snprintf(buf, sizeof buf, "{\"node\": %zu, \"kernel_ms\": %.3f, \"rendering_ms\": %.3f, \"pixels\": %lld}", i,
-                    tile.kernel_ms, tile.rendering_ms, static_cast<long long>(tile.pixels.area()));
-      per_node += (per_node.empty() ? "" : ", ") + std::string(buf);
+      per_node.push_back(Json::object({{"node", i},
+                                       {"kernel_ms", Json::number(tile.kernel_ms)},
+                                       {"rendering_ms", Json::number(tile.rendering_ms)},
+                                       {"pixels", static_cast<long long>(tile.pixels.area())}}));
     }
     rep.sats.push_back(std::move(tile.sat));
     rep.perf.push_back(i < perf.size() ? perf[i] : 1.0);
@@ -334,11 +335,11 @@ void finish_frame(self_ptr self, std::vector<TileResult>&& tiles, std::vector<do
   st.in_flight = false;
   st.last_rendering_ms = st.meta.rendering_ms;
   if (!per_node.empty()) {
-    char buf[160];
-    std::snprintf(buf, sizeof buf, "\"cluster_frame\": %u, \"balance\": %.4f, \"recovered\": %u, \"per_node\": [",
-                  st.meta.client_frame, rendered && sum_norm > 0 ? max_norm / (sum_norm / double(rendered)) : 1.0,
-                  st.recovered);
-    log(self, buf + per_node + "]");
+    const double balance = rendered && sum_norm > 0 ? max_norm / (sum_norm / double(rendered)) : 1.0;
+    log(self, Event(Ev::cluster_frame, st.meta.client_frame)
+                  .with("balance", Json::number(balance, 4))
+                  .with("recovered", st.recovered)
+                  .with("per_node", Json::array(std::move(per_node))));
   }
   if (error.empty()) {
     self->send(st.display, display_atom::value, FrameTiles{st.meta, std::move(shown)});
@@ -387,9 +388,11 @@ void on_handshake(self_ptr self, const Handshake& h) {
     r.server_version = st.settings->server_version;
     st.sink->send(encode(ServerRecord{r}));
     static const char* displays[] = {"jpeg", "s3tc", "mjpeg"};
-    log(self, std::string("\"handshake\": {\"display\": \"") + displays[int(h.display)] + "\", \"quality\": " +
-                  std::to_string(h.jpeg_quality) + ", \"width\": " + std::to_string(h.width) +
-                  ", \"height\": " + std::to_string(h.height) + ", \"nodes\": " + std::to_string(r.nodes) + "}");
+    log(self, Event(Ev::handshake, Json::object({{"display", displays[int(h.display)]},
+                                                 {"quality", unsigned(h.jpeg_quality)},
+                                                 {"width", h.width},
+                                                 {"height", h.height},
+                                                 {"nodes", r.nodes}})));
   });
 }
 
@@ -512,14 +515,16 @@ session_actor::behavior_type session_impl(self_ptr self, std::shared_ptr<ClientS
   self->link_to(st.display);
   // Linked children end with the session (it always quits with a non-normal reason).
   self->attach_functor([settings = st.settings, id](const caf::error& reason) {
-    node_log(*settings, "{\"session\": " + std::to_string(id) + ", \"closed\": true}");
+    Event closed(Ev::closed, true);
+    closed.scope = {{"session", id}};
+    node_log(*settings, std::move(closed));
     schedule_heap_trim();  // its scene, BVH and frames are freed as its linked actors end
   });
-  log(self, "\"opened\": true, \"token\": " + json_quote(st.sink->token()));
+  log(self, Event(Ev::opened, true).with("token", st.sink->token()));
   // The client's tree: workers on the children this node is connected to (and, every
   // reconnect period, on children that came back).
   st.router.layout = st.layout;
-  st.router.log = [self](const std::string& line) { log(self, line); };
+  st.router.log = [self](Event e) { log(self, std::move(e)); };
   st.router.keepalive_ms = st.settings->reconnect_ms;  // the tick below sends the keep-alives
   st.node = caf::actor_cast<node_actor>(st.settings->node.lock());
   self->set_down_handler([=](caf::down_msg& m) { self->state.router.child_failed(m.source, to_string(m.reason)); });

@@ -73,7 +73,7 @@ int run(const std::vector<std::string>& argv) {
     cfg->log_frames = false;
     cfg->port = 0;
     auto settings = cfg->node_settings();
-    settings->log = [](const std::string&) {};
+    settings->log = [](const Event&) {};
     ServerOptions o = cfg->server_options();
     o.max_clients = size_t(clients);
     sys = std::make_unique<caf::actor_system>(*cfg);

@@ -119,6 +119,9 @@ int run(const std::vector<std::string>& argv) {
   ServerOptions opts = cfg.server_options();
   if (!scenes_root.empty()) opts.scenes_root = scenes_root;
   caf::actor_system sys{cfg};
+  // Every actor's events go through one logger (actors/event.h); this is its only strong handle.
+  logger_actor logger = spawn_logger(sys, settings->log);
+  settings->logger = caf::actor_cast<caf::weak_actor_ptr>(logger);
   node_actor node;
   int published = -1;
   std::unique_ptr<Server> server;
@@ -166,6 +169,7 @@ int run(const std::vector<std::string>& argv) {
   if (server) server->stop();
   if (node) caf::anon_send_exit(node, caf::exit_reason::user_shutdown);
   sys.await_all_actors_done();
+  flush_logger(sys, logger);
   return 0;
 }
 

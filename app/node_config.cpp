@@ -27,6 +27,18 @@ caf::config_option string_list_option(std::vector<std::string>& storage, caf::st
   return {category, name, description, &meta, &storage};
 }
 
+// A boolean setting that the command line can set either way. CAF 0.17 makes a bool option a
+// flag: `--tessera.log-frames=false` is a parser error there, and a bare flag is not a
+// `--tessera.NAME=VALUE` argument, so such settings could only be turned off in a config file.
+// With this meta state (not named "boolean", so not a flag) `=true` and `=false` both parse.
+caf::config_option bool_option(bool& storage, caf::string_view category, caf::string_view name,
+                               caf::string_view description) {
+  using T = bool;
+  static caf::config_option::meta_state meta{caf::detail::check_impl<T>, caf::detail::store_impl<T>,
+                                             caf::detail::get_impl<T>, caf::detail::parse_impl_delegate<T>, "bool"};
+  return {category, name, description, &meta, &storage};
+}
+
 }  // namespace
 
 NodeConfig::NodeConfig() {
@@ -49,7 +61,6 @@ NodeConfig::NodeConfig() {
       .add(max_client_bytes, "max-client-bytes", "buffers + textures held per client")
       .add(max_triangles, "max-triangles", "triangles per client scene")
       .add(max_texture_size, "max-texture-size", "largest texture width/height")
-      .add(log_frames, "log-frames", "log one JSON line per frame")
       .add(handshake_timeout_ms, "handshake-timeout-ms", "close a WebSocket without a valid handshake after this long")
       .add(max_node_bytes, "max-node-bytes",
            "memory budget over all clients: scene bytes + queued frames (0: half the physical memory)")
@@ -57,8 +68,6 @@ NodeConfig::NodeConfig() {
       .add(max_mjpeg_viewers, "max-mjpeg-viewers", "MJPEG viewers on the node")
       .add(cluster_port, "cluster-port", "publish this node to parent nodes on this port (-1: off, 0: any)")
       .add(cluster_host, "cluster-host", "address of the cluster port (0.0.0.0: all interfaces)")
-      .add(renders, "render", "render tasks here (false: hub or dedicated master)")
-      .add(http, "http", "serve HTTP and WebSocket clients (false: worker or hub only)")
       .add(name, "name", "this node's name in node lists and logs (default host:cluster-port)")
       .add(task_timeout_ms, "task-timeout-ms", "fail a sub-tree that has not returned its tiles after this long")
       .add(reconnect_ms, "reconnect-ms", "retry period for lost child nodes; keep-alive period to workers below")
@@ -69,6 +78,9 @@ NodeConfig::NodeConfig() {
   custom_options_.add(string_list_option(
       web_public, "tessera", "web-public",
       "further folders of the web root to serve, as [\"dir/\", ...] (default: index.html, src/, demo/, three.js)"));
+  custom_options_.add(bool_option(log_frames, "tessera", "log-frames", "log one JSON line per frame"));
+  custom_options_.add(bool_option(renders, "tessera", "render", "render tasks here (false: hub or dedicated master)"));
+  custom_options_.add(bool_option(http, "tessera", "http", "serve HTTP and WebSocket clients (false: worker or hub only)"));
   custom_options_.add(string_list_option(children, "tessera", "children", "child nodes as [\"host:port\", ...]"));
 }
 
@@ -118,8 +130,10 @@ std::shared_ptr<NodeSettings> NodeConfig::node_settings() const {
             : cluster_port > 0  ? cluster_host + ":" + std::to_string(cluster_port)
             : cluster_port == 0 ? cluster_host + ":any/pid" + std::to_string(getpid())
                                 : "local";
-  if (!log_frames) s->log = [](const std::string& line) {
-    if (line.find("\"frame\"") == std::string::npos) std::fprintf(stderr, "%s\n", line.c_str());
+  // Without per-frame lines: every event but Ev::frame (the old substring filter on "frame"
+  // also hid the recovering events, which carry the frame number).
+  if (!log_frames) s->log = [](const Event& e) {
+    if (e.kind != Ev::frame) std::fprintf(stderr, "%s\n", to_json_line(e).c_str());
   };
   return s;
 }

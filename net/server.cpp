@@ -136,7 +136,7 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl> {
   Impl(caf::actor_system& s, std::shared_ptr<const NodeSettings> st, ServerOptions o)
       : sys(s), settings(std::move(st)), opts(std::move(o)) {}
 
-  void log(const std::string& line) { node_log(*settings, line); }
+  void log(Event e) { node_log(*settings, std::move(e)); }
   void on_open(connection_hdl h);
   void on_close(connection_hdl h);
   bool on_validate(connection_hdl h);
@@ -270,7 +270,7 @@ void Server::Impl::flush(connection_hdl h, Conn& c) {
   // malformed messages and never reads the errors) is closed.
   const uint64_t cap = std::max<uint64_t>(8u << 20, 3 * uint64_t(c.largest_frame));
   if (backlog > cap) {
-    log("{\"closed_slow_client\": true, \"backlog\": " + std::to_string(backlog) + "}");
+    log(Event(Ev::closed_slow_client, true).with("backlog", backlog));
     close_conn(h, c, websocketpp::close::status::policy_violation, "client is not reading");
     return;
   }
@@ -324,7 +324,7 @@ bool Server::Impl::on_validate(connection_hdl h) {
   if (count + pending_opens.size() >= opts.max_clients) {
     con->set_status(websocketpp::http::status_code::service_unavailable);
     con->set_body("server full: " + std::to_string(opts.max_clients) + " clients\n");
-    log("{\"rejected\": \"server full\", \"max_clients\": " + std::to_string(opts.max_clients) + "}");
+    log(Event(Ev::rejected, "server full").with("max_clients", opts.max_clients));
     return false;
   }
   std::string token = http::query_param(target, "session");
@@ -421,8 +421,7 @@ void Server::Impl::on_http(connection_hdl h) {
                                  " (max-mjpeg-viewers)\n");
       con->replace_header("Retry-After", "5");
       if (!head)
-        log(std::string("{\"rejected\": \"mjpeg viewers\", \"limit\": \"") +
-            (session_full ? "max-mjpeg-per-session" : "max-mjpeg-viewers") + "\"}");
+        log(Event(Ev::rejected, "mjpeg viewers").with("limit", session_full ? "max-mjpeg-per-session" : "max-mjpeg-viewers"));
       return;
     }
     if (head) {  // the headers of the stream, no stream
@@ -521,7 +520,7 @@ void Server::start() {
     try {
       i.ws.run();
     } catch (const std::exception& e) {
-      i.log(std::string("{\"network_thread_error\": \"") + e.what() + "\"}");
+      i.log(Event(Ev::network_thread_error, e.what()));
     }
   });
 }

@@ -6,6 +6,7 @@
 #include <caf/test/dsl.hpp>
 #include <caf/test/unit_test_impl.hpp>
 
+#include <algorithm>
 #include <chrono>
 #include <functional>
 #include <memory>
@@ -148,7 +149,8 @@ struct fixture : test_coordinator_fixture<TestConfig> {
   std::shared_ptr<RecordingSink> sink = std::make_shared<RecordingSink>();
   std::shared_ptr<NodeSettings> settings = std::make_shared<NodeSettings>();
   std::shared_ptr<std::vector<ChildLink>> links = std::make_shared<std::vector<ChildLink>>();
-  std::vector<std::string> lines;
+  std::vector<Event> events;  // what the session and the workers reported, through the logger
+  logger_actor logger;
   node_actor parent;
   session_actor session;
   std::vector<caf::actor> nodes;  // the children's node actors (ended with the test)
@@ -157,10 +159,12 @@ struct fixture : test_coordinator_fixture<TestConfig> {
     settings->detached = false;
     settings->packet_layout = {2, 2};
     settings->task_timeout_ms = 1000;
-    settings->log = [this](const std::string& l) {
-      if (getenv("TESSERA_TEST_VERBOSE")) fprintf(stderr, "%s\n", l.c_str());
-      lines.push_back(l);
+    settings->log = [this](const Event& e) {
+      if (getenv("TESSERA_TEST_VERBOSE")) fprintf(stderr, "%s\n", to_json_line(e).c_str());
+      events.push_back(e);
     };
+    logger = spawn_logger(sys, settings->log);
+    settings->logger = caf::actor_cast<caf::weak_actor_ptr>(logger);
     parent = sys.spawn(parent_node, links);
     settings->node = caf::actor_cast<caf::weak_actor_ptr>(parent);
   }
@@ -195,10 +199,15 @@ struct fixture : test_coordinator_fixture<TestConfig> {
     for (auto& f : sink->all<Frame>()) out.push_back(f.frame);
     return out;
   }
-  size_t logged(const std::string& needle) {
+  // Events of `kind` (for which `pred` holds) reported so far.
+  size_t count(Ev kind, const std::function<bool(const Event&)>& pred = nullptr) {
     size_t n = 0;
-    for (auto& l : lines) n += l.find(needle) != std::string::npos;
+    for (auto& e : events) n += e.kind == kind && (!pred || pred(e));
     return n;
+  }
+  // Events of `kind` whose own value is `value`.
+  size_t count(Ev kind, const Json& value) {
+    return count(kind, [&](const Event& e) { return e.value == value; });
   }
 };
 
@@ -219,8 +228,8 @@ CAF_TEST(a real child node renders its share and gets every accepted scene recor
   request_frame(1);
   sched.run();
   CAF_CHECK_EQUAL(frames_sent(), std::vector<uint32_t>{1});
-  CAF_CHECK_EQUAL(logged("\"recovering\""), 0u);
-  CAF_CHECK_EQUAL(logged("\"cluster_frame\": 1"), 1u);
+  CAF_CHECK_EQUAL(count(Ev::recovering), 0u);
+  CAF_CHECK_EQUAL(count(Ev::cluster_frame, 1), 1u);
   CAF_CHECK_EQUAL(sink->all<ErrorReply>().size(), 0u);
 }
 
@@ -307,8 +316,8 @@ CAF_TEST(tiles with impossible sizes are rejected and logged and the master rend
   request_frame(1);
   sched.run();
   CAF_CHECK_EQUAL(frames_sent(), std::vector<uint32_t>{1});
-  CAF_CHECK_EQUAL(logged("\"rejected_tile\": \"liar:1\""), 1u);
-  CAF_CHECK_EQUAL(logged("\"recovering\": 1"), 1u);
+  CAF_CHECK_EQUAL(count(Ev::rejected_tile, "liar:1"), 1u);
+  CAF_CHECK_EQUAL(count(Ev::recovering, 1), 1u);
   CAF_CHECK_EQUAL(sink->all<ErrorReply>().size(), 0u);
 }
 
@@ -324,11 +333,11 @@ CAF_TEST(a child that dies mid frame: the frame completes and the next one is ti
   self->send_exit(*last, caf::exit_reason::kill);
   sched.run();
   CAF_CHECK_EQUAL(frames_sent(), std::vector<uint32_t>{1});
-  CAF_CHECK_EQUAL(logged("\"node_lost\": \"hang:1\""), 1u);
+  CAF_CHECK_EQUAL(count(Ev::node_lost, "hang:1"), 1u);
   request_frame(2);
   sched.run();
   CAF_CHECK_EQUAL(frames_sent(), (std::vector<uint32_t>{1, 2}));
-  CAF_CHECK_EQUAL(logged("\"used\": 1"), 1u);  // committed without it before frame 2
+  CAF_CHECK_EQUAL(count(Ev::nodes, [](const Event& e) { return *e.field("used") == Json(1); }), 1u);  // committed without it before frame 2
 }
 
 CAF_TEST(a child that is alive but never answers is failed by the timeout and its tiles rendered here) {
@@ -342,7 +351,7 @@ CAF_TEST(a child that is alive but never answers is failed by the timeout and it
   sched.trigger_timeouts();
   sched.run();
   CAF_CHECK_EQUAL(frames_sent(), std::vector<uint32_t>{1});
-  CAF_CHECK_EQUAL(logged("\"recovering\": 1"), 1u);
+  CAF_CHECK_EQUAL(count(Ev::recovering, 1), 1u);
 }
 
 CAF_TEST(the cost maps of a straggler shift its share away in the next frame) {
@@ -373,7 +382,7 @@ CAF_TEST(a child that claims an impossible node list is dropped and the master r
   auto replies = sink->all<HandshakeReply>();
   CAF_REQUIRE_EQUAL(replies.size(), 1u);
   CAF_CHECK_EQUAL(replies[0].nodes, 1u);
-  CAF_CHECK_EQUAL(logged("impossible node list: node fake claims -3 logical cores"), 1u);
+  CAF_CHECK_EQUAL(count(Ev::node_lost, [](const Event& e) { return *e.field("reason") == Json("impossible node list: node fake claims -3 logical cores"); }), 1u);
   request_frame(1);
   sched.run();
   CAF_CHECK_EQUAL(frames_sent(), std::vector<uint32_t>{1});
@@ -394,7 +403,7 @@ CAF_TEST(frames do not wait for a child whose opens are never answered) {
   auto replies = sink->all<HandshakeReply>();
   CAF_REQUIRE_EQUAL(replies.size(), 1u);
   CAF_CHECK_EQUAL(replies[0].nodes, 2u);  // this node and slow:2
-  CAF_CHECK_EQUAL(logged("\"join_failed\": \"deaf:1\""), 1u);
+  CAF_CHECK_EQUAL(count(Ev::join_failed, "deaf:1"), 1u);
   // The session retries it every reconnect period; each attempt waits for the timeout. Frames
   // meanwhile must not wait for the attempt in flight (they did, a timeout per frame).
   self->send(session, tick_atom::value);
@@ -405,7 +414,7 @@ CAF_TEST(frames do not wait for a child whose opens are never answered) {
     sched.run();
   }
   CAF_CHECK_EQUAL(frames_sent(), (std::vector<uint32_t>{1, 2}));
-  CAF_CHECK_EQUAL(logged("\"join_failed\": \"deaf:1\""), 1u);  // still in flight
+  CAF_CHECK_EQUAL(count(Ev::join_failed, "deaf:1"), 1u);  // still in flight
   CAF_CHECK_EQUAL(sink->all<ErrorReply>().size(), 0u);
 }
 
@@ -421,7 +430,7 @@ CAF_TEST(a worker whose parent gave up on its open ends itself after twice the t
   self->send(orphan, tick_atom::value);
   self->send(adopted, tick_atom::value);
   sched.run();
-  CAF_CHECK_EQUAL(logged("\"orphaned\": true"), 1u);
+  CAF_CHECK_EQUAL(count(Ev::orphaned, true), 1u);
   self->send_exit(adopted, caf::exit_reason::user_shutdown);
   sched.run();
 }
@@ -457,13 +466,13 @@ CAF_TEST(a worker opened through a node ends when the actor that opened it ends)
   self->send(op, open_atom::value, good_open(5));
   sched.run();
   CAF_REQUIRE_EQUAL(out->workers.size(), 1u);
-  CAF_CHECK_EQUAL(logged("\"worker_opened\": 5, \"master\": \"master:1\", \"live_workers\": 1"), 1u);
+  CAF_CHECK_EQUAL(count(Ev::worker_opened, [](const Event& e) { return e.value == Json(5) && *e.field("master") == Json("master:1") && *e.field("live_workers") == Json(1); }), 1u);
   // The session (here: the opener) ends: its worker must go too. The node used to read the
   // sender after make_response_promise had taken it over, so workers watched nobody.
   self->send_exit(op, caf::exit_reason::user_shutdown);
   sched.run();
-  CAF_CHECK_EQUAL(logged("\"ended\": \"parent down\""), 1u);
-  CAF_CHECK_EQUAL(logged("\"worker_closed\": 5, \"live_workers\": 0"), 1u);
+  CAF_CHECK_EQUAL(count(Ev::ended, "parent down"), 1u);
+  CAF_CHECK_EQUAL(count(Ev::worker_closed, [](const Event& e) { return e.value == Json(5) && *e.field("live_workers") == Json(0); }), 1u);
   self->send_exit(node, caf::exit_reason::user_shutdown);
   sched.run();
 }
@@ -493,8 +502,8 @@ CAF_TEST(a node refuses malformed opens and opens beyond max_workers) {
   CAF_CHECK_EQUAL(out->workers.size(), 0u);
   CAF_REQUIRE_EQUAL(out->errors.size(), 9u);
   for (auto& e : out->errors) CAF_CHECK(e.find("open refused") != std::string::npos);
-  CAF_CHECK_EQUAL(logged("\"open_refused\""), 9u);
-  CAF_CHECK_EQUAL(logged("forged"), 0u);  // the name was refused, never logged
+  CAF_CHECK_EQUAL(count(Ev::open_refused), 9u);
+  CAF_CHECK_EQUAL(std::count_if(events.begin(), events.end(), [](const Event& e) { return to_json_line(e).find("forged") != std::string::npos; }), 0);  // the name was refused, never logged
   for (uint64_t s = 1; s <= 3; ++s) self->send(op, open_atom::value, good_open(s));
   sched.run();
   CAF_CHECK_EQUAL(out->workers.size(), 2u);
@@ -508,7 +517,7 @@ CAF_TEST(a node refuses malformed opens and opens beyond max_workers) {
   CAF_CHECK_EQUAL(out->workers.size(), 3u);
   self->send_exit(op, caf::exit_reason::user_shutdown);
   sched.run();
-  CAF_CHECK_EQUAL(logged("\"live_workers\": 0"), 1u);
+  CAF_CHECK_EQUAL(count(Ev::worker_closed, [](const Event& e) { return *e.field("live_workers") == Json(0); }), 1u);
   self->send_exit(node, caf::exit_reason::user_shutdown);
   sched.run();
 }
@@ -526,17 +535,17 @@ CAF_TEST(a worker ends after keepalive_misses periods without a word from its pa
     sched.advance_time(std::chrono::milliseconds(100));
     sched.run();
   }
-  CAF_CHECK_EQUAL(logged("\"ended\""), 0u);
+  CAF_CHECK_EQUAL(count(Ev::ended), 0u);
   // The parent falls silent (it was last heard 100 ms ago); messages from others do not count.
   for (int i = 0; i < 2; ++i) {
     caf::anon_send(w, update_atom::value, Payload{}, false);
     sched.advance_time(std::chrono::milliseconds(100));
     sched.run();
   }
-  CAF_CHECK_EQUAL(logged("\"ended\""), 0u);  // 300 ms: not more than 3 periods yet
+  CAF_CHECK_EQUAL(count(Ev::ended), 0u);  // 300 ms: not more than 3 periods yet
   sched.advance_time(std::chrono::milliseconds(100));
   sched.run();
-  CAF_CHECK_EQUAL(logged("\"ended\": \"parent silent\", \"silent_ms\": 400"), 1u);
+  CAF_CHECK_EQUAL(count(Ev::ended, [](const Event& e) { return e.value == Json("parent silent") && *e.field("silent_ms") == Json(400); }), 1u);
 }
 
 // A batch as a session of a 16x16 client sends it to a worker that renders one node.
@@ -595,7 +604,7 @@ CAF_TEST(a worker fails every tile of a batch outside the node limits and serves
       CAF_CHECK(t.rgba.empty());
     }
   }
-  CAF_CHECK_EQUAL(logged("\"bad_batch\""), bad.size() - 1);  // the last one is the router's count check
+  CAF_CHECK_EQUAL(count(Ev::bad_batch), bad.size() - 1);  // the last one is the router's count check
   const BatchReply& ok = replies->back();
   CAF_REQUIRE_EQUAL(ok.tiles.size(), 1u);
   CAF_CHECK_EQUAL(ok.tiles[0].error, "");
@@ -633,7 +642,7 @@ CAF_TEST(a worker refuses an update whose chunks add up to more than max_update_
   chunk(std::vector<uint8_t>(600, 7), true, false);
   chunk(std::vector<uint8_t>(10, 7), true, true);
   CAF_CHECK_EQUAL(*acks, (std::vector<uint64_t>{600, 600, 10}));
-  CAF_CHECK_EQUAL(logged("\"update_failed\": \"a scene update over 1000 bytes\""), 1u);
+  CAF_CHECK_EQUAL(count(Ev::update_failed, "a scene update over 1000 bytes"), 1u);
   self->send(parent, good_batch());
   sched.run();
   CAF_REQUIRE_EQUAL(replies->size(), 1u);
@@ -659,7 +668,7 @@ CAF_TEST(a worker refuses an update whose chunks add up to more than max_update_
 CAF_TEST_FIXTURE_SCOPE_END()
 
 // Log lines carry names and messages from clients and peers: they must stay one JSON object.
-CAF_TEST(json_quote escapes what could forge a log line and nodes_json uses it) {
+CAF_TEST(json_quote escapes what could forge a log line and events use it everywhere) {
   CAF_CHECK_EQUAL(json_quote("plain"), "\"plain\"");
   CAF_CHECK_EQUAL(json_quote("a\"b\\c"), "\"a\\\"b\\\\c\"");
   CAF_CHECK_EQUAL(json_quote("x\n{\"node\": 1}"), "\"x\\u000a{\\\"node\\\": 1}\"");
@@ -667,8 +676,18 @@ CAF_TEST(json_quote escapes what could forge a log line and nodes_json uses it) 
   CAF_CHECK_EQUAL(json_quote("caf\xc3\xa9 \xe2\x82\xac"), "\"caf\xc3\xa9 \xe2\x82\xac\"");  // UTF-8 kept
   CAF_CHECK_EQUAL(json_quote("\xff\xc3"), "\"\\ufffd\\ufffd\"");  // not UTF-8
   CAF_CHECK_EQUAL(json_quote("\xed\xa0\x80"), "\"\\ufffd\\ufffd\\ufffd\"");  // a surrogate
-  CAF_CHECK_EQUAL(nodes_json({NodeInfo{"n\"}, {\"x", 2, 1.5}}),
-                  "[{\"name\": \"n\\\"}, {\\\"x\", \"cores\": 2, \"perf\": 1.5}]");
+  CAF_CHECK_EQUAL(nodes_value({NodeInfo{"n\"}, {\"x", 2, 1.5}}).dump(),
+                  "[{\"name\": \"n\\\"}, {\\\"x\", \"cores\": 2, \"perf\": 1.500}]");
+  // Scope, kind and fields, keys and nested values: every string goes through json_quote.
+  Event e(Ev::node_lost, "w\"1");
+  e.scope = {{"node", "m\n"}, {"session", 7u}};
+  e.with("reason", "x\"}, {\"forged\": 1").with("frame", Json::number(1.23456, 2)).with("ok", false);
+  e.with("list", Json::array({Json(1), Json("a\\b"), Json::number(std::nan(""))}));
+  CAF_CHECK_EQUAL(to_json_line(e), "{\"node\": \"m\\u000a\", \"session\": 7, \"node_lost\": \"w\\\"1\", "
+                                   "\"reason\": \"x\\\"}, {\\\"forged\\\": 1\", \"frame\": 1.23, \"ok\": false, "
+                                   "\"list\": [1, \"a\\\\b\", null]}");
+  CAF_CHECK(*e.field("node") == Json("m\n"));
+  CAF_CHECK(e.field("missing") == nullptr);
 }
 
 // The checks a parent applies to what its children send.

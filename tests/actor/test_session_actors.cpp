@@ -29,7 +29,7 @@ struct fixture : test_coordinator_fixture<TestConfig> {
   fixture() {
     settings->detached = false;  // everything on the test coordinator
     settings->packet_layout = {4, 4};
-    settings->log = [](const std::string&) {};
+    settings->log = [](const Event&) {};
     settings->handshake_timeout_ms = 0;  // run() advances the clock: the timeout has its own tests
     settings->budget = budget;
     run();
@@ -315,7 +315,7 @@ struct bare_fixture : test_coordinator_fixture<TestConfig> {
   bare_fixture() {
     settings->detached = false;
     settings->packet_layout = {4, 4};
-    settings->log = [](const std::string&) {};
+    settings->log = [](const Event&) {};
     settings->handshake_timeout_ms = 300;
     run();
     baseline = sys.registry().running();

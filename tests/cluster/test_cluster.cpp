@@ -46,7 +46,8 @@ TEST_CASE("Two worker processes render for a master; a killed worker's tiles are
           "[cluster][fault]") {
   Node w1 = worker("w1"), w2 = worker("w2");
   const uint16_t p1 = w1.cluster;
-  Node m({"--port", "0", "--no-render", "--children", w1.addr() + "," + w2.addr()});
+  // Without the per-frame lines: every other event still shows (the recovering ones below).
+  Node m({"--port", "0", "--no-render", "--tessera.log-frames=false", "--children", w1.addr() + "," + w2.addr()});
   REQUIRE(wait_for([&] { return m.p->err_count("\"child_connected\"") == 2; }, 20000));
 
   ProtoClient c;
@@ -64,6 +65,8 @@ TEST_CASE("Two worker processes render for a master; a killed worker's tiles are
   w1.p->signal(SIGKILL);
   for (size_t k : {100, 120, 140}) check_frame(c, k, n++, *m.p);
   CHECK(m.p->err_count("\"node_lost\"") >= 1);
+  CHECK(m.p->err_count("\"recovering\"") >= 1);  // hidden with the frame lines before events had kinds
+  CHECK(m.p->err_count("\"sent_ms\"") == 0);      // no frame event
 
   // It comes back on the same port: the session reopens a worker there, sends it the scene,
   // and tiles over both workers again.

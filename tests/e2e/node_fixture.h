@@ -36,6 +36,7 @@ struct TestConfig : caf::actor_system_config {
 struct TestNode {
   TestConfig cfg;
   caf::actor_system sys{cfg};
+  logger_actor logger;  // the node's logger; ends before the actor system
   std::shared_ptr<NodeSettings> settings = std::make_shared<NodeSettings>();
   std::unique_ptr<Server> server;
   // The node's log lines. Shared with the log callback rather than a member the callback
@@ -46,17 +47,19 @@ struct TestNode {
   // keeps the buffer alive until CAF drops the last NodeSettings.
   struct Log {
     std::mutex mu;
-    std::vector<std::string> lines;
+    std::vector<Event> events;
   };
   std::shared_ptr<Log> log = std::make_shared<Log>();
 
   // `configure` may change the settings and options before the server starts.
   explicit TestNode(size_t max_clients = 8,
                     const std::function<void(NodeSettings&, ServerOptions&)>& configure = nullptr) {
-    settings->log = [log = log](const std::string& line) {
+    settings->log = [log = log](const Event& e) {
       std::lock_guard<std::mutex> l(log->mu);
-      log->lines.push_back(line);
+      log->events.push_back(e);
     };
+    logger = spawn_logger(sys, settings->log);
+    settings->logger = caf::actor_cast<caf::weak_actor_ptr>(logger);
     ServerOptions o;
     o.host = "127.0.0.1";
     o.port = 0;
@@ -70,12 +73,22 @@ struct TestNode {
   ~TestNode() {
     server->stop();
     sys.await_all_actors_done();
+    flush_logger(sys, logger);
   }
   uint16_t port() const { return server->port(); }
-  size_t log_count(const std::string& needle) {
+  // The events the node reported so far (every event sent to the logger before the call).
+  std::vector<Event> events(Ev kind) {
+    flush_logger(sys, logger);
     std::lock_guard<std::mutex> l(log->mu);
+    std::vector<Event> out;
+    for (auto& e : log->events)
+      if (e.kind == kind) out.push_back(e);
+    return out;
+  }
+  // How many events of `kind` (and for which `pred` holds) the node reported so far.
+  size_t count(Ev kind, const std::function<bool(const Event&)>& pred = nullptr) {
     size_t n = 0;
-    for (auto& s : log->lines) n += s.find(needle) != std::string::npos;
+    for (auto& e : events(kind)) n += !pred || pred(e);
     return n;
   }
 };
@@ -162,6 +175,12 @@ inline Image decode_jpeg(const std::vector<uint8_t>& bytes) {
   std::string err;
   REQUIRE(jpeg_decode(bytes.data(), bytes.size(), img, err));
   return img;
+}
+
+// Whether the event's field `key` is a string containing `part`.
+inline bool has(const Event& e, const std::string& key, const std::string& part) {
+  const Json* v = e.field(key);
+  return v && v->type() == Json::Type::string && v->as_string().find(part) != std::string::npos;
 }
 
 inline bool wait_for(const std::function<bool()>& pred, int timeout_ms = 5000) {

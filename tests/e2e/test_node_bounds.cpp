@@ -160,7 +160,7 @@ TEST_CASE("WebSockets that never send a handshake are closed after the timeout a
   // A handshake in time outlives the timeout.
   std::this_thread::sleep_for(std::chrono::milliseconds(500));
   CHECK_FALSE(newcomer.ws.closed());
-  CHECK(node.log_count("no handshake within") == 4);
+  CHECK(node.count(Ev::error, [](const Event& e) { return has(e, "message", "no handshake within"); }) == 4);
 }
 
 TEST_CASE("A handshake record that fails decoding ends the session", "[e2e][fault]") {
@@ -257,7 +257,7 @@ TEST_CASE("A client that never reads costs the node a bounded number of frames",
   // Until the node has rendered 100 frames (11 MB) for the client that does not read: more
   // than every socket buffer between them holds.
   const auto t0 = std::chrono::steady_clock::now();
-  auto rendered = [&] { return node.log_count("\"display\": \"s3tc\""); };
+  auto rendered = [&] { return node.count(Ev::frame, [](const Event& e) { return has(e, "display", "s3tc"); }); };
   // 20 s in the Release build; longer under a sanitizer (the renderer and encoder are not
   // instrumented under TSan, but every message and socket write is).
   const auto limit = std::chrono::seconds(20 * time_scale());
@@ -311,7 +311,7 @@ TEST_CASE("MJPEG viewers are counted per session and per node", "[e2e][fault]") 
   a1.shut();  // a viewer that leaves frees its slot at once, without waiting for a frame
   CHECK(wait_for([&] { return node.server->mjpeg_viewers() == 2; }, 3000));
   CHECK(view("viewersB01", b3) == 200);
-  CHECK(node.log_count("\"mjpeg viewers\"") == 2);
+  CHECK(node.count(Ev::rejected, [](const Event& e) { return e.value == Json("mjpeg viewers"); }) == 2);
 }
 
 TEST_CASE("HTTP: HEAD, Range, 405 with Allow, no Server header, and only the public web files", "[e2e]") {

@@ -80,7 +80,7 @@ TEST_CASE("A client uploads the pavilion and receives JPEG and S3TC frames that 
   }
   // Every session's actors are gone once its client has left.
   CHECK(wait_for([&] { return node.sys.registry().running() == baseline && node.server->sessions() == 0; }));
-  CHECK(node.log_count("\"kernel_ms\"") >= 6);
+  CHECK(node.count(Ev::frame) >= 6);
 }
 
 TEST_CASE("MJPEG frames stream over HTTP and match the ray tracer", "[e2e]") {
@@ -184,7 +184,7 @@ TEST_CASE("Malformed messages get errors and neither that session nor another on
   CHECK(fatal->code == protocol::ErrorCode::bad_handshake);
   CHECK(wait_for([&] { return a.ws.closed(); }));
   CHECK(b.render(pavilion_loop().camera(6), 9));
-  CHECK(node.log_count("\"error\"") >= 5);
+  CHECK(node.count(Ev::error) >= 5);
 }
 
 TEST_CASE("One node serves a rasterizer client and a ray tracer client at the same time", "[e2e]") {

@@ -60,7 +60,7 @@ TEST_CASE("Without EGL a rasterizer session gets an error and a ray tracer sessi
     CHECK(f->frame == 5 + i);
     CHECK(f->timings.kernel_ms > 0);
   }
-  CHECK(node.log_count("OpenGL ES 3 context") >= 1);
+  CHECK(node.count(Ev::error, [](const Event& e) { return has(e, "message", "OpenGL ES 3 context"); }) >= 1);
 }
 
 int main(int argc, char** argv) {

@@ -223,3 +223,25 @@ TEST_CASE("tessera.children given on the command line is a list the node reads",
   p.signal(SIGTERM);
   REQUIRE(p.wait(15000));
 }
+
+TEST_CASE("Boolean settings take =true and =false on the command line, and nothing else", "[e2e]") {
+  // CAF 0.17 makes bool options flags, which refused `=false`; a bare flag is not a
+  // --tessera.NAME=VALUE argument either, so `render` and `log-frames` could not be turned off
+  // on the command line (app/node_config.cpp, bool_option).
+  for (const char* v : {"false", "true"}) {
+    Process p(serve({"--port", "0", std::string("--tessera.render=") + v, std::string("--tessera.log-frames=") + v}));
+    auto line = p.first_line(30000);
+    INFO("stderr: " << p.err());
+    REQUIRE(line);
+    CHECK(line->find(std::string("\"render\": ") + v) != std::string::npos);
+    p.signal(SIGTERM);
+    REQUIRE(p.wait(15000));
+  }
+  Process bad(serve({"--port", "0", "--tessera.log-frames=maybe"}));
+  auto status = bad.wait(15000);
+  REQUIRE(status);
+  CHECK(WIFEXITED(*status));
+  CHECK(WEXITSTATUS(*status) != 0);
+  INFO("stderr: " << bad.err());
+  CHECK(bad.err().find("log-frames") != std::string::npos);
+}

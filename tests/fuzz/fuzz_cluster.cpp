@@ -81,7 +81,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     }
     case 4: {
       std::vector<NodeInfo> nodes;
-      if (read(data, size, nodes) && check_nodes(nodes).empty()) (void)nodes_json(nodes);
+      if (read(data, size, nodes) && check_nodes(nodes).empty()) (void)nodes_value(nodes).dump();
       break;
     }
     case 5: {
