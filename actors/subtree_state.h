@@ -1,8 +1,8 @@
 #pragma once
 // The state of a subtree actor (subtree_protocol.h) and the functions that work on it, shared
-// by subtree.cpp (its behaviour, scene and own renderer) and subtree_fanout.cpp (its
-// children: updates down in windows, batches out and tiles in, membership). Private to
-// those two files: everything here runs on the subtree's own thread.
+// by subtree.cpp (its behaviour, scene and own renderer), subtree_fanout.cpp (updates down in
+// windows, batches out and tiles in) and subtree_members.cpp (children that join, fail and are
+// committed). Private to those files: everything here runs on the subtree's own thread.
 #include <deque>
 #include <map>
 #include <memory>
@@ -110,6 +110,12 @@ void render_own(subtree_ptr self, uint64_t join, size_t part, const RenderTask& 
 void scene_snapshot(subtree_ptr self, std::function<void(std::vector<std::pair<std::vector<uint8_t>, bool>>)> done);
 
 // --- subtree_fanout.cpp ---
+// The live child whose worker is `who` (nullptr: none).
+SubtreeChild* find_child(subtree_state& st, const caf::actor_addr& who);
+// The tiles of part `p` failed with `code` (those that have not failed already).
+void fail_part(Join& j, const Join::Part& p, protocol::ErrorCode code, const std::string& why);
+// An update for one child, sent as its window allows.
+void enqueue_update(subtree_ptr self, SubtreeChild& c, std::shared_ptr<const std::vector<uint8_t>> data, bool reset);
 // The committed flattened list: this node first (if it renders), then each routed child's.
 std::vector<NodeInfo> node_list(const subtree_state& st);
 // Sends encoded scene records to every live child (routed or joining), behind what waits for it.
@@ -121,6 +127,7 @@ void keepalive(subtree_ptr self);
 void dispatch(subtree_ptr self, RenderBatch batch, caf::typed_response_promise<BatchReply> promise);
 // Part `part` of batch `join` is in (its tiles are in the reply).
 void finish_part(subtree_ptr self, uint64_t join, size_t part);
+// --- subtree_members.cpp ---
 // Commits membership and delivers the new list; waits behind a commit in flight and, with
 // wait_joins, behind the opens in flight (the first list of a subtree should have its children).
 void commit(subtree_ptr self, caf::typed_response_promise<std::vector<NodeInfo>> promise, bool wait_joins);
