@@ -611,7 +611,7 @@ CAF_TEST(a worker fails every tile of a batch outside the node limits and serves
       CAF_CHECK(t.rgba.empty());
     }
   }
-  CAF_CHECK_EQUAL(count(Ev::bad_batch), bad.size() - 1);  // the last one is the router's count check
+  CAF_CHECK_EQUAL(count(Ev::bad_batch), bad.size() - 1);  // the last one is the subtree's count check
   const BatchReply& ok = replies->back();
   CAF_REQUIRE_EQUAL(ok.tiles.size(), 1u);
   CAF_CHECK(!ok.tiles[0].failed());
