@@ -6,7 +6,7 @@
 #include <vector>
 
 #include "actors/event.h"
-#include "actors/messages.h"
+#include "actors/cluster_protocol.h"
 #include "core/rect.h"
 #include "core/scene.h"
 #include "lb/tiler.h"

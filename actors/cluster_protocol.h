@@ -27,6 +27,40 @@
 
 namespace tessera {
 
+// Parent -> node: open a worker for one session on this node's sub-tree.
+struct OpenRequest {
+  uint64_t session = 0;
+  std::string master;        // for log lines
+  int32_t packet_w = 4, packet_h = 4;  // the master's packet layout (one packet space per cluster)
+  uint32_t timeout_ms = 0;   // how long the parent waits for the reply (0: not said)
+  uint32_t keepalive_ms = 0; // the parent sends the worker something (at least an empty update)
+                             // this often; a worker that hears nothing for a multiple of it ends
+};
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, OpenRequest& x) {
+  return f(caf::meta::type_name("tessera::open_request"), x.session, x.master, x.packet_w, x.packet_h, x.timeout_ms,
+           x.keepalive_ms);
+}
+
+struct OpenReply {
+  caf::actor worker;            // a worker_actor
+  std::vector<NodeInfo> nodes;  // its flattened list
+};
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, OpenReply& x) {
+  return f(caf::meta::type_name("tessera::open_reply"), x.worker, x.nodes);
+}
+
+// A node's live children, for its own workers.
+struct ChildLink {
+  std::string name;
+  caf::actor node;  // a node_actor
+};
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, ChildLink& x) {
+  return f(caf::meta::type_name("tessera::child_link"), x.name, x.node);
+}
+
 using node_actor = caf::typed_actor<caf::replies_to<open_atom, OpenRequest>::with<OpenReply>,
                                     caf::replies_to<links_atom>::with<std::vector<ChildLink>>,
                                     caf::reacts_to<tick_atom>>;

@@ -6,8 +6,19 @@
 #include <caf/replies_to.hpp>
 
 #include "actors/messages.h"
+#include "actors/renderer_protocol.h"
 
 namespace tessera {
+
+// Frame actor -> display channel: the tiles of one frame.
+struct FrameTiles {
+  FrameMeta meta;
+  std::vector<TileResult> tiles;
+};
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, FrameTiles& x) {
+  return f(caf::meta::type_name("tessera::frame_tiles"), x.meta, x.tiles);
+}
 
 using display_actor = caf::typed_actor<caf::reacts_to<display_atom, FrameTiles>>;
 

@@ -8,6 +8,33 @@
 
 namespace tessera {
 
+// Display -> encoder: a composed image.
+struct EncodeJob {
+  FrameMeta meta;
+  std::vector<uint8_t> rgba;  // width * height * 4
+};
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, EncodeJob& x) {
+  return f(caf::meta::type_name("tessera::encode_job"), x.meta, BytesField{x.rgba});
+}
+
+// Encoder -> display: the encoded frame. `message` starts with header_bytes of room for the
+// protocol header (the display writes it when it knows the pipeline time) followed by the
+// payload (JPEG file or DXT1 blocks).
+struct EncodedFrame {
+  FrameMeta meta;
+  std::vector<uint8_t> message;
+  uint32_t header_bytes = 0;
+  double encode_ms = 0;
+  int64_t encode_start_ns = 0, encode_end_ns = 0;
+  std::string error;
+};
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, EncodedFrame& x) {
+  return f(caf::meta::type_name("tessera::encoded_frame"), x.meta, BytesField{x.message}, x.header_bytes, x.encode_ms,
+           x.encode_start_ns, x.encode_end_ns, x.error);
+}
+
 using encoder_actor = caf::typed_actor<caf::replies_to<encode_atom, EncodeJob>::with<EncodedFrame>>;
 
 }  // namespace tessera

@@ -8,7 +8,7 @@
 
 #include <caf/error.hpp>
 
-#include "actors/messages.h"
+#include "actors/renderer_protocol.h"
 #include "protocol/protocol.h"
 
 namespace tessera {

@@ -27,6 +27,19 @@
 
 namespace tessera {
 
+// Sync actor -> frame actor (frame_protocol.h): render one frame. `meta` has the session's
+// figures as of the frame's start; `scene` is read-only until the frame actor answers.
+struct FrameStart {
+  FrameMeta meta;
+  SceneSnapshot scene;
+  int32_t ao_samples = 0, max_depth = 4;
+  uint8_t renderer = 0;  // protocol::RendererKind
+};
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, FrameStart& x) {
+  return f(caf::meta::type_name("tessera::frame_start"), x.meta, x.scene, x.ao_samples, x.max_depth, x.renderer);
+}
+
 using frame_actor = caf::typed_actor<caf::replies_to<nodes_atom, uint32_t>::with<uint32_t>,
                                      caf::replies_to<render_atom, FrameStart>::with<uint32_t>>;
 

@@ -12,6 +12,40 @@
 
 namespace tessera {
 
+// One rendering task: a pixel rectangle of frame `frame` at width x height.
+struct RenderTask {
+  uint32_t frame = 0;  // the session's frame sequence number (not the client's)
+  int32_t width = 0, height = 0;
+  Rect pixels;
+  int32_t ao_samples = 0;
+  int32_t max_depth = 4;
+  uint8_t renderer = 0;  // protocol::RendererKind: 0 ray tracer, 1 rasterizer
+};
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, RenderTask& x) {
+  return f(caf::meta::type_name("tessera::render_task"), x.frame, x.width, x.height, x.pixels, x.ao_samples,
+           x.max_depth, x.renderer);
+}
+
+// What a rendering node returns for a task: RGBA pixels of the rectangle and the serialised
+// SAT of its cost map (Sat wire format), plus its measurements.
+struct TileResult {
+  uint32_t frame = 0;
+  Rect pixels;
+  std::vector<uint8_t> rgba;  // pixels.width() * pixels.height() * 4
+  std::vector<uint8_t> sat;   // Sat::serialize(); empty when no cost map was measured
+  double kernel_ms = 0, rendering_ms = 0, sat_ms = 0;
+  uint64_t rays = 0;
+  protocol::ErrorCode code = protocol::ErrorCode::ok;  // not ok: the task failed (pixels are not valid)
+  std::string error;                                   // why, when it failed
+  bool failed() const { return code != protocol::ErrorCode::ok; }
+};
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, TileResult& x) {
+  return f(caf::meta::type_name("tessera::tile_result"), x.frame, x.pixels, BytesField{x.rgba}, BytesField{x.sat}, x.kernel_ms,
+           x.rendering_ms, x.sat_ms, x.rays, x.code, x.error);
+}
+
 using renderer_actor = caf::typed_actor<caf::replies_to<render_atom, SceneSnapshot, RenderTask>::with<TileResult>>;
 
 }  // namespace tessera

@@ -23,6 +23,26 @@
 
 namespace tessera {
 
+// A session's state, for tests and monitoring.
+struct SessionStatus {
+  bool handshake_done = false;
+  bool in_flight = false;        // a frame is being rendered (scene updates are cached)
+  bool render_pending = false;   // a render request waits for the frame in flight
+  uint32_t pending_frame = 0;
+  uint32_t cached_updates = 0;
+  uint32_t frames_started = 0;
+  uint32_t dropped = 0;          // render requests merged into a later one
+  uint32_t errors_sent = 0;
+  uint64_t scene_version = 0;
+  uint64_t triangles = 0;
+};
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, SessionStatus& x) {
+  return f(caf::meta::type_name("tessera::session_status"), x.handshake_done, x.in_flight, x.render_pending,
+           x.pending_frame, x.cached_updates, x.frames_started, x.dropped, x.errors_sent, x.scene_version,
+           x.triangles);
+}
+
 // The handshake timeout (NodeSettings::handshake_timeout_ms), sent by the session to itself.
 using hs_timeout_atom = caf::atom_constant<caf::atom("hstimeout")>;
 

@@ -41,8 +41,48 @@
 #include <caf/replies_to.hpp>
 
 #include "actors/messages.h"
+#include "actors/renderer_protocol.h"
 
 namespace tessera {
+
+// One rendering node of a sub-tree, as its parent sees it (paper 5.2: the master gets the
+// flattened list of its sub-trees' rendering nodes).
+struct NodeInfo {
+  std::string name;            // "host:port" of its cluster endpoint, or "local"
+  int32_t logical_cores = 1;   // renderer coefficient = logical_cores x single_core_perf
+  double single_core_perf = 1;
+};
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, NodeInfo& x) {
+  return f(caf::meta::type_name("tessera::node_info"), x.name, x.logical_cores, x.single_core_perf);
+}
+
+// The tasks of one frame for a sub-tree: tasks[i] is the pixel rectangle of entry i of the
+// receiver's flattened node list (as last returned by its nodes query); empty: nothing.
+struct RenderBatch {
+  uint32_t frame = 0;
+  int32_t width = 0, height = 0;
+  int32_t ao_samples = 0, max_depth = 4;
+  uint32_t timeout_ms = 5000;  // the sender gives up on this batch after this long
+  std::vector<Rect> tasks;
+  uint8_t renderer = 0;        // protocol::RendererKind of the session
+};
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, RenderBatch& x) {
+  return f(caf::meta::type_name("tessera::render_batch"), x.frame, x.width, x.height, x.ao_samples, x.max_depth,
+           x.timeout_ms, x.tasks, x.renderer);
+}
+
+// tiles[i] answers tasks[i] (its code set when that node failed); changed: the sub-tree lost or
+// gained nodes, so its parent should ask for the node list again before the next frame.
+struct BatchReply {
+  std::vector<TileResult> tiles;
+  bool changed = false;
+};
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, BatchReply& x) {
+  return f(caf::meta::type_name("tessera::batch_reply"), x.tiles, x.changed);
+}
 
 using subtree_actor = caf::typed_actor<caf::reacts_to<update_atom, Payload, bool>,
                                        caf::replies_to<update_atom, Payload, bool, bool>::with<uint64_t>,

@@ -12,7 +12,7 @@
 
 #include <caf/binary_serializer.hpp>
 
-#include "actors/messages.h"
+#include "actors/cluster_protocol.h"
 #include "codecs/jpeg.h"
 #include "protocol/protocol.h"
 #include "protocol/scene_records.h"
