@@ -8,6 +8,7 @@
 #include "actors/router.h"
 #include "protocol/scene_records.h"
 #include "renderer/raytracer.h"
+#include "update/scene_update.h"
 
 namespace tessera {
 namespace {

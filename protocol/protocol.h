@@ -1,16 +1,15 @@
 #pragma once
 // The client protocol: binary messages on the sync and display WebSockets (docs/protocol.md
-// documents every byte). Pure code: no sockets, no actors.
+// documents every byte). Pure code: bytes in, records out and back; no scene, no sockets, no actors.
 //
 // A WebSocket binary message is a header followed by one or more records:
 //   message = "TS" u8 version u8 channel u32 record_count, record*
 //   record  = u8 type u8 op u16 reserved(0) u32 body_length, body
 // Everything is little endian. Decoding validates the whole message before anything is
-// returned (all or nothing); `apply` then changes the scene record by record, checking what
-// depends on the scene (mesh consistency, per-client totals).
+// returned (all or nothing); `apply` (update/scene_update.h) then changes the scene record by
+// record, checking what depends on the scene (mesh consistency, per-client totals).
 #include <cstddef>
 #include <cstdint>
-#include <map>
 #include <string>
 #include <utility>
 #include <variant>
@@ -128,6 +127,8 @@ enum class RecordType : uint8_t {
 };
 
 enum class Op : uint8_t { set = 0, remove = 1 };  // set = add or change
+
+const char* to_string(RecordType t);  // "handshake", "buffer", ...
 
 enum class RendererKind : uint8_t { raytracer = 0, rasterizer = 1 };
 enum class DisplayKind : uint8_t { jpeg = 0, s3tc = 1, mjpeg = 2 };
@@ -269,41 +270,6 @@ void encode_frame_header(const Frame& frame_without_payload, size_t payload_size
 
 Result<std::vector<ClientRecord>> decode_client(const uint8_t* data, size_t size, const Limits& limits);
 Result<std::vector<ServerRecord>> decode_server(const uint8_t* data, size_t size, const Limits& limits);
-
-// ---------------------------------------------------------------------------------------
-// Applying decoded client records to a scene.
-
-bool is_scene_update(const ClientRecord& r);  // resolution, camera, environment, set/remove of entries
-
-// Applies one scene update. Scene-dependent checks:
-// - a mesh whose referenced buffers are all present must pass Scene::validate_mesh, else
-//   bad_mesh and the scene is unchanged; a mesh with missing buffers is accepted (progressive
-//   loading: it is rendered once its buffers arrive and validate_mesh passes);
-// - buffers and textures held for the client stay within limits.max_client_bytes;
-// - the scene's triangle count stays within limits.max_triangles;
-// - remove of an id the scene does not hold: unknown_id.
-// Returns not_scene_update for handshake, settings and render requests (the session handles them).
-Status apply(Scene& scene, ClientRecord&& record, const Limits& limits);
-
-// Buffers + textures held by the scene (what max_client_bytes limits).
-uint64_t scene_bytes(const Scene& scene);
-
-// Scene updates that wait to be applied (a session caches them while a frame renders from
-// the scene) count against max_client_bytes as if they had been applied in order: admit()
-// checks one more waiting update against the buffers and textures the scene would hold once
-// it and every update admitted before it were applied (a replacement counts the size it
-// replaces out, a removal frees it). limit_exceeded says the update must not wait (it is
-// dropped; what waits already is kept). The scene must not change until clear().
-class PendingBytes {
- public:
-  Status admit(const Scene& scene, const ClientRecord& record, const Limits& limits);
-  void clear();  // the waiting updates were applied (or dropped)
-  uint64_t waiting_bytes() const { return added_; }  // bytes the admitted updates hold while they wait
- private:
-  uint64_t size_of(const Scene& scene, RecordType what, Id id) const;  // as the waiting updates leave it
-  std::map<std::pair<RecordType, Id>, uint64_t> latest_;  // last waiting size per entry
-  uint64_t added_ = 0, freed_ = 0;
-};
 
 // Session order on the sync channel: the first message is exactly one handshake, and no
 // handshake comes later (bad_handshake, fatal). `handshake_done` is the session's state.
