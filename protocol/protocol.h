@@ -16,14 +16,13 @@
 #include <vector>
 
 #include "core/scene.h"
+// Generated at build time from protocol/wire.toml (protocol/gen_wire.py): the framing constants
+// (kVersion, kMagic0/1, kMessageHeaderSize, kRecordHeaderSize, kNoRecord), the enums RecordType,
+// Channel, Op, RendererKind, DisplayKind, FrameEncoding and TextureFormat, the flag bits, and
+// protocol::wire: every record's body size, field offsets and ranges, and the default limits.
+#include "protocol/wire.h"
 
 namespace tessera::protocol {
-
-constexpr uint8_t kVersion = 1;
-constexpr uint8_t kMagic0 = 'T', kMagic1 = 'S';
-constexpr size_t kMessageHeaderSize = 8;
-constexpr size_t kRecordHeaderSize = 8;
-constexpr uint32_t kNoRecord = 0xffffffffu;
 
 // ---------------------------------------------------------------------------------------
 // Errors are values.
@@ -86,59 +85,28 @@ using Status = Result<Ok>;
 // ---------------------------------------------------------------------------------------
 // Limits, enforced before any allocation that depends on a declared size.
 
+// The defaults are protocol/wire.toml's [limits].
 struct Limits {
-  uint32_t max_message_bytes = 64u << 20;      // one WebSocket message
-  uint32_t max_records = 1u << 16;             // records in one message
-  int32_t max_width = 7680, max_height = 4320; // resolution
-  uint64_t max_message_payload_bytes = 256ull << 20;  // inflated buffers + decoded textures in one message
-  uint64_t max_buffer_bytes = 256ull << 20;    // one buffer, inflated
-  uint64_t max_client_bytes = 1ull << 30;      // buffers + textures held in one client's scene
-  uint64_t max_triangles = 20'000'000;         // scene total, instances counted each time
-  uint64_t max_vertices = 20'000'000;          // elements in one buffer
-  int32_t max_texture_size = 8192;             // texture width and height each
-  uint32_t max_nodes = 1024;                   // handshake max_nodes
-  uint32_t max_ao_samples = 256;
-  uint32_t max_depth = 64;
+  uint32_t max_message_bytes = wire::limits::max_message_bytes;  // one WebSocket message
+  uint32_t max_records = wire::limits::max_records;              // records in one message
+  int32_t max_width = wire::limits::max_width, max_height = wire::limits::max_height;  // resolution
+  uint64_t max_message_payload_bytes = wire::limits::max_message_payload_bytes;  // inflated buffers + decoded textures in one message
+  uint64_t max_buffer_bytes = wire::limits::max_buffer_bytes;    // one buffer, inflated
+  uint64_t max_client_bytes = wire::limits::max_client_bytes;    // buffers + textures held in one client's scene
+  uint64_t max_triangles = wire::limits::max_triangles;          // scene total, instances counted each time
+  uint64_t max_vertices = wire::limits::max_vertices;            // elements in one buffer
+  int32_t max_texture_size = wire::limits::max_texture_size;     // texture width and height each
+  uint32_t max_nodes = wire::limits::max_nodes;                  // handshake max_nodes
+  uint32_t max_ao_samples = wire::limits::max_ao_samples;
+  uint32_t max_depth = wire::limits::max_depth;
 };
 
 // ---------------------------------------------------------------------------------------
-// Record types and enums on the wire.
-
-enum class Channel : uint8_t { client = 0, server = 1 };  // who sends the message
-
-enum class RecordType : uint8_t {
-  // client -> server
-  handshake = 0x01,
-  settings = 0x02,
-  resolution = 0x03,
-  camera = 0x04,
-  environment = 0x05,
-  buffer = 0x10,
-  texture = 0x11,
-  material = 0x12,
-  mesh = 0x13,
-  light = 0x14,
-  render = 0x20,
-  // server -> client
-  handshake_reply = 0x81,
-  frame = 0x82,
-  error = 0x83,
-  stats = 0x84,
-};
-
-enum class Op : uint8_t { set = 0, remove = 1 };  // set = add or change
+// Record types and enums on the wire: protocol/wire.h (RecordType, Channel, Op, RendererKind,
+// DisplayKind, FrameEncoding, TextureFormat; kBufferDeflate, kMaterialAlphaMask,
+// kMaterialDoubleSided).
 
 const char* to_string(RecordType t);  // "handshake", "buffer", ...
-
-enum class RendererKind : uint8_t { raytracer = 0, rasterizer = 1 };
-enum class DisplayKind : uint8_t { jpeg = 0, s3tc = 1, mjpeg = 2 };
-enum class FrameEncoding : uint8_t { jpeg = 0, dxt1 = 1 };
-enum class TextureFormat : uint8_t { rgba8 = 0, png = 1, jpeg = 2 };
-
-// Buffer flags.
-constexpr uint8_t kBufferDeflate = 1;
-// Material flags.
-constexpr uint8_t kMaterialAlphaMask = 1, kMaterialDoubleSided = 2;
 
 // ---------------------------------------------------------------------------------------
 // Client -> server records.
