@@ -23,13 +23,13 @@
 namespace tessera {
 
 enum class Ev : uint8_t {
-  // A session (actors/session_actor.cpp, display_actor.cpp): scope {"session": id}.
+  // A session (actors/session_actor.cpp, frame_actor.cpp, display_actor.cpp): scope {"session": id}.
   opened, closed, handshake, error, nodes, preloaded_scene, recovering, cluster_frame, frame,
-  // A session's or a worker's tree (actors/router.h).
+  // A subtree (actors/subtree*.cpp): a root with the session's scope, a worker with its own.
   joined, join_failed, node_lost, rejected_tile,
-  // A worker (actors/cluster.cpp): scope {"node": name, "session": id}.
+  // A worker subtree (actors/subtree.cpp): scope {"node": name, "session": id}.
   update_failed, ended, bad_batch, orphaned,
-  // The node actor (actors/cluster.cpp): scope {"node": name}.
+  // The node actor (actors/node_actor.cpp): scope {"node": name}.
   child_connected, child_unreachable, child_lost, worker_opened, worker_closed, open_refused, heap_trimmed,
   // The server (net/server.cpp): no scope.
   closed_slow_client, rejected, network_thread_error,

@@ -21,6 +21,7 @@
 
 #include "core/rect.h"
 #include "core/scene.h"
+#include "protocol/protocol.h"
 
 namespace tessera {
 
@@ -38,6 +39,8 @@ using update_atom = caf::atom_constant<caf::atom("update")>;
 using nodes_atom = caf::atom_constant<caf::atom("nodes")>;
 using links_atom = caf::atom_constant<caf::atom("links")>;
 using tick_atom = caf::atom_constant<caf::atom("tick")>;
+using scene_atom = caf::atom_constant<caf::atom("scene")>;
+using snapshot_atom = caf::atom_constant<caf::atom("snapshot")>;
 
 // --- Byte vectors from other processes ----------------------------------------------------
 //
@@ -134,12 +137,14 @@ struct TileResult {
   std::vector<uint8_t> sat;   // Sat::serialize(); empty when no cost map was measured
   double kernel_ms = 0, rendering_ms = 0, sat_ms = 0;
   uint64_t rays = 0;
-  std::string error;          // non-empty: the task failed (pixels are not valid)
+  protocol::ErrorCode code = protocol::ErrorCode::ok;  // not ok: the task failed (pixels are not valid)
+  std::string error;                                   // why, when it failed
+  bool failed() const { return code != protocol::ErrorCode::ok; }
 };
 template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, TileResult& x) {
   return f(caf::meta::type_name("tessera::tile_result"), x.frame, x.pixels, BytesField{x.rgba}, BytesField{x.sat}, x.kernel_ms,
-           x.rendering_ms, x.sat_ms, x.rays, x.error);
+           x.rendering_ms, x.sat_ms, x.rays, x.code, x.error);
 }
 
 // Tiler: the task list for a frame, and the SATs of the previous one.
@@ -198,7 +203,20 @@ typename Inspector::result_type inspect(Inspector& f, FrameMeta& x) {
            x.dropped, x.scene_bytes, x.triangles);
 }
 
-// Session -> display channel: the tiles of one frame.
+// Sync actor -> frame actor (frame_protocol.h): render one frame. `meta` has the session's
+// figures as of the frame's start; `scene` is read-only until the frame actor answers.
+struct FrameStart {
+  FrameMeta meta;
+  SceneSnapshot scene;
+  int32_t ao_samples = 0, max_depth = 4;
+  uint8_t renderer = 0;  // protocol::RendererKind
+};
+template <class Inspector>
+typename Inspector::result_type inspect(Inspector& f, FrameStart& x) {
+  return f(caf::meta::type_name("tessera::frame_start"), x.meta, x.scene, x.ao_samples, x.max_depth, x.renderer);
+}
+
+// Frame actor -> display channel: the tiles of one frame.
 struct FrameTiles {
   FrameMeta meta;
   std::vector<TileResult> tiles;
@@ -263,7 +281,7 @@ typename Inspector::result_type inspect(Inspector& f, RenderBatch& x) {
   return f(caf::meta::type_name("tessera::render_batch"), x.frame, x.width, x.height, x.ao_samples, x.max_depth,
            x.timeout_ms, x.tasks, x.renderer);
 }
-// tiles[i] answers tasks[i] (error set when that node failed); changed: the sub-tree lost or
+// tiles[i] answers tasks[i] (its code set when that node failed); changed: the sub-tree lost or
 // gained nodes, so its parent should ask for the node list again before the next frame.
 struct BatchReply {
   std::vector<TileResult> tiles;

@@ -1,4 +1,6 @@
 #include "actors/node.h"
+#include "actors/checks.h"
+#include "actors/errors.h"
 
 #include <condition_variable>
 #include <cstdio>
@@ -29,6 +31,13 @@ caf::error scene_snapshot_from_bytes(const std::vector<uint8_t>& bytes, SceneSna
 }
 
 void register_message_types(caf::actor_system_config& cfg) {
+  // protocol::ErrorCode is CAF's error category "tessera" (actors/errors.h): sys.render(e)
+  // names the code, and the message it carries.
+  cfg.add_error_category(kErrorCategory, [](uint8_t code, caf::atom_value, const caf::message& ctx) {
+    std::string s = std::string("tessera: ") + protocol::to_string(protocol::ErrorCode(code));
+    if (ctx.match_elements<std::string>()) s += " (" + ctx.get_as<std::string>(0) + ")";
+    return s;
+  });
   cfg.add_message_type<Payload>("tessera::payload");  // not std::vector<uint8_t>: see BytesField
   cfg.add_message_type<SceneSnapshot>("tessera::scene_snapshot");
   cfg.add_message_type<RenderTask>("tessera::render_task");
@@ -36,6 +45,7 @@ void register_message_types(caf::actor_system_config& cfg) {
   cfg.add_message_type<TaskRequest>("tessera::task_request");
   cfg.add_message_type<TaskList>("tessera::task_list");
   cfg.add_message_type<SatReport>("tessera::sat_report");
+  cfg.add_message_type<FrameStart>("tessera::frame_start");
   cfg.add_message_type<FrameTiles>("tessera::frame_tiles");
   cfg.add_message_type<EncodeJob>("tessera::encode_job");
   cfg.add_message_type<EncodedFrame>("tessera::encoded_frame");

@@ -17,9 +17,11 @@
 #include "actors/cluster_protocol.h"
 #include "actors/display_protocol.h"
 #include "actors/encoder_protocol.h"
+#include "actors/frame_protocol.h"
 #include "actors/event.h"
 #include "actors/renderer_protocol.h"
 #include "actors/session_protocol.h"
+#include "actors/subtree_protocol.h"
 #include "actors/tiler_protocol.h"
 #include "protocol/memory_budget.h"
 #include "protocol/protocol.h"
@@ -93,12 +95,23 @@ display_actor spawn_display(caf::actor_system& sys, std::shared_ptr<ClientSink> 
 // The node actor of this process (cluster_protocol.h): connects to settings->children over
 // CAF's middleman (when loaded), reconnects lost ones, and opens workers for sessions.
 node_actor spawn_node(caf::actor_system& sys, std::shared_ptr<const NodeSettings> settings);
-// A worker of one session on this node's sub-tree; it ends when `parent` goes down.
-worker_actor spawn_worker(caf::actor_system& sys, std::shared_ptr<const NodeSettings> settings, node_actor node,
-                          OpenRequest request, caf::strong_actor_ptr parent);
-// Applies encoded client records (a forwarded update or a snapshot) to a scene; validates
-// them against this node's limits. Returns an error message, empty on success.
-std::string apply_records(Scene& scene, const std::vector<uint8_t>& bytes, const protocol::Limits& limits);
+// A subtree (subtree_protocol.h). `parent` is watched: when it goes down the subtree ends.
+// A root (source set) renders the session's scene on the session's renderer; a worker builds
+// its scene from its parent's updates and spawns its own renderer when the node renders.
+struct SubtreeSpec {
+  OpenRequest req;               // session, master name, packet layout, the parent's timeout and keep-alive
+  caf::strong_actor_ptr parent;
+  renderer_actor renderer;       // none: its own, when settings->render
+  scene_source_actor source;     // a root's scene owner: the session's sync actor
+};
+subtree_actor spawn_subtree(caf::actor_system& sys, std::shared_ptr<const NodeSettings> settings, node_actor node,
+                            SubtreeSpec spec);
+// A worker of one session on this node's sub-tree (spawn_subtree without renderer or source).
+subtree_actor spawn_worker(caf::actor_system& sys, std::shared_ptr<const NodeSettings> settings, node_actor node,
+                           OpenRequest request, caf::strong_actor_ptr parent);
+// The frame actor of a session (frame_protocol.h), linked to nothing: its spawner links it.
+frame_actor spawn_frame(caf::actor_system& sys, std::shared_ptr<const NodeSettings> settings, uint64_t session_id,
+                        PacketLayout layout, FrameActors actors);
 
 // A session with its own renderer, tiler, encoder and display actors, all linked to it:
 // when the session ends (client gone, fatal error, exit message), they end too.

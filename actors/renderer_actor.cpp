@@ -8,6 +8,7 @@
 
 #include <caf/all.hpp>
 
+#include "actors/errors.h"
 #include "actors/node.h"
 #include "renderer/rasterizer.h"
 #include "renderer/raytracer.h"
@@ -32,7 +33,14 @@ renderer_actor::behavior_type renderer_impl(renderer_actor::stateful_pointer<ren
   // this actor ends, which on a busy node can be well after its session ended: trim after it.
   self->attach_functor([] { schedule_heap_trim(); });
   return {
-      [=](render_atom, const SceneSnapshot& snap, const RenderTask& task) -> TileResult {
+      // A task it cannot take is a bad_task error; a renderer that fails (Embree's error, a
+      // GL context that cannot be made, memory) a render_failed error with the reason.
+      [=](render_atom, const SceneSnapshot& snap, const RenderTask& task) -> caf::result<TileResult> {
+        using protocol::ErrorCode;
+        if (task.renderer > 1) return make_error(ErrorCode::bad_task, "unknown renderer " + std::to_string(int(task.renderer)));
+        if (!snap.scene) return make_error(ErrorCode::bad_task, "render task without a scene");
+        if (snap.scene->width() != task.width || snap.scene->height() != task.height)
+          return make_error(ErrorCode::bad_task, "scene resolution does not match the task");
         TileResult out;
         out.frame = task.frame;
         out.pixels = task.pixels;
@@ -42,15 +50,10 @@ renderer_actor::behavior_type renderer_impl(renderer_actor::stateful_pointer<ren
           if (task.renderer == 1) {
             if (!st.raster) st.raster = std::make_unique<Rasterizer>();
             renderer = st.raster.get();
-          } else if (task.renderer == 0) {
+          } else {
             if (!st.rt) st.rt = std::make_unique<RayTracer>(layout);
             renderer = st.rt.get();
-          } else {
-            throw std::runtime_error("unknown renderer " + std::to_string(int(task.renderer)));
           }
-          if (!snap.scene) throw std::runtime_error("render task without a scene");
-          if (snap.scene->width() != task.width || snap.scene->height() != task.height)
-            throw std::runtime_error("scene resolution does not match the task");
           st.warnings.clear();
           renderer->sync(*snap.scene, st.warnings);
           RenderSettings s;
@@ -72,9 +75,7 @@ renderer_actor::behavior_type renderer_impl(renderer_actor::stateful_pointer<ren
             out.sat_ms = ms_since(t0);
           }
         } catch (const std::exception& e) {
-          out.error = e.what();
-          out.rgba.clear();
-          out.sat.clear();
+          return make_error(ErrorCode::render_failed, e.what());
         }
         return out;
       },

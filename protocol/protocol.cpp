@@ -38,6 +38,13 @@ const char* to_string(ErrorCode c) {
     case ErrorCode::bad_handshake: return "bad_handshake";
     case ErrorCode::not_scene_update: return "not_scene_update";
     case ErrorCode::internal: return "internal";
+    case ErrorCode::bad_task: return "bad_task";
+    case ErrorCode::render_failed: return "render_failed";
+    case ErrorCode::no_scene: return "no_scene";
+    case ErrorCode::bad_batch: return "bad_batch";
+    case ErrorCode::bad_tile: return "bad_tile";
+    case ErrorCode::node_lost: return "node_lost";
+    case ErrorCode::no_node: return "no_node";
   }
   return "unknown";
 }
@@ -67,10 +74,10 @@ bool is_fatal(ErrorCode c) { return c == ErrorCode::bad_version || c == ErrorCod
 
 ErrorReply to_reply(const Error& e) {
   ErrorReply r;
-  r.code = e.code;
+  r.code = uint16_t(e.code) <= kMaxErrorCode ? e.code : ErrorCode::internal;  // node codes stay in the node
   r.fatal = is_fatal(e.code);
   r.record = e.record;
-  r.message = e.message;
+  r.message = r.code == e.code ? e.message : std::string(to_string(e.code)) + ": " + e.message;
   return r;
 }
 

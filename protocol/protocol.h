@@ -51,8 +51,18 @@ enum class ErrorCode : uint16_t {
   bad_handshake = 20,    // handshake missing, repeated or not alone in its message (fatal)
   not_scene_update = 21, // apply() given a record that is not a scene update
   internal = 22,         // server-side failure (server -> client only)
+  // A node's own failures (64 and up): its actors' and its cluster's errors, from the renderer's
+  // reply to a parent's view of its children (actors/errors.h). They never go on the wire to a
+  // client: to_reply sends them as `internal`, with their name in the message.
+  bad_task = 64,         // a render task the renderer cannot take (renderer kind, scene, resolution)
+  render_failed = 65,    // the renderer failed (Embree's error, no GL context, out of memory)
+  no_scene = 66,         // a worker has no valid scene (its last update failed)
+  bad_batch = 67,        // a worker refused its parent's batch
+  bad_tile = 68,         // a child's tile or batch reply failed its parent's checks
+  node_lost = 69,        // a node or its link went down, or it did not answer in time
+  no_node = 70,          // no node could render the task
 };
-constexpr uint16_t kMaxErrorCode = 22;
+constexpr uint16_t kMaxErrorCode = 22;  // the largest code on the wire
 
 const char* to_string(ErrorCode c);
 // Whether the session ends after this error (the server closes both channels).

@@ -1,4 +1,4 @@
-// Deterministic tests of the cluster paths (actors/router.h, actors/cluster.cpp) with CAF's
+// Deterministic tests of the cluster paths (actors/subtree*.cpp, actors/node_actor.cpp) with CAF's
 // test coordinator: a session whose node has children, some of them real node actors with
 // real workers and renderers, some of them fakes that lie, hang, die or straggle. Every
 // message runs on the test's one thread, timeouts fire only when the test says so.
@@ -15,7 +15,8 @@
 #include <cmath>
 
 #include "actors/node.h"
-#include "actors/router.h"
+#include "actors/checks.h"
+#include "actors/subtree_state.h"
 #include "protocol/protocol.h"
 #include "protocol/scene_records.h"
 #include "lb/sat.h"
@@ -46,7 +47,7 @@ struct FakeLog {
 };
 
 // A worker that answers (or not) as its mode says; one node named `name`.
-worker_actor::behavior_type fake_worker(worker_actor::pointer self, Mode mode, std::shared_ptr<FakeLog> log) {
+subtree_actor::behavior_type fake_worker(subtree_actor::pointer self, Mode mode, std::shared_ptr<FakeLog> log) {
   return {
       [=](update_atom, Payload& payload, bool reset) {
         auto& bytes = payload.bytes;
@@ -100,6 +101,7 @@ worker_actor::behavior_type fake_worker(worker_actor::pointer self, Mode mode, s
         // bad_info: a node that claims an impossible coefficient (it would get all the work).
         return std::vector<NodeInfo>{mode == Mode::bad_info ? NodeInfo{"fake", -3, 1e300} : NodeInfo{"fake", 1, 1.0}};
       },
+      [=](scene_atom, SceneSnapshot&) {},
       [=](tick_atom) {
         auto acks = std::move(log->held_acks);
         auto sizes = std::move(log->held_ack_sizes);
@@ -112,7 +114,7 @@ worker_actor::behavior_type fake_worker(worker_actor::pointer self, Mode mode, s
 
 // A node that opens fake workers.
 node_actor::behavior_type fake_node(node_actor::pointer self, Mode mode, std::shared_ptr<FakeLog> log,
-                                    std::shared_ptr<worker_actor> last) {
+                                    std::shared_ptr<subtree_actor> last) {
   return {
       [=](open_atom, const OpenRequest&) {
         *last = self->spawn<caf::linked>(fake_worker, mode, log);  // ends with its node
@@ -235,7 +237,7 @@ CAF_TEST(a real child node renders its share and gets every accepted scene recor
 
 CAF_TEST(a big update goes down in chunks within the window and the batch of the frame waits behind it) {
   auto log = std::make_shared<FakeLog>();
-  auto last = std::make_shared<worker_actor>();
+  auto last = std::make_shared<subtree_actor>();
   add_child("slow:1", caf::actor_cast<caf::actor>(sys.spawn(fake_node, Mode::slow_acks, log, last)));
   auto release_acks = [&] {  // the fake worker acknowledges what it holds on a tick
     const size_t n = log->held_acks.size();
@@ -278,7 +280,7 @@ CAF_TEST(a big update goes down in chunks within the window and the batch of the
 
 CAF_TEST(small updates go as plain messages while less than a chunk is unacknowledged and then through the window) {
   auto log = std::make_shared<FakeLog>();
-  auto last = std::make_shared<worker_actor>();
+  auto last = std::make_shared<subtree_actor>();
   add_child("slow:1", caf::actor_cast<caf::actor>(sys.spawn(fake_node, Mode::slow_acks, log, last)));
   start();
   const size_t plain_at_start = log->plain_bytes;  // the snapshot and the upload: small
@@ -309,7 +311,7 @@ CAF_TEST(small updates go as plain messages while less than a chunk is unacknowl
 
 CAF_TEST(tiles with impossible sizes are rejected and logged and the master renders that task) {
   auto log = std::make_shared<FakeLog>();
-  auto last = std::make_shared<worker_actor>();
+  auto last = std::make_shared<subtree_actor>();
   add_child("liar:1", caf::actor_cast<caf::actor>(sys.spawn(fake_node, Mode::liar, log, last)));
   start();
   CAF_CHECK_EQUAL(log->updates, 2u);  // the snapshot at join, then the uploaded records
@@ -323,7 +325,7 @@ CAF_TEST(tiles with impossible sizes are rejected and logged and the master rend
 
 CAF_TEST(a child that dies mid frame: the frame completes and the next one is tiled among the rest) {
   auto log = std::make_shared<FakeLog>();
-  auto last = std::make_shared<worker_actor>();
+  auto last = std::make_shared<subtree_actor>();
   add_child("hang:1", caf::actor_cast<caf::actor>(sys.spawn(fake_node, Mode::hang, log, last)));
   start();
   request_frame(1);
@@ -342,7 +344,7 @@ CAF_TEST(a child that dies mid frame: the frame completes and the next one is ti
 
 CAF_TEST(a child that is alive but never answers is failed by the timeout and its tiles rendered here) {
   auto log = std::make_shared<FakeLog>();
-  auto last = std::make_shared<worker_actor>();
+  auto last = std::make_shared<subtree_actor>();
   add_child("hang:2", caf::actor_cast<caf::actor>(sys.spawn(fake_node, Mode::hang, log, last)));
   start();
   request_frame(1);
@@ -356,7 +358,7 @@ CAF_TEST(a child that is alive but never answers is failed by the timeout and it
 
 CAF_TEST(the cost maps of a straggler shift its share away in the next frame) {
   auto log = std::make_shared<FakeLog>();
-  auto last = std::make_shared<worker_actor>();
+  auto last = std::make_shared<subtree_actor>();
   add_child("slow:1", caf::actor_cast<caf::actor>(sys.spawn(fake_node, Mode::straggler, log, last)));
   start();
   for (uint32_t f = 1; f <= 3; ++f) {
@@ -376,7 +378,7 @@ CAF_TEST(the cost maps of a straggler shift its share away in the next frame) {
 
 CAF_TEST(a child that claims an impossible node list is dropped and the master renders alone) {
   auto log = std::make_shared<FakeLog>();
-  auto last = std::make_shared<worker_actor>();
+  auto last = std::make_shared<subtree_actor>();
   add_child("boast:1", caf::actor_cast<caf::actor>(sys.spawn(fake_node, Mode::bad_info, log, last)));
   start();
   auto replies = sink->all<HandshakeReply>();
@@ -391,7 +393,7 @@ CAF_TEST(a child that claims an impossible node list is dropped and the master r
 
 CAF_TEST(frames do not wait for a child whose opens are never answered) {
   auto log = std::make_shared<FakeLog>(), deaf = std::make_shared<FakeLog>();
-  auto last = std::make_shared<worker_actor>();
+  auto last = std::make_shared<subtree_actor>();
   add_child("slow:2", caf::actor_cast<caf::actor>(sys.spawn(fake_node, Mode::straggler, log, last)));
   add_child("deaf:1", caf::actor_cast<caf::actor>(sys.spawn(deaf_node, deaf)));
   settings->reconnect_ms = 60000;  // retries only when the test sends a tick
@@ -426,7 +428,11 @@ CAF_TEST(a worker whose parent gave up on its open ends itself after twice the t
   sched.run();
   self->send(adopted, update_atom::value, Payload{}, false);  // the adoption notice
   sched.run();
-  std::this_thread::sleep_for(std::chrono::milliseconds(5));  // past 2 x 1 ms (a real clock)
+  sched.advance_time(std::chrono::milliseconds(2));  // 2 x 1 ms: not yet
+  self->send(orphan, tick_atom::value);
+  sched.run();
+  CAF_CHECK_EQUAL(count(Ev::orphaned, true), 0u);
+  sched.advance_time(std::chrono::milliseconds(1));  // past 2 x 1 ms on the actor clock
   self->send(orphan, tick_atom::value);
   self->send(adopted, tick_atom::value);
   sched.run();
@@ -437,14 +443,14 @@ CAF_TEST(a worker whose parent gave up on its open ends itself after twice the t
 
 // An actor that opens a worker on `node` as a session would, and keeps what came back.
 struct Opened {
-  std::vector<worker_actor> workers;
+  std::vector<subtree_actor> workers;
   std::vector<std::string> errors;
 };
 caf::behavior opener(caf::event_based_actor* self, node_actor node, std::shared_ptr<Opened> out) {
   return {
       [=](open_atom, OpenRequest req) {
         self->request(node, caf::infinite, open_atom::value, req)
-            .then([=](OpenReply& r) { out->workers.push_back(caf::actor_cast<worker_actor>(r.worker)); },
+            .then([=](OpenReply& r) { out->workers.push_back(caf::actor_cast<subtree_actor>(r.worker)); },
                   [=](caf::error& e) { out->errors.push_back(to_string(e)); });
       },
   };
@@ -600,14 +606,15 @@ CAF_TEST(a worker fails every tile of a batch outside the node limits and serves
   for (size_t i = 0; i < bad.size(); ++i) {
     CAF_CHECK(!(*replies)[i].tiles.empty());
     for (auto& t : (*replies)[i].tiles) {
+      CAF_CHECK(t.failed());
       CAF_CHECK(!t.error.empty());
       CAF_CHECK(t.rgba.empty());
     }
   }
-  CAF_CHECK_EQUAL(count(Ev::bad_batch), bad.size() - 1);  // the last one is the router's count check
+  CAF_CHECK_EQUAL(count(Ev::bad_batch), bad.size() - 1);  // the last one is the subtree's count check
   const BatchReply& ok = replies->back();
   CAF_REQUIRE_EQUAL(ok.tiles.size(), 1u);
-  CAF_CHECK_EQUAL(ok.tiles[0].error, "");
+  CAF_CHECK(!ok.tiles[0].failed());
   CAF_CHECK_EQUAL(ok.tiles[0].rgba.size(), size_t(kSize * kSize * 4));
   self->send_exit(asker, caf::exit_reason::user_shutdown);
   self->send_exit(w, caf::exit_reason::user_shutdown);
@@ -647,6 +654,7 @@ CAF_TEST(a worker refuses an update whose chunks add up to more than max_update_
   sched.run();
   CAF_REQUIRE_EQUAL(replies->size(), 1u);
   CAF_REQUIRE_EQUAL(replies->back().tiles.size(), 1u);
+  CAF_CHECK_EQUAL(replies->back().tiles[0].code, ErrorCode::no_scene);
   CAF_CHECK(replies->back().tiles[0].error.find("has no valid scene") != std::string::npos);
   // A reset update within the bound, in two chunks, replaces the scene: it renders again.
   const std::vector<uint8_t> scene = encode(tiny_scene());
@@ -658,7 +666,7 @@ CAF_TEST(a worker refuses an update whose chunks add up to more than max_update_
   sched.run();
   CAF_REQUIRE_EQUAL(replies->size(), 2u);
   CAF_REQUIRE_EQUAL(replies->back().tiles.size(), 1u);
-  CAF_CHECK_EQUAL(replies->back().tiles[0].error, "");
+  CAF_CHECK(!replies->back().tiles[0].failed());
   CAF_CHECK_EQUAL(replies->back().tiles[0].rgba.size(), size_t(kSize * kSize * 4));
   self->send_exit(parent, caf::exit_reason::user_shutdown);
   self->send_exit(w, caf::exit_reason::user_shutdown);

@@ -1,5 +1,5 @@
-// Deterministic tests of the session pipeline (session -> tiler -> renderer -> display ->
-// encoder) with CAF's test coordinator: every message is delivered by the test, one at a
+// Deterministic tests of the session pipeline (session -> frame -> tiler -> root subtree ->
+// renderer -> display -> encoder) with CAF's test coordinator: every message is delivered by the test, one at a
 // time, on one thread. The renderer and encoder are real (not detached) and render a tiny
 // scene, so the pixels, SATs and encodings are the production code's.
 #define CAF_SUITE session_actors
@@ -24,7 +24,7 @@ struct fixture : test_coordinator_fixture<TestConfig> {
   std::shared_ptr<MemoryBudget> budget = std::make_shared<MemoryBudget>(1u << 20);
   size_t baseline = 0;
   session_actor session;
-  caf::actor renderer, tiler, encoder, display;
+  caf::actor renderer, tiler, encoder, display, frame, subtree;
 
   fixture() {
     settings->detached = false;  // everything on the test coordinator
@@ -38,7 +38,10 @@ struct fixture : test_coordinator_fixture<TestConfig> {
     run();
     auto rh = self->request(session, caf::infinite, children_atom::value);
     run();
-    rh.receive([&](std::vector<caf::actor>& c) { renderer = c[0], tiler = c[1], encoder = c[2], display = c[3]; },
+    rh.receive([&](std::vector<caf::actor>& c) {
+      CAF_REQUIRE_EQUAL(c.size(), 6u);
+      renderer = c[0], tiler = c[1], encoder = c[2], display = c[3], frame = c[4], subtree = c[5];
+    },
                [&](caf::error& e) { CAF_FAIL(sys.render(e)); });
     Handshake hs;
     hs.width = 16;
@@ -52,6 +55,20 @@ struct fixture : test_coordinator_fixture<TestConfig> {
     run();
   }
   void client(const std::vector<ClientRecord>& recs) { self->send(session, client_atom::value, encode(recs)); }
+  // A frame starts: the frame actor gets the root's node list (unchanged: at once) and the tasks.
+  void expect_frame_start() {
+    expect((render_atom, FrameStart), from(session).to(frame));
+    expect((nodes_atom), from(frame).to(subtree));
+    expect((std::vector<NodeInfo>), from(subtree).to(frame));
+    expect((tasks_atom, TaskRequest), from(frame).to(tiler));
+    expect((TaskList), from(tiler).to(frame));
+  }
+  // The frame's batch goes through the root subtree to this node's renderer.
+  void expect_render() {
+    expect((scene_atom, SceneSnapshot), from(frame).to(subtree));
+    expect((render_atom, RenderBatch), from(frame).to(subtree));
+    expect((render_atom, SceneSnapshot, RenderTask), from(subtree).to(renderer));
+  }
   // Delivers the next client message to the session (and nothing else).
   void deliver_client() { expect((client_atom, std::vector<uint8_t>), from(self).to(session)); }
   SessionStatus status() {
@@ -175,20 +192,20 @@ CAF_TEST(render requests during a frame are remembered once and never queued twi
 CAF_TEST(the encoder encodes frame f while the renderer renders frame f plus 1) {
   client({SetCamera{camera_at(3)}, RenderRequest{1}, RenderRequest{2}});
   deliver_client();
-  expect((tasks_atom, TaskRequest), from(session).to(tiler));
-  expect((TaskList), from(tiler).to(session));
-  expect((render_atom, SceneSnapshot, RenderTask), from(session).to(renderer));
-  expect((TileResult), from(renderer).to(session));
-  // Frame 1 is rendered: its SATs go to the tiler, its pixels to the display channel, and
-  // frame 2 starts at once.
-  expect((sats_atom, SatReport), from(session).to(tiler));
-  expect((tasks_atom, TaskRequest), from(session).to(tiler));
-  expect((TaskList), from(tiler).to(session));
-  expect((display_atom, FrameTiles), from(session).to(display));
+  expect_frame_start();
+  expect_render();
+  expect((TileResult), from(renderer).to(subtree));
+  expect((BatchReply), from(subtree).to(frame));
+  // Frame 1 is rendered: its SATs go to the tiler, its pixels to the display channel, and the
+  // session, told so, starts frame 2 at once.
+  expect((sats_atom, SatReport), from(frame).to(tiler));
+  expect((display_atom, FrameTiles), from(frame).to(display));
+  expect((uint32_t), from(frame).to(session));
   // Now the encoder holds frame 1 and the renderer frame 2, at the same time: with detached
   // actors these run in parallel.
   expect((encode_atom, EncodeJob), from(display).to(encoder));
-  expect((render_atom, SceneSnapshot, RenderTask), from(session).to(renderer));
+  expect_frame_start();
+  expect_render();
   expect((EncodedFrame), from(encoder).to(display));
   CAF_CHECK_EQUAL(frames_sent(), std::vector<uint32_t>{1});
   run();
@@ -205,8 +222,9 @@ CAF_TEST(the encoder encodes frame f while the renderer renders frame f plus 1) 
 CAF_TEST(a session that ends mid frame takes all its actors with it) {
   client({SetCamera{camera_at(3)}, RenderRequest{1}});
   deliver_client();
-  expect((tasks_atom, TaskRequest), from(session).to(tiler));
-  expect((TaskList), from(tiler).to(session));
+  expect_frame_start();
+  expect((scene_atom, SceneSnapshot), from(frame).to(subtree));
+  expect((render_atom, RenderBatch), from(frame).to(subtree));
   // The render task is in the renderer's mailbox when the client goes away.
   self->send_exit(session, caf::exit_reason::user_shutdown);
   run();

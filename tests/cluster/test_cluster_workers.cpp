@@ -119,7 +119,8 @@ TEST_CASE("50 sessions through a master leave its worker at the baseline: no liv
   // One worker per session; an open that timed out at the master (3 s, a loaded machine) is
   // retried, and the first worker then ends with its session too (or as an orphan).
   const size_t opened = w.p->err_count("\"worker_opened\"");
-  INFO("master's failed joins: " << m.p->err_count("\"join_failed\""));
+  INFO("master's failed joins: " << m.p->err_count("\"join_failed\"") << ", lost nodes: " << m.p->err_count("\"node_lost\"")
+                                  << ", recovered frames: " << m.p->err_count("\"recovering\""));
   CHECK(opened >= 50);
   CHECK(opened <= 50 + m.p->err_count("\"join_failed\""));
   // Every worker ends with its session (the log's count of live workers comes back to 0).
@@ -236,9 +237,9 @@ TEST_CASE("A hostile peer on the cluster port gets refusals and failed tiles; th
   {
     caf::scoped_actor self{sys};
     auto open = [&](OpenRequest req, std::string* error) {
-      worker_actor out;
+      subtree_actor out;
       self->request(*node, std::chrono::seconds(10), open_atom::value, req)
-          .receive([&](OpenReply& r) { out = caf::actor_cast<worker_actor>(r.worker); },
+          .receive([&](OpenReply& r) { out = caf::actor_cast<subtree_actor>(r.worker); },
                    [&](caf::error& e) { *error = sys.render(e); });
       return out;
     };
@@ -263,7 +264,7 @@ TEST_CASE("A hostile peer on the cluster port gets refusals and failed tiles; th
 
     // A worker, with a scene, and batches that no client could send through this node.
     std::string err;
-    worker_actor wk = open(good, &err);
+    subtree_actor wk = open(good, &err);
     REQUIRE(wk);
     self->send(wk, update_atom::value, Payload{protocol::encode(protocol::scene_to_records(pavilion().scene))}, true);
     auto batch = [] {

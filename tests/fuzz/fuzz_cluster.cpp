@@ -2,7 +2,7 @@
 // first byte picks the message; the rest is read by CAF 0.17's binary_deserializer, as the
 // middleman reads a message's fields, into:
 //   0  RenderBatch (parent -> worker), then the worker's task_of for each task
-//   1  BatchReply (worker -> parent), each tile checked by check_tile (router.h) against a
+//   1  BatchReply (worker -> parent), each tile checked by check_tile (checks.h) against a
 //      task of the parent's own 64x48 frame, as Router does
 //   2  TileResult alone, checked the same way
 //   3  OpenRequest (parent -> node)
@@ -22,8 +22,9 @@
 #include <caf/error.hpp>
 
 #include "actors/messages.h"
+#include "actors/checks.h"
 #include "actors/node.h"
-#include "actors/router.h"
+#include "actors/checks.h"
 
 using namespace tessera;
 

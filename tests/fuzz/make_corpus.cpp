@@ -278,6 +278,7 @@ void cluster_corpus() {
   put("cluster", "tile_result_4x2", caf_bytes(2 | 0x80, t));
   TileResult failed;
   failed.frame = 7;
+  failed.code = protocol::ErrorCode::node_lost;
   failed.error = "node worker:4000 failed";
   put("cluster", "tile_result_error", caf_bytes(2, failed));
   OpenRequest o;

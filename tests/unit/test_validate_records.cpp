@@ -1,4 +1,4 @@
-// Cluster workers apply forwarded client records through apply_records (actors/cluster.cpp):
+// Cluster workers apply forwarded client records through apply_records (actors/checks.h):
 // the same validation as a client's decode (core/validate.h), so a singular, nearly
 // singular or huge transform forwarded by a master (or sent straight to a worker's cluster
 // port) is refused with a message and never reaches the worker's renderer.
@@ -7,6 +7,7 @@
 #include <caf/binary_deserializer.hpp>
 #include <caf/binary_serializer.hpp>
 
+#include "actors/checks.h"
 #include "actors/node.h"
 #include "protocol/protocol.h"
 #include "renderer/raytracer.h"

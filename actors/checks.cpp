@@ -1,0 +1,131 @@
+// What a node checks of what its peers send (checks.h).
+#include "actors/checks.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "lb/sat.h"
+#include "update/scene_update.h"
+
+namespace tessera {
+
+RenderTask task_of(const RenderBatch& b, const Rect& pixels) {
+  RenderTask t;
+  t.frame = b.frame;
+  t.width = b.width;
+  t.height = b.height;
+  t.pixels = pixels;
+  t.ao_samples = b.ao_samples;
+  t.max_depth = b.max_depth;
+  t.renderer = b.renderer;
+  return t;
+}
+
+std::string check_tile(const TileResult& t, uint32_t frame, const Rect& expected, PacketLayout layout, int32_t width,
+                       int32_t height) {
+  auto str = [](const Rect& r) {
+    return "[" + std::to_string(r.x0) + "," + std::to_string(r.y0) + "," + std::to_string(r.x1) + "," +
+           std::to_string(r.y1) + "]";
+  };
+  if (t.frame != frame) return "tile of frame " + std::to_string(t.frame) + " in frame " + std::to_string(frame);
+  if (!(t.pixels == expected)) return "tile " + str(t.pixels) + " for task " + str(expected);
+  if (t.rgba.size() != size_t(expected.area()) * 4)
+    return "tile " + str(expected) + " with " + std::to_string(t.rgba.size()) + " bytes of pixels, expected " +
+           std::to_string(size_t(expected.area()) * 4);
+  if (!std::isfinite(t.kernel_ms) || t.kernel_ms < 0 || !std::isfinite(t.rendering_ms) || t.rendering_ms < 0 ||
+      !std::isfinite(t.sat_ms) || t.sat_ms < 0)
+    return "impossible timings";
+  if (!t.sat.empty()) {
+    std::string err;
+    auto sat = Sat::try_deserialize(t.sat.data(), t.sat.size(), &err);
+    if (!sat) return "cost SAT: " + err;
+    // The packets the task covers (its pixel rectangle, rounded out to packets).
+    Rect want{expected.x0 / layout.w, expected.y0 / layout.h, (expected.x1 + layout.w - 1) / layout.w,
+              (expected.y1 + layout.h - 1) / layout.h};
+    if (!(sat->packets() == want) || !packet_space(width, height, layout).contains(sat->packets()))
+      return "cost SAT over packets " + str(sat->packets()) + " for task packets " + str(want);
+  }
+  return {};
+}
+
+namespace {
+// A node or master name: 1..256 bytes, no control characters, quotes or backslashes.
+bool usable_name(const std::string& name) {
+  bool ok = !name.empty() && name.size() <= 256;
+  for (unsigned char c : name) ok &= c >= 0x20 && c != 0x7f && c != '"' && c != '\\';
+  return ok;
+}
+}  // namespace
+
+std::string check_nodes(const std::vector<NodeInfo>& nodes) {
+  if (nodes.size() > 65536) return std::to_string(nodes.size()) + " nodes";
+  for (const NodeInfo& n : nodes) {
+    if (!usable_name(n.name)) return "a node without a usable name";
+    if (n.logical_cores < 1 || n.logical_cores > 65536)
+      return "node " + n.name + " claims " + std::to_string(n.logical_cores) + " logical cores";
+    if (!std::isfinite(n.single_core_perf) || n.single_core_perf <= 0 || n.single_core_perf > 1000)
+      return "node " + n.name + " claims a single-core performance of " + std::to_string(n.single_core_perf);
+  }
+  return {};
+}
+
+Json nodes_value(const std::vector<NodeInfo>& nodes) {
+  std::vector<Json> out;
+  out.reserve(nodes.size());
+  for (const NodeInfo& n : nodes)
+    out.push_back(Json::object({{"name", n.name}, {"cores", n.logical_cores}, {"perf", Json::number(n.single_core_perf)}}));
+  return Json::array(std::move(out));
+}
+
+std::string check_open(const OpenRequest& req) {
+  if (req.session == 0) return "session 0";
+  if (!usable_name(req.master)) return "a master name that is empty, longer than 256 bytes or not printable";
+  auto pow2 = [](int32_t v) { return v >= 1 && v <= 16 && (v & (v - 1)) == 0; };
+  const int64_t rays = int64_t(req.packet_w) * req.packet_h;
+  if (!pow2(req.packet_w) || !pow2(req.packet_h) || (rays != 4 && rays != 8 && rays != 16))
+    return "packet layout " + std::to_string(req.packet_w) + "x" + std::to_string(req.packet_h) +
+           " (the ray tracer has 4, 8 or 16 rays per packet)";
+  if (req.timeout_ms > 3'600'000) return "reply timeout of " + std::to_string(req.timeout_ms) + " ms";
+  if (req.keepalive_ms < 10 || req.keepalive_ms > 60'000)
+    return "keep-alive period of " + std::to_string(req.keepalive_ms) + " ms (10..60000)";
+  return {};
+}
+
+std::string check_batch(const RenderBatch& b, const protocol::Limits& lim) {
+  if (b.width < 1 || b.height < 1 || b.width > lim.max_width || b.height > lim.max_height)
+    return "frame " + std::to_string(b.width) + "x" + std::to_string(b.height) + " outside 1x1.." +
+           std::to_string(lim.max_width) + "x" + std::to_string(lim.max_height);
+  if (b.ao_samples < 0 || uint32_t(b.ao_samples) > lim.max_ao_samples)
+    return "ao_samples " + std::to_string(b.ao_samples) + " outside 0.." + std::to_string(lim.max_ao_samples);
+  if (b.max_depth < 0 || uint32_t(b.max_depth) > lim.max_depth)
+    return "max_depth " + std::to_string(b.max_depth) + " outside 0.." + std::to_string(lim.max_depth);
+  if (b.renderer > uint8_t(protocol::RendererKind::rasterizer)) return "renderer kind " + std::to_string(int(b.renderer));
+  if (b.timeout_ms < 1 || b.timeout_ms > 3'600'000) return "timeout of " + std::to_string(b.timeout_ms) + " ms";
+  if (b.tasks.size() > 65536) return std::to_string(b.tasks.size()) + " tasks";
+  const Rect frame{0, 0, b.width, b.height};
+  for (const Rect& t : b.tasks)
+    if (!t.empty() && !frame.contains(t))
+      return "task [" + std::to_string(t.x0) + "," + std::to_string(t.y0) + "," + std::to_string(t.x1) + "," +
+             std::to_string(t.y1) + "] outside the frame " + std::to_string(b.width) + "x" + std::to_string(b.height);
+  return {};
+}
+
+std::string apply_records(Scene& scene, const std::vector<uint8_t>& bytes, const protocol::Limits& node_limits) {
+  if (bytes.empty()) return {};
+  // The scene-level limits are this node's own; a forwarded message may be bigger than a
+  // client's (a whole scene when a node joins), so the message-level ones are lifted.
+  protocol::Limits lim = node_limits;
+  lim.max_message_bytes = std::max<uint32_t>(lim.max_message_bytes, uint32_t(std::min<size_t>(bytes.size(), 0xffffffffu)));
+  lim.max_records = 0xffffffffu;
+  lim.max_message_payload_bytes = std::max<uint64_t>(lim.max_message_payload_bytes, lim.max_client_bytes);
+  auto res = protocol::decode_client(bytes.data(), bytes.size(), lim);
+  if (!res) return res.error().message;
+  std::string first;
+  for (auto& r : res.value()) {
+    auto st = apply(scene, std::move(r), lim);
+    if (!st && first.empty()) first = st.error().message;
+  }
+  return first;
+}
+
+}  // namespace tessera

@@ -1,0 +1,250 @@
+// Frame actor (frame_protocol.h): tiler -> root subtree -> recovery -> display, one frame at a time.
+#include <algorithm>
+#include <chrono>
+
+#include <caf/all.hpp>
+
+#include "actors/checks.h"
+#include "actors/errors.h"
+#include "actors/node.h"
+
+namespace tessera {
+namespace {
+
+using protocol::ErrorCode;
+
+struct frame_state {
+  std::shared_ptr<const NodeSettings> settings;
+  uint64_t id = 0;
+  PacketLayout layout;
+  bool cluster = false;         // this process has a node actor: per-node figures in the log
+  FrameActors a;
+  uint32_t max_nodes = 0;
+  std::vector<NodeInfo> nodes;  // the root subtree's committed list
+  std::vector<size_t> used;     // the entries of `nodes` this client renders on
+  bool listed = false;          // `nodes` holds a list
+  // The frame in flight.
+  FrameStart cur;
+  RenderBatch batch;            // its settings and one task per node
+  caf::typed_response_promise<uint32_t> done;
+  uint32_t recovered = 0;       // tasks of lost nodes rendered here
+  double last_rendering_ms = 0;
+  static inline const char* name = "tessera.frame";
+};
+using self_ptr = frame_actor::stateful_pointer<frame_state>;
+
+void log(self_ptr self, Event e) {
+  e.scope = {{"session", self->state.id}};
+  node_log(*self->state.settings, std::move(e));
+}
+
+int64_t now_ns() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
+      .count();
+}
+
+// The committed node list: pick the nodes this client may use (the strongest first, at most
+// max_nodes) and give their coefficients to the tiler.
+void on_nodes(self_ptr self, std::vector<NodeInfo> nodes) {
+  auto& st = self->state;
+  std::vector<size_t> order(nodes.size());
+  for (size_t i = 0; i < order.size(); ++i) order[i] = i;
+  auto coef = [&](size_t i) { return double(nodes[i].logical_cores) * nodes[i].single_core_perf; };
+  std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return coef(a) > coef(b); });
+  if (st.max_nodes > 0 && order.size() > st.max_nodes) order.resize(st.max_nodes);
+  std::sort(order.begin(), order.end());  // keep list order (depth first) for the tiling
+  std::vector<double> coefficients;
+  for (size_t i : order) coefficients.push_back(std::max(1e-6, coef(i)));
+  bool same = st.listed && nodes.size() == st.nodes.size() && order == st.used;
+  for (size_t i = 0; same && i < nodes.size(); ++i)
+    same = nodes[i].name == st.nodes[i].name && coef(i) == double(st.nodes[i].logical_cores) * st.nodes[i].single_core_perf;
+  if (same) return;  // the root answered with the list it had
+  st.listed = true;
+  st.nodes = std::move(nodes);
+  st.used = std::move(order);
+  if (!coefficients.empty()) self->send(st.a.tiler, nodes_atom::value, std::move(coefficients));
+  log(self, Event(Ev::nodes, nodes_value(st.nodes)).with("used", st.used.size()));
+}
+
+// Renders a task on this node's renderer: the tasks of lost nodes.
+void render_here(self_ptr self, const RenderTask& t, std::function<void(TileResult&&)> cb) {
+  auto& st = self->state;
+  if (!st.a.renderer) {
+    st.a.renderer = spawn_renderer(self->system(), st.layout, st.settings->detached);
+    self->link_to(st.a.renderer);
+  }
+  self->request(st.a.renderer, caf::infinite, render_atom::value, st.cur.scene, t)
+      .then([cb](TileResult& r) { cb(std::move(r)); },
+            [cb, t](caf::error& e) { cb(failed_tile(t, e, ErrorCode::render_failed)); });
+}
+
+void finish_frame(self_ptr self, std::vector<TileResult>&& tiles, std::vector<double>&& perf) {
+  auto& st = self->state;
+  FrameMeta& meta = st.cur.meta;
+  meta.render_end_ns = now_ns();
+  std::string error;
+  SatReport rep{meta.seq, meta.width, meta.height, st.layout.w, st.layout.h, {}, {}};
+  std::vector<TileResult> shown;
+  std::vector<Json> per_node;
+  double max_norm = 0, sum_norm = 0;
+  size_t rendered = 0;
+  for (size_t i = 0; i < tiles.size(); ++i) {
+    auto& tile = tiles[i];
+    if (tile.pixels.empty() && !tile.failed()) continue;  // a node without a task this frame
+    meta.kernel_ms += tile.kernel_ms;
+    meta.rendering_ms = std::max(meta.rendering_ms, tile.rendering_ms);
+    meta.sat_ms = std::max(meta.sat_ms, tile.sat_ms);
+    if (tile.failed()) error = std::string(to_string(tile.code)) + ": " + tile.error;
+    if (i < st.nodes.size() && st.cluster) {  // a cluster node: per-node figures
+      const NodeInfo& n = st.nodes[i];
+      const double norm = tile.kernel_ms / std::max(1e-9, double(n.logical_cores));
+      max_norm = std::max(max_norm, norm);
+      sum_norm += norm;
+      ++rendered;
+      per_node.push_back(Json::object({{"node", i},
+                                       {"kernel_ms", Json::number(tile.kernel_ms)},
+                                       {"rendering_ms", Json::number(tile.rendering_ms)},
+                                       {"pixels", static_cast<long long>(tile.pixels.area())}}));
+    }
+    rep.sats.push_back(std::move(tile.sat));
+    rep.perf.push_back(i < perf.size() ? perf[i] : 1.0);
+    shown.push_back(std::move(tile));
+  }
+  self->send(st.a.tiler, sats_atom::value, std::move(rep));
+  st.last_rendering_ms = meta.rendering_ms;
+  if (!per_node.empty()) {
+    const double balance = rendered && sum_norm > 0 ? max_norm / (sum_norm / double(rendered)) : 1.0;
+    log(self, Event(Ev::cluster_frame, meta.client_frame)
+                  .with("balance", Json::number(balance, 4))
+                  .with("recovered", st.recovered)
+                  .with("per_node", Json::array(std::move(per_node))));
+  }
+  auto done = std::move(st.done);
+  st.cur.scene = {};  // the sync actor may change its scene once it has the answer
+  if (!error.empty()) {
+    done.deliver(protocol::make_error(ErrorCode::render_failed, "frame " + std::to_string(meta.client_frame) + ": " + error));
+    return;
+  }
+  self->send(st.a.display, display_atom::value, FrameTiles{meta, std::move(shown)});
+  done.deliver(meta.seq);
+}
+
+// Tasks whose node failed (down, too late, impossible tiles) are rendered here, so the frame
+// still completes; the root subtree commits its list again before the next frame.
+void recover(self_ptr self, BatchReply&& r) {
+  auto& st = self->state;
+  const std::vector<Rect>& tasks = st.batch.tasks;
+  std::vector<size_t> lost;
+  for (size_t i = 0; i < r.tiles.size() && i < tasks.size(); ++i)
+    if (r.tiles[i].failed() && !tasks[i].empty()) lost.push_back(i);
+  std::vector<double> perf(r.tiles.size(), 1.0);
+  for (size_t i = 0; i < r.tiles.size() && i < st.nodes.size(); ++i) perf[i] = st.nodes[i].single_core_perf;
+  if (lost.empty()) return finish_frame(self, std::move(r.tiles), std::move(perf));
+  std::vector<Json> errors;
+  for (size_t i : lost) errors.push_back(Json::object({{"code", to_string(r.tiles[i].code)}, {"message", r.tiles[i].error}}));
+  log(self, Event(Ev::recovering, lost.size())
+                .with("frame", st.cur.meta.client_frame)
+                .with("errors", Json::array(std::move(errors))));
+  st.recovered = uint32_t(lost.size());
+  auto tiles = std::make_shared<std::vector<TileResult>>(std::move(r.tiles));
+  auto perfs = std::make_shared<std::vector<double>>(std::move(perf));
+  auto left = std::make_shared<size_t>(lost.size());
+  const uint32_t seq = st.cur.meta.seq;
+  for (size_t i : lost) {
+    (*perfs)[i] = st.settings->coefficient.single_core_perf;
+    render_here(self, task_of(st.batch, tasks[i]), [self, seq, i, tiles, perfs, left](TileResult&& res) {
+      (*tiles)[i] = std::move(res);
+      if (--*left > 0 || self->state.cur.meta.seq != seq) return;
+      finish_frame(self, std::move(*tiles), std::move(*perfs));
+    });
+  }
+}
+
+void render_batch(self_ptr self) {
+  auto& st = self->state;
+  const FrameMeta& meta = st.cur.meta;
+  RenderBatch& batch = st.batch;
+  batch = RenderBatch{};
+  batch.frame = meta.seq;
+  batch.width = meta.width;
+  batch.height = meta.height;
+  batch.ao_samples = st.cur.ao_samples;
+  batch.max_depth = st.cur.max_depth;
+  batch.renderer = st.cur.renderer;
+  // Bounded delay for lost nodes: the configured timeout, or 3x the last frame if longer.
+  batch.timeout_ms = std::max<uint32_t>(st.settings->task_timeout_ms, uint32_t(3 * st.last_rendering_ms + 200));
+  batch.tasks.assign(st.nodes.size(), Rect{});
+  if (st.used.empty()) {
+    // No rendering node at all (a dedicated master whose children are all gone): render the
+    // whole frame here rather than show nothing.
+    batch.tasks = {Rect{0, 0, meta.width, meta.height}};
+    BatchReply r;
+    r.tiles = {failed_tile(task_of(batch, batch.tasks[0]), ErrorCode::no_node, "no rendering node")};
+    return recover(self, std::move(r));
+  }
+  TaskRequest req{meta.seq, meta.width, meta.height, st.layout.w, st.layout.h};
+  self->request(st.a.tiler, caf::infinite, tasks_atom::value, req).then([=](TaskList& tl) {
+    auto& st = self->state;
+    st.cur.meta.tiling_ms = tl.tiling_ms;
+    for (size_t k = 0; k < tl.tasks.size() && k < st.used.size(); ++k) st.batch.tasks[st.used[k]] = tl.tasks[k];
+    st.cur.meta.nodes = uint32_t(st.used.size());
+    self->send(st.a.subtree, scene_atom::value, st.cur.scene);  // what the root renders this frame
+    self->request(st.a.subtree, caf::infinite, render_atom::value, st.batch)
+        .then([=](BatchReply& r) { recover(self, std::move(r)); },
+              [=](caf::error& e) {
+                auto& st = self->state;
+                BatchReply r;
+                for (const Rect& t : st.batch.tasks) r.tiles.push_back(failed_tile(task_of(st.batch, t), e, ErrorCode::node_lost));
+                recover(self, std::move(r));
+              });
+  });
+}
+
+frame_actor::behavior_type frame_impl(self_ptr self, std::shared_ptr<const NodeSettings> settings, uint64_t id,
+                                      PacketLayout layout, FrameActors actors) {
+  auto& st = self->state;
+  st.settings = std::move(settings);
+  st.id = id;
+  st.layout = layout;
+  st.cluster = bool(st.settings->node.lock());
+  st.a = std::move(actors);
+  return {
+      [=](nodes_atom, uint32_t max_nodes) -> caf::result<uint32_t> {
+        self->state.max_nodes = max_nodes;
+        auto rp = self->make_response_promise<uint32_t>();
+        self->request(self->state.a.subtree, caf::infinite, nodes_atom::value)
+            .then(
+                [=](std::vector<NodeInfo>& nodes) mutable {
+                  on_nodes(self, std::move(nodes));
+                  rp.deliver(uint32_t(std::max<size_t>(1, self->state.used.size())));
+                },
+                [=](caf::error& e) mutable { rp.deliver(std::move(e)); });
+        return rp;
+      },
+      [=](render_atom, FrameStart& fs) -> caf::result<uint32_t> {
+        auto& st = self->state;
+        st.cur = std::move(fs);
+        st.recovered = 0;
+        st.done = self->make_response_promise<uint32_t>();
+        // Membership changes (lost nodes, nodes that joined) are committed between frames:
+        // the root answers at once when nothing changed.
+        self->request(st.a.subtree, caf::infinite, nodes_atom::value)
+            .then(
+                [=](std::vector<NodeInfo>& nodes) {
+                  on_nodes(self, std::move(nodes));
+                  render_batch(self);
+                },
+                [=](caf::error& e) { self->state.done.deliver(std::move(e)); });
+        return self->state.done;
+      },
+  };
+}
+
+}  // namespace
+
+frame_actor spawn_frame(caf::actor_system& sys, std::shared_ptr<const NodeSettings> settings, uint64_t session_id,
+                        PacketLayout layout, FrameActors actors) {
+  return sys.spawn(frame_impl, std::move(settings), session_id, layout, std::move(actors));
+}
+
+}  // namespace tessera

@@ -1,0 +1,42 @@
+#pragma once
+// The frame actor, one per session: runs each frame through tiler -> subtree -> recovery ->
+// display. The session's sync actor (session_protocol.h) owns the scene and asks for frames.
+//
+//   nodes(max_nodes) -> n          commits the session's tree (its root subtree) and picks the
+//                                  nodes this client renders on (the strongest first, at most
+//                                  max_nodes, 0: all); n of them (at least 1: with none, this
+//                                  node renders). Sent once, for the handshake's reply.
+//   render(FrameStart) -> seq      one frame: the root subtree's node list (committed again
+//                                  when its membership changed), the tiler's tasks from the
+//                                  previous frame's SATs, the scene to the root subtree and the
+//                                  batch through it, the tasks of lost nodes rendered here, the
+//                                  SATs to the tiler and the tiles to the display. Answers when
+//                                  the tiles went to the display (the encoder then encodes this
+//                                  frame while the next one renders), or with a typed error
+//                                  (actors/errors.h) when the frame cannot be shown.
+#include <cstdint>
+
+#include <caf/typed_actor.hpp>
+#include <caf/replies_to.hpp>
+
+#include "actors/display_protocol.h"
+#include "actors/messages.h"
+#include "actors/renderer_protocol.h"
+#include "actors/subtree_protocol.h"
+#include "actors/tiler_protocol.h"
+
+namespace tessera {
+
+using frame_actor = caf::typed_actor<caf::replies_to<nodes_atom, uint32_t>::with<uint32_t>,
+                                     caf::replies_to<render_atom, FrameStart>::with<uint32_t>>;
+
+// The actors a frame actor drives; the session spawns and links them all.
+struct FrameActors {
+  subtree_actor subtree;    // the root of the session's tree
+  renderer_actor renderer;  // this node's renderer (none on a node that does not render: one is
+                            // spawned when a lost node's tasks must be rendered here)
+  tiler_actor tiler;
+  display_actor display;
+};
+
+}  // namespace tessera

@@ -1,0 +1,157 @@
+// The session's input (session_state.h): what a client sends, admitted, decoded and applied.
+#include "actors/errors.h"
+#include "actors/session_state.h"
+#include "protocol/scene_records.h"
+
+namespace tessera::session {
+
+// Sends an error record; a fatal one ends the session (and closes the connection).
+void fail(self_ptr self, const Error& e) {
+  auto& st = self->state;
+  if (st.closed) return;
+  ErrorReply r = to_reply(e);
+  st.errors++;
+  st.sink->send(encode(ServerRecord{r}));
+  log(self, Event(Ev::error, to_string(e.code))
+                .with("fatal", r.fatal)
+                .with("record", e.record == kNoRecord ? -1 : int64_t(e.record))
+                .with("message", e.message));
+  if (r.fatal) {
+    st.closed = true;
+    st.sink->close(e.message);
+    self->quit(caf::exit_reason::user_shutdown);
+  }
+}
+
+// The session's share of the node budget becomes what it holds now. Never more than it had
+// reserved: every update grows the scene by at most the size its message declared.
+void settle_budget(self_ptr self) {
+  auto& st = self->state;
+  st.share.set(scene_bytes(*st.scene) + st.cached_bytes.waiting_bytes());
+}
+
+static void apply_update(self_ptr self, ClientRecord&& rec, uint32_t index) {
+  auto& st = self->state;
+  // Children get exactly the records this node accepted (encoded before apply moves them).
+  std::vector<uint8_t> one;
+  if (st.cluster) one = encode(rec);
+  Status s = apply(*st.scene, std::move(rec), st.settings->limits);
+  if (s && st.cluster) append_message(st.forward, std::move(one));
+  if (!s) {
+    Error e = s.error();
+    e.record = index;
+    fail(self, e);
+  }
+}
+
+static void flush_forward(self_ptr self) {
+  auto& st = self->state;
+  if (st.forward.empty()) return;
+  self->send(st.subtree, update_atom::value, Payload{std::move(st.forward)}, false);
+  st.forward.clear();
+}
+
+void apply_cached(self_ptr self) {
+  auto& st = self->state;
+  auto cached = std::move(st.cached);
+  st.cached.clear();
+  st.cached_bytes.clear();
+  for (auto& r : cached) {
+    if (st.closed) return;
+    apply_update(self, std::move(r), kNoRecord);  // deferred: the record index is no longer meaningful
+  }
+  flush_forward(self);
+  settle_budget(self);
+}
+
+
+// The node-wide budget, checked before anything is inflated or decoded: each buffer and
+// texture the message declares is reserved from the budget; one that does not fit is
+// refused (limit_exceeded, not fatal) and cut out of the message, the others go on. `kept`
+// maps the indices of the message that remains to those of the client's. False: nothing is
+// left to decode.
+static bool admit_payloads(self_ptr self, std::vector<uint8_t>& bytes, std::vector<uint32_t>& kept) {
+  auto& st = self->state;
+  if (!st.settings->budget) return true;
+  auto declared = declared_payloads(bytes.data(), bytes.size(), st.settings->limits);
+  if (!declared) return true;  // bad framing: the decoder says why
+  std::vector<uint32_t> drop;
+  for (const DeclaredRecord& d : *declared) {
+    if (d.bytes == 0 || st.share.reserve(d.bytes)) continue;
+    drop.push_back(d.index);
+    const MemoryBudget& b = *st.settings->budget;
+    fail(self, Error{ErrorCode::limit_exceeded,
+                     "record " + std::to_string(d.index) + ": its " +
+                         std::to_string(d.bytes) + " bytes would exceed the node's memory budget (" +
+                         std::to_string(b.used()) + " of " + std::to_string(b.limit()) +
+                         " bytes in use by all clients); the update is dropped",
+                     d.index});
+  }
+  if (drop.empty()) return true;
+  if (drop.size() == declared->size()) return false;
+  bytes = without_records(bytes.data(), bytes.size(), *declared, drop);
+  for (const DeclaredRecord& d : *declared)
+    if (!std::binary_search(drop.begin(), drop.end(), d.index)) kept.push_back(d.index);
+  return true;
+}
+
+static void on_client_records(self_ptr self, std::vector<uint8_t>& bytes, const std::vector<uint32_t>& kept);
+
+void on_client(self_ptr self, std::vector<uint8_t>& bytes) {
+  auto& st = self->state;
+  if (st.closed) return;
+  std::vector<uint32_t> kept;  // empty: every record of the message
+  if (admit_payloads(self, bytes, kept)) on_client_records(self, bytes, kept);
+  bytes = {};
+  if (!st.closed) settle_budget(self);  // gives back what was reserved and not kept
+}
+
+static void on_client_records(self_ptr self, std::vector<uint8_t>& bytes, const std::vector<uint32_t>& kept) {
+  auto& st = self->state;
+  auto original = [&](uint32_t i) { return i < kept.size() ? kept[i] : i; };
+  auto res = decode_client(bytes.data(), bytes.size(), st.settings->limits);
+  bytes = {};  // the decoded records own their data now
+  if (!res) {
+    Error e = res.error();
+    if (e.record != kNoRecord) e.record = original(e.record);
+    // Before the handshake, a message that does not decode cannot be one: the session ends.
+    if (!st.handshake_done && e.code != ErrorCode::bad_handshake) {
+      e.message = "the first message must be a valid handshake: " + std::string(to_string(e.code)) + ": " + e.message;
+      e.code = ErrorCode::bad_handshake;
+    }
+    return fail(self, e);
+  }
+  auto& recs = res.value();
+  if (Status order = check_session_order(st.handshake_done, recs); !order) return fail(self, order.error());
+  for (uint32_t i = 0; i < recs.size() && !st.closed; ++i) {
+    ClientRecord& rec = recs[i];
+    if (auto* h = std::get_if<Handshake>(&rec)) {
+      on_handshake(self, *h);
+    } else if (auto* s = std::get_if<protocol::Settings>(&rec)) {
+      st.render = *s;  // read when the next frame starts
+    } else if (auto* rr = std::get_if<RenderRequest>(&rec)) {
+      if (!st.in_flight) {
+        start_frame(self, rr->frame);
+      } else {
+        if (st.pending) st.dropped++;  // the older request is merged into this one
+        st.pending = rr->frame;
+      }
+    } else if (st.in_flight) {
+      // Waiting updates count against the client's byte limit now: one that would exceed it
+      // is refused (as it would be when applied) instead of held until the frame ends.
+      if (Status room = st.cached_bytes.admit(*st.scene, rec, st.settings->limits); !room) {
+        Error e = room.error();
+        e.record = original(i);
+        fail(self, e);
+        continue;
+      }
+      st.cached.push_back(std::move(rec));
+    } else {
+      apply_update(self, std::move(rec), original(i));
+    }
+  }
+  flush_forward(self);
+}
+
+
+}  // namespace tessera::session

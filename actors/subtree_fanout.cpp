@@ -1,0 +1,258 @@
+// A subtree's children (subtree_state.h): scene updates down in windows, batches out and
+// tiles in (membership: subtree_members.cpp). Fan-out and fan-in are CAF requests; a batch's reply is a response
+// promise held in its Join until every part is in; the children's timeouts are the requests'.
+#include <algorithm>
+#include <chrono>
+
+#include "actors/checks.h"
+#include "actors/errors.h"
+#include "actors/subtree_state.h"
+
+namespace tessera {
+
+using protocol::ErrorCode;
+
+SubtreeChild* find_child(subtree_state& st, const caf::actor_addr& who) {
+  for (auto& c : st.children)
+    if (c.alive && c.actor.address() == who) return &c;
+  return nullptr;
+}
+
+void fail_part(Join& j, const Join::Part& p, ErrorCode code, const std::string& why) {
+  for (size_t i = p.begin; i < p.begin + p.count; ++i) {
+    TileResult& t = j.reply.tiles[i];
+    t.rgba.clear();
+    t.sat.clear();
+    if (!t.failed()) t.code = code, t.error = why;
+  }
+}
+
+namespace {
+
+void send_batch(subtree_ptr self, SubtreeChild& c, uint64_t id, size_t part);
+
+// Sends what the child's window allows: chunks of the update at the head, and the batches
+// queued behind an update once all of it has been sent. An acknowledgement opens the window
+// again; an error fails the child.
+void pump(subtree_ptr self, SubtreeChild& c) {
+  Outbox& box = c.outbox;
+  while (!box.items.empty()) {
+    Outbox::Item& it = box.items.front();
+    if (!it.update) {
+      const uint64_t id = it.join;
+      const size_t part = it.part;
+      box.items.pop_front();
+      send_batch(self, c, id, part);
+      continue;
+    }
+    const size_t size = it.update->size();
+    if (it.offset == 0 && box.in_flight() + size <= kUpdateChunkBytes) {
+      self->send(c.actor, update_atom::value, Payload{*it.update}, it.reset);
+      box.sent += size;
+      box.items.pop_front();
+      continue;
+    }
+    if (box.in_flight() >= kUpdateWindowBytes) return;
+    const size_t n = std::min(kUpdateChunkBytes, size - it.offset);
+    Payload chunk;
+    chunk.bytes.assign(it.update->begin() + long(it.offset), it.update->begin() + long(it.offset + n));
+    it.offset += n;
+    const bool last = it.offset == it.update->size();
+    const bool reset = it.reset;
+    if (last) box.items.pop_front();
+    box.sent += n;
+    const uint64_t mark = box.sent;
+    const caf::actor_addr addr = c.actor.address();
+    self->request(c.actor, caf::infinite, update_atom::value, std::move(chunk), reset, last)
+        .then(
+            [=](uint64_t) {
+              if (SubtreeChild* x = find_child(self->state, addr)) {
+                x->outbox.acked = std::max(x->outbox.acked, mark);
+                pump(self, *x);
+              }
+            },
+            [=](caf::error& e) { child_failed(self, addr, ErrorCode::node_lost, "scene update: " + to_string(e)); });
+  }
+}
+
+}  // namespace
+
+void enqueue_update(subtree_ptr self, SubtreeChild& c, std::shared_ptr<const std::vector<uint8_t>> data, bool reset) {
+  Outbox::Item item;
+  item.update = std::move(data);
+  item.reset = reset;
+  c.outbox.items.push_back(std::move(item));
+  pump(self, c);
+}
+
+namespace {
+
+// The child's part of batch `id` goes out; its timeout runs from now. What comes back is
+// checked tile by tile against the tasks that were sent.
+void send_batch(subtree_ptr self, SubtreeChild& c, uint64_t id, size_t part) {
+  auto j = self->state.joins.find(id);
+  if (j == self->state.joins.end() || j->second.parts[part].done) return;
+  const Join::Part p = j->second.parts[part];
+  const RenderBatch& b = j->second.batch;
+  RenderBatch sub = b;
+  sub.tasks.assign(b.tasks.begin() + long(p.begin), b.tasks.begin() + long(p.begin + p.count));
+  // Children below answer earlier than we must, so a late grandchild fails at its own
+  // parent and the healthy tiles of that sub-tree still arrive in time.
+  sub.timeout_ms = std::max<uint32_t>(50, b.timeout_ms * 4 / 5);
+  const caf::actor_addr addr = c.actor.address();
+  self->request(c.actor, std::chrono::milliseconds(b.timeout_ms), render_atom::value, std::move(sub))
+      .then(
+          [=](BatchReply& r) {
+            auto& st = self->state;
+            auto j = st.joins.find(id);
+            if (j == st.joins.end() || j->second.parts[part].done) return;
+            Join& join = j->second;
+            if (r.changed) st.changed = true;
+            if (r.tiles.size() != p.count) {
+              const std::string bad = "returned " + std::to_string(r.tiles.size()) + " tiles for " + std::to_string(p.count) + " tasks";
+              subtree_log(self, Event(Ev::rejected_tile, p.name).with("reason", bad));
+              fail_part(join, p, ErrorCode::bad_tile, "node " + p.name + " returned a malformed batch");
+            } else {
+              for (size_t i = 0; i < p.count; ++i) {
+                TileResult& t = r.tiles[i];
+                const Rect want = join.reply.tiles[p.begin + i].pixels;
+                if (!t.failed()) {
+                  const std::string bad = check_tile(t, join.batch.frame, want, {st.req.packet_w, st.req.packet_h},
+                                                     join.batch.width, join.batch.height);
+                  if (!bad.empty()) {
+                    subtree_log(self, Event(Ev::rejected_tile, p.name).with("reason", bad));
+                    t = TileResult{};
+                    t.code = ErrorCode::bad_tile;
+                    t.error = "node " + p.name + " sent an impossible tile: " + bad;
+                  }
+                } else if (t.code == ErrorCode::ok || uint16_t(t.code) > uint16_t(ErrorCode::no_node)) {
+                  t.code = ErrorCode::bad_tile;  // a failure without a code of ours
+                }
+                t.frame = join.batch.frame;
+                t.pixels = want;
+                join.reply.tiles[p.begin + i] = std::move(t);
+              }
+            }
+            finish_part(self, id, part);
+          },
+          [=](caf::error& e) {
+            child_failed(self, addr, ErrorCode::node_lost, to_string(e));
+            auto j = self->state.joins.find(id);
+            if (j == self->state.joins.end() || j->second.parts[part].done) return;
+            fail_part(j->second, p, ErrorCode::node_lost, "node " + p.name + ": " + to_string(e));
+            finish_part(self, id, part);
+          });
+}
+
+}  // namespace
+
+std::vector<NodeInfo> node_list(const subtree_state& st) {
+  std::vector<NodeInfo> out;
+  if (st.self_node) out.push_back(*st.self_node);
+  for (auto& c : st.children)
+    if (c.routed) out.insert(out.end(), c.nodes.begin(), c.nodes.end());
+  return out;
+}
+
+void forward(subtree_ptr self, std::vector<uint8_t> records, bool reset) {
+  std::shared_ptr<const std::vector<uint8_t>> data;
+  for (auto& c : self->state.children)
+    if (c.alive) {
+      if (!data) data = std::make_shared<const std::vector<uint8_t>>(std::move(records));
+      enqueue_update(self, c, data, reset);
+    }
+}
+
+void keepalive(subtree_ptr self) {
+  for (auto& c : self->state.children)
+    if (c.alive) self->send(c.actor, update_atom::value, Payload{}, false);
+}
+
+void dispatch(subtree_ptr self, RenderBatch b, caf::typed_response_promise<BatchReply> promise) {
+  auto& st = self->state;
+  BatchReply reply;
+  reply.tiles.resize(b.tasks.size());
+  for (size_t i = 0; i < b.tasks.size(); ++i) {
+    reply.tiles[i].frame = b.frame;
+    reply.tiles[i].pixels = b.tasks[i];
+  }
+  const size_t nodes = node_list(st).size();
+  if (b.tasks.size() != nodes) {
+    for (auto& t : reply.tiles) {
+      t.code = ErrorCode::bad_batch;
+      t.error = "batch of " + std::to_string(b.tasks.size()) + " tasks for a sub-tree of " + std::to_string(nodes) + " nodes";
+    }
+    reply.changed = true;
+    promise.deliver(std::move(reply));
+    return;
+  }
+  const uint64_t id = st.next_join++;
+  Join& j = st.joins[id];
+  j.promise = std::move(promise);
+  j.reply = std::move(reply);
+  size_t at = 0;
+  if (st.self_node) j.parts.push_back({caf::actor_addr{}, st.settings->name, at++, 1, false});
+  for (auto& c : st.children)
+    if (c.routed) {
+      j.parts.push_back({c.actor.address(), c.name, at, c.nodes.size(), false});
+      at += c.nodes.size();
+    }
+  j.batch = std::move(b);
+  j.left = j.parts.size() + 1;  // +1: a guard, so the reply goes once every part was started
+  for (size_t part = 0; part < j.parts.size(); ++part) {
+    auto it = st.joins.find(id);  // a part that finished at once may have ended the join
+    if (it == st.joins.end()) return;
+    Join& join = it->second;
+    const Join::Part p = join.parts[part];
+    bool any = false;
+    for (size_t i = p.begin; i < p.begin + p.count; ++i) any |= !join.batch.tasks[i].empty();
+    if (!any) {
+      finish_part(self, id, part);
+      continue;
+    }
+    if (!p.child) {
+      render_own(self, id, part, task_of(join.batch, join.batch.tasks[p.begin]));
+      continue;
+    }
+    SubtreeChild* c = nullptr;
+    for (auto& x : st.children)
+      if (x.routed && x.actor.address() == p.child) c = &x;
+    if (!c || !c->alive) {
+      fail_part(join, p, ErrorCode::node_lost, "node " + p.name + " is down");
+      finish_part(self, id, part);
+      continue;
+    }
+    // The batch goes after the updates queued for this child (the worker renders the scene
+    // as of the frame).
+    if (c->outbox.items.empty()) {
+      send_batch(self, *c, id, part);
+    } else {
+      Outbox::Item item;
+      item.join = id;
+      item.part = part;
+      c->outbox.items.push_back(std::move(item));
+    }
+  }
+  if (auto it = st.joins.find(id); it != st.joins.end()) {
+    it->second.reply.changed = st.changed;
+    finish_part(self, id, it->second.parts.size());  // the guard
+  }
+}
+
+void finish_part(subtree_ptr self, uint64_t id, size_t part) {
+  auto& st = self->state;
+  auto it = st.joins.find(id);
+  if (it == st.joins.end()) return;
+  Join& j = it->second;
+  if (part < j.parts.size()) {
+    if (j.parts[part].done) return;
+    j.parts[part].done = true;
+  }
+  if (--j.left > 0) return;
+  auto promise = std::move(j.promise);
+  auto reply = std::move(j.reply);
+  st.joins.erase(it);
+  promise.deliver(std::move(reply));
+}
+
+}  // namespace tessera

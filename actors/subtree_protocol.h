@@ -1,0 +1,58 @@
+#pragma once
+// The subtree actor: one interface at every level of the tree (paper 5.2). A subtree is a
+// node's own renderer (when the node renders) plus one subtree per child node, opened on that
+// child by the node actor (cluster_protocol.h, open). A worker is the subtree a parent opened
+// on this node for one session; a master's frame actor (frame_protocol.h) holds one root
+// subtree for its whole tree; a hub's subtree renders nothing and only relays.
+//
+//   update(Payload, reset)               encoded client-protocol scene records
+//                                        (protocol/scene_records.h); reset=true replaces the
+//                                        whole scene (a node joining a running session). A
+//                                        worker applies them to its own scene (at once, or
+//                                        after the render in flight) and forwards them to its
+//                                        children. Empty and reset=false: the parent's
+//                                        adoption notice and keep-alive.
+//   update(Payload, reset, last) -> n    one chunk of an update, acknowledged with its size;
+//                                        the update is applied at `last`. Parents send big
+//                                        updates this way, a window of chunks at a time
+//                                        (subtree_state.h, Outbox).
+//   render(RenderBatch) -> BatchReply    tasks[i] for entry i of the committed node list: its
+//                                        own task on its renderer, the others relayed to the
+//                                        children, what comes back checked (checks.h); the
+//                                        tasks of a child that is down, too late or lying fail
+//                                        with a typed code (TileResult::code). A batch outside
+//                                        this node's limits fails every tile (bad_batch).
+//   nodes() -> [NodeInfo]                commits membership (dead children out, joined ones in)
+//                                        and returns the flattened list that later batches are
+//                                        indexed by; requests during a commit wait for it.
+//   scene(SceneSnapshot)                 a root only: the scene its own renderer renders from
+//                                        now on, which belongs to the session's sync actor
+//                                        (session_protocol.h); a worker refuses it.
+//   tick                                 its own periodic work: keep-alives to the children,
+//                                        joins of children that (re)connected, and for a
+//                                        worker the orphan and parent-silence checks. A tick
+//                                        from its parent runs one round now.
+//
+// Nothing is exchanged during a frame except the batch going down and the tiles coming up;
+// rendering nodes never talk to each other.
+#include <vector>
+
+#include <caf/typed_actor.hpp>
+#include <caf/replies_to.hpp>
+
+#include "actors/messages.h"
+
+namespace tessera {
+
+using subtree_actor = caf::typed_actor<caf::reacts_to<update_atom, Payload, bool>,
+                                       caf::replies_to<update_atom, Payload, bool, bool>::with<uint64_t>,
+                                       caf::replies_to<render_atom, RenderBatch>::with<BatchReply>,
+                                       caf::replies_to<nodes_atom>::with<std::vector<NodeInfo>>,
+                                       caf::reacts_to<scene_atom, SceneSnapshot>,
+                                       caf::reacts_to<tick_atom>>;
+
+// Where a root subtree gets the whole scene for a child that joins: the session's sync actor,
+// which owns the scene (a worker makes its snapshot from its own scene).
+using scene_source_actor = caf::typed_actor<caf::replies_to<snapshot_atom>::with<Payload>>;
+
+}  // namespace tessera
