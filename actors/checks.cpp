@@ -5,6 +5,7 @@
 #include <cmath>
 
 #include "lb/sat.h"
+#include "update/scene_update.h"
 
 namespace tessera {
 
@@ -121,7 +122,7 @@ std::string apply_records(Scene& scene, const std::vector<uint8_t>& bytes, const
   if (!res) return res.error().message;
   std::string first;
   for (auto& r : res.value()) {
-    auto st = protocol::apply(scene, std::move(r), lim);
+    auto st = apply(scene, std::move(r), lim);
     if (!st && first.empty()) first = st.error().message;
   }
   return first;

@@ -7,6 +7,7 @@
 #include "actors/session_state.h"
 #include "protocol/scene_records.h"
 #include "renderer/raytracer.h"
+#include "update/scene_update.h"
 
 namespace tessera {
 namespace session {

@@ -10,6 +10,7 @@
 
 #include "actors/node.h"
 #include "protocol/protocol.h"
+#include "update/scene_update.h"
 
 namespace tessera::session {
 

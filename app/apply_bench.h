@@ -1,8 +1,9 @@
 #pragma once
-// The core of `tessera applybench`: times protocol::apply on a scene of many small meshes, as
-// a client uploading a large scene sends it. Header-only and dependent only on protocol/protocol.h
-// and core/scene.h, so bench/apply_before_after.sh can compile it against an older
-// protocol.cpp/scene.cpp to show the before/after figures in one run.
+// The core of `tessera applybench`: times apply (update/scene_update.h) on a scene of many small
+// meshes, as a client uploading a large scene sends it. Header-only and dependent only on
+// protocol/protocol.h, update/scene_update.h and core/scene.h, so bench/apply_before_after.sh
+// can compile it against an older protocol.cpp/scene.cpp to show the before/after figures in
+// one run.
 #include <chrono>
 #include <cstdint>
 #include <stdexcept>
@@ -11,6 +12,7 @@
 
 #include "protocol/protocol.h"
 #include "core/scene.h"
+#include "update/scene_update.h"
 
 namespace tessera::bench {
 

@@ -1,8 +1,8 @@
 // tessera applybench [--meshes-list 5000,10000,20000] [--shared-vertices V] [--reps R]
-// Time for the sync channel to apply a scene of many meshes (protocol::apply), record by
-// record as a client uploads it: total, and per 1000 mesh records at the start and at the end
-// of the upload. With per-record work independent of the scene's size the two are equal and
-// the total grows linearly with the mesh count.
+// Time for the sync channel to apply a scene of many meshes (apply, update/scene_update.h),
+// record by record as a client uploads it: total, and per 1000 mesh records at the start and at
+// the end of the upload. With per-record work independent of the scene's size the two are equal
+// and the total grows linearly with the mesh count.
 #include <cstdio>
 
 #include "app/apply_bench.h"
@@ -16,7 +16,7 @@ int run(const std::vector<std::string>& argv) {
   Args args(argv);
   if (args.flag("--help")) {
     std::puts("tessera applybench [--meshes-list 5000,10000,20000] [--shared-vertices V] [--reps R]\n"
-              "Times protocol::apply on N meshes (each: position buffer, index buffer, mesh record; with\n"
+              "Times apply on N meshes (each: position buffer, index buffer, mesh record; with\n"
               "--shared-vertices V all meshes instance one geometry of V vertices). Median of R runs.");
     return 0;
   }

@@ -87,7 +87,7 @@ std::string check_direction(const Vec3& d) {
   if (!finite(d)) return "is not finite";
   const Vec3 n = normalize(d);
   const float l = length(n);
-  if (!(std::fabs(l - 1.0f) < 1e-3f)) return "cannot be normalised (zero, or too large or small for float)";
+  if (!(std::fabs(l - 1.0f) < kUnitTolerance)) return "cannot be normalised (zero, or too large or small for float)";
   return {};
 }
 

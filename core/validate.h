@@ -49,6 +49,7 @@ namespace tessera {
 constexpr float kWorldLimit = 4294967296.0f;  // 2^32
 constexpr float kRayLimit = 8589934592.0f;    // 2^33: the kernel drops rays with a component beyond it
 constexpr float kEmbreeLarge = 1.844e18f;     // Embree's FLT_LARGE (for the documentation and tests)
+constexpr float kUnitTolerance = 1e-3f;       // a normalised direction's length is within this of 1
 
 struct TransformLimits {
   double max_norm;          // ||A||, the maximum absolute row sum of the upper 3x3

@@ -49,6 +49,27 @@ const char* to_string(ErrorCode c) {
   return "unknown";
 }
 
+const char* to_string(RecordType t) {
+  switch (t) {
+    case RecordType::handshake: return "handshake";
+    case RecordType::settings: return "settings";
+    case RecordType::resolution: return "resolution";
+    case RecordType::camera: return "camera";
+    case RecordType::environment: return "environment";
+    case RecordType::buffer: return "buffer";
+    case RecordType::texture: return "texture";
+    case RecordType::material: return "material";
+    case RecordType::mesh: return "mesh";
+    case RecordType::light: return "light";
+    case RecordType::render: return "render";
+    case RecordType::handshake_reply: return "handshake_reply";
+    case RecordType::frame: return "frame";
+    case RecordType::error: return "error";
+    case RecordType::stats: return "stats";
+  }
+  return "?";
+}
+
 bool is_fatal(ErrorCode c) { return c == ErrorCode::bad_version || c == ErrorCode::bad_handshake; }
 
 ErrorReply to_reply(const Error& e) {
@@ -256,7 +277,7 @@ struct ClientEncoder {
   }
 };
 
-constexpr size_t kFrameFixed = 40;
+constexpr size_t kFrameFixed = wire::frame::kFixed;
 
 void frame_fixed(Writer& w, const Frame& f) {
   w.u32(f.frame);
@@ -276,7 +297,7 @@ struct ServerEncoder {
   Writer& w;
   void operator()(const HandshakeReply& h) {
     size_t at = w.begin_record(RecordType::handshake_reply, Op::set);
-    size_t n = std::min<size_t>(h.server_version.size(), 255);
+    size_t n = std::min(h.server_version.size(), wire::handshake_reply::server_version_max_length);
     w.u8(uint8_t(h.renderer));
     w.u8(uint8_t(h.display));
     w.u8(h.jpeg_quality);
@@ -301,7 +322,7 @@ struct ServerEncoder {
     w.u8(e.fatal ? 1 : 0);
     w.u8(0);
     w.u32(e.record);
-    w.bytes(e.message.data(), std::min<size_t>(e.message.size(), 65535));
+    w.bytes(e.message.data(), std::min(e.message.size(), wire::error::message_max_length));
     w.end_record(at);
   }
   void operator()(const Stats& s) {
@@ -409,27 +430,6 @@ class Reader {
   bool ok_ = true;
 };
 
-const char* record_name(RecordType t) {
-  switch (t) {
-    case RecordType::handshake: return "handshake";
-    case RecordType::settings: return "settings";
-    case RecordType::resolution: return "resolution";
-    case RecordType::camera: return "camera";
-    case RecordType::environment: return "environment";
-    case RecordType::buffer: return "buffer";
-    case RecordType::texture: return "texture";
-    case RecordType::material: return "material";
-    case RecordType::mesh: return "mesh";
-    case RecordType::light: return "light";
-    case RecordType::render: return "render";
-    case RecordType::handshake_reply: return "handshake_reply";
-    case RecordType::frame: return "frame";
-    case RecordType::error: return "error";
-    case RecordType::stats: return "stats";
-  }
-  return "?";
-}
-
 // Validation context for one record: builds errors that name the record.
 struct Check {
   uint32_t index;
@@ -442,7 +442,7 @@ struct Check {
       failed = true;
       err.code = c;
       err.record = index;
-      err.message = std::string("record ") + std::to_string(index) + " (" + record_name(type) + "): " + what;
+      err.message = std::string("record ") + std::to_string(index) + " (" + to_string(type) + "): " + what;
     }
     return false;
   }
@@ -455,12 +455,30 @@ struct Check {
   bool finite(const Mat4& m, const char* field) {
     return m.finite() || fail(ErrorCode::not_finite, std::string(field) + " is not finite");
   }
-  // Finite and within [lo, hi].
-  bool range(float v, float lo, float hi, const char* field) {
+  // Finite and within the field's range (protocol/wire.toml), by the range's kind.
+  bool range(float v, wire::Closed r, const char* field) {
     if (!finite(v, field)) return false;
-    if (v < lo || v > hi)
+    if (v < r.lo || v > r.hi)
       return fail(ErrorCode::out_of_range, std::string(field) + " = " + std::to_string(v) + " outside [" +
-                                               std::to_string(lo) + ", " + std::to_string(hi) + "]");
+                                               std::to_string(r.lo) + ", " + std::to_string(r.hi) + "]");
+    return true;
+  }
+  bool range(float v, wire::Open r, const char* field) {
+    if (!finite(v, field)) return false;
+    if (!(v > r.lo && v < r.hi))
+      return fail(ErrorCode::out_of_range, std::string(field) + " = " + std::to_string(v) + " outside (" +
+                                               std::to_string(r.lo) + ", " + std::to_string(r.hi) + ")");
+    return true;
+  }
+  bool range(float v, wire::Above r, const char* field) {
+    if (!finite(v, field)) return false;
+    if (!(v > r.lo)) return fail(ErrorCode::out_of_range, std::string(field) + " must be > " + std::to_string(r.lo));
+    return true;
+  }
+  bool range(uint32_t v, wire::IntRange r, const char* field, ErrorCode code = ErrorCode::out_of_range) {
+    if (v < r.lo || v > r.hi)
+      return fail(code, std::string(field) + " " + std::to_string(v) + " outside " + std::to_string(r.lo) + ".." +
+                            std::to_string(r.hi));
     return true;
   }
   bool non_negative(const Vec3& v, const char* field) {
@@ -483,8 +501,9 @@ struct Check {
     return got >= want || fail(ErrorCode::bad_length, "body length " + std::to_string(got) + ", at least " +
                                                           std::to_string(want) + " expected");
   }
-  bool resolution(uint32_t w, uint32_t h, const Limits& lim) {
-    if (w == 0 || h == 0)
+  // Width and height: at least their minimum (protocol/wire.toml), then within the limits.
+  bool resolution(uint32_t w, uint32_t h, wire::IntRange wr, wire::IntRange hr, const Limits& lim) {
+    if (w < wr.lo || h < hr.lo)
       return fail(ErrorCode::out_of_range, "resolution " + std::to_string(w) + "x" + std::to_string(h) + " is empty");
     if (w > uint32_t(lim.max_width) || h > uint32_t(lim.max_height))
       return fail(ErrorCode::limit_exceeded, "resolution " + std::to_string(w) + "x" + std::to_string(h) +
@@ -512,10 +531,9 @@ class ClientDecoder {
   bool decode(Check& c, Op op, Reader& r, ClientRecord& out) {
     RecordType t = c.type;
     if (op == Op::remove) {
-      if (!(t == RecordType::buffer || t == RecordType::texture || t == RecordType::material || t == RecordType::mesh ||
-            t == RecordType::light))
+      if (!wire::removable(t))
         return c.fail(ErrorCode::bad_op, "remove is only defined for buffer, texture, material, mesh and light");
-      if (!c.length(r.left(), 4)) return false;
+      if (!c.length(r.left(), wire::kRemoveBody)) return false;
       Remove rm;
       rm.what = t;
       rm.id = r.u32();
@@ -526,7 +544,7 @@ class ClientDecoder {
     switch (t) {
       case RecordType::handshake: return handshake(c, r, out);
       case RecordType::settings: {
-        if (!c.length(r.left(), 8)) return false;
+        if (!c.length(r.left(), wire::settings::kFixed)) return false;
         Settings s;
         s.ao_samples = r.u32();
         s.max_depth = r.u32();
@@ -540,20 +558,19 @@ class ClientDecoder {
         return true;
       }
       case RecordType::resolution: {
-        if (!c.length(r.left(), 8)) return false;
+        if (!c.length(r.left(), wire::resolution::kFixed)) return false;
         uint32_t w = r.u32(), h = r.u32();
-        if (!c.resolution(w, h, lim_)) return false;
+        if (!c.resolution(w, h, wire::resolution::width, wire::resolution::height, lim_)) return false;
         out = Resolution{int32_t(w), int32_t(h)};
         return true;
       }
       case RecordType::camera: {
-        if (!c.length(r.left(), 68)) return false;
+        if (!c.length(r.left(), wire::camera::kFixed)) return false;
         SetCamera s;
         s.camera.to_world = r.mat4();
         s.camera.fov_y = r.f32();
-        if (!c.finite(s.camera.to_world, "to_world") || !c.finite(s.camera.fov_y, "fov_y")) return false;
-        if (!(s.camera.fov_y > 0 && s.camera.fov_y < kPi))
-          return c.fail(ErrorCode::out_of_range, "fov_y = " + std::to_string(s.camera.fov_y) + " outside (0, pi)");
+        if (!c.finite(s.camera.to_world, "to_world") || !c.range(s.camera.fov_y, wire::camera::fov_y, "fov_y"))
+          return false;
         // Invertible, well-conditioned and bounded (core/validate.h): a huge or nearly
         // singular camera would give rays that Embree asserts on.
         if (std::string why = check_transform(s.camera.to_world, kCameraLimits); !why.empty())
@@ -562,7 +579,7 @@ class ClientDecoder {
         return true;
       }
       case RecordType::environment: {
-        if (!c.length(r.left(), 32)) return false;
+        if (!c.length(r.left(), wire::environment::kFixed)) return false;
         SetEnvironment s;
         Environment& e = s.environment;
         e.ambient = r.vec3();
@@ -574,7 +591,7 @@ class ClientDecoder {
         if (!c.non_negative(e.ambient, "ambient") || !c.non_negative(e.background, "background") ||
             !c.finite(e.exposure, "exposure") || !c.flag(linear, "linear") || !c.reserved(res))
           return false;
-        if (!(e.exposure > 0)) return c.fail(ErrorCode::out_of_range, "exposure must be > 0");
+        if (!c.range(e.exposure, wire::environment::exposure, "exposure")) return false;
         out = std::move(s);
         return true;
       }
@@ -582,7 +599,7 @@ class ClientDecoder {
       case RecordType::texture: return texture(c, r, out);
       case RecordType::material: return material(c, r, out);
       case RecordType::mesh: {
-        if (!c.length(r.left(), 92)) return false;
+        if (!c.length(r.left(), wire::mesh::kFixed)) return false;
         SetMesh s;
         Mesh& m = s.mesh;
         s.id = r.u32();
@@ -605,7 +622,7 @@ class ClientDecoder {
       }
       case RecordType::light: return light(c, r, out);
       case RecordType::render: {
-        if (!c.length(r.left(), 4)) return false;
+        if (!c.length(r.left(), wire::render::kFixed)) return false;
         out = RenderRequest{r.u32()};
         return true;
       }
@@ -615,23 +632,23 @@ class ClientDecoder {
 
  private:
   bool handshake(Check& c, Reader& r, ClientRecord& out) {
-    if (!c.length(r.left(), 16)) return false;
+    if (!c.length(r.left(), wire::handshake::kFixed)) return false;
     Handshake h;
     uint8_t renderer = r.u8(), display = r.u8();
     h.jpeg_quality = r.u8();
     uint8_t res = r.u8();
     h.max_nodes = r.u32();
     uint32_t w = r.u32(), hh = r.u32();
-    if (!c.enumeration(renderer, 1, "renderer") || !c.enumeration(display, 2, "display") || !c.reserved(res))
+    if (!c.enumeration(renderer, wire::enum_max::renderer, "renderer") ||
+        !c.enumeration(display, wire::enum_max::display, "display") || !c.reserved(res))
       return false;
     h.renderer = RendererKind(renderer);
     h.display = DisplayKind(display);
-    if (h.jpeg_quality < 1 || h.jpeg_quality > 100)
-      return c.fail(ErrorCode::out_of_range, "jpeg_quality " + std::to_string(h.jpeg_quality) + " outside 1..100");
+    if (!c.range(h.jpeg_quality, wire::handshake::jpeg_quality, "jpeg_quality")) return false;
     if (h.max_nodes > lim_.max_nodes)
       return c.fail(ErrorCode::limit_exceeded, "max_nodes " + std::to_string(h.max_nodes) + " exceeds the limit " +
                                                    std::to_string(lim_.max_nodes));
-    if (!c.resolution(w, hh, lim_)) return false;
+    if (!c.resolution(w, hh, wire::handshake::width, wire::handshake::height, lim_)) return false;
     h.width = int32_t(w);
     h.height = int32_t(hh);
     out = h;
@@ -649,15 +666,14 @@ class ClientDecoder {
 
   bool buffer(Check& c, Reader& r, ClientRecord& out) {
     const size_t body = r.left();
-    if (!c.min_length(body, 12)) return false;
+    if (!c.min_length(body, wire::buffer::kFixed)) return false;
     SetBuffer s;
     s.id = r.u32();
     uint8_t type = r.u8(), comps = r.u8(), flags = r.u8(), res = r.u8();
     uint32_t values = r.u32();
-    if (!c.id(s.id, "id") || !c.enumeration(type, 1, "type") || !c.reserved(res)) return false;
+    if (!c.id(s.id, "id") || !c.enumeration(type, wire::enum_max::buffer_type, "type") || !c.reserved(res)) return false;
     if (flags & ~kBufferDeflate) return c.fail(ErrorCode::bad_reserved, "unknown buffer flags");
-    if (comps < 1 || comps > 4)
-      return c.fail(ErrorCode::bad_components, "components " + std::to_string(comps) + " outside 1..4");
+    if (!c.range(comps, wire::buffer::components, "components", ErrorCode::bad_components)) return false;
     if (values % comps)
       return c.fail(ErrorCode::bad_components, std::to_string(values) + " values are not a multiple of " +
                                                    std::to_string(comps) + " components");
@@ -669,7 +685,7 @@ class ClientDecoder {
       return c.fail(ErrorCode::limit_exceeded, std::to_string(values / comps) + " elements exceed the limit of " +
                                                    std::to_string(lim_.max_vertices));
     s.deflate = flags & kBufferDeflate;
-    if (!s.deflate && !c.length(body, 12 + bytes)) return false;
+    if (!s.deflate && !c.length(body, wire::buffer::kFixed + bytes)) return false;
     if (!charge(c, bytes)) return false;
     s.buffer.type = Buffer::Type(type);
     s.buffer.components = comps;
@@ -694,24 +710,26 @@ class ClientDecoder {
 
   bool texture(Check& c, Reader& r, ClientRecord& out) {
     const size_t body = r.left();
-    if (!c.min_length(body, 20)) return false;
+    if (!c.min_length(body, wire::texture::kFixed)) return false;
     SetTexture s;
     s.id = r.u32();
     uint8_t format = r.u8(), wrap_s = r.u8(), wrap_t = r.u8(), filter = r.u8(), srgb = r.u8();
     uint32_t res = r.u8() | (r.u8() << 8) | (r.u8() << 16);
     uint32_t w = r.u32(), h = r.u32();
-    if (!c.id(s.id, "id") || !c.enumeration(format, 2, "format") || !c.enumeration(wrap_s, 1, "wrap_s") ||
-        !c.enumeration(wrap_t, 1, "wrap_t") || !c.enumeration(filter, 1, "filter") || !c.flag(srgb, "srgb") ||
+    if (!c.id(s.id, "id") || !c.enumeration(format, wire::enum_max::texture_format, "format") ||
+        !c.enumeration(wrap_s, wire::enum_max::wrap, "wrap_s") || !c.enumeration(wrap_t, wire::enum_max::wrap, "wrap_t") ||
+        !c.enumeration(filter, wire::enum_max::filter, "filter") || !c.flag(srgb, "srgb") ||
         !c.reserved(res))
       return false;
-    if (w == 0 || h == 0) return c.fail(ErrorCode::out_of_range, "texture size " + std::to_string(w) + "x" +
+    if (w < wire::texture::width.lo || h < wire::texture::height.lo)
+      return c.fail(ErrorCode::out_of_range, "texture size " + std::to_string(w) + "x" +
                                                                      std::to_string(h) + " is empty");
     if (w > uint32_t(lim_.max_texture_size) || h > uint32_t(lim_.max_texture_size))
       return c.fail(ErrorCode::limit_exceeded, "texture size " + std::to_string(w) + "x" + std::to_string(h) +
                                                    " exceeds the limit " + std::to_string(lim_.max_texture_size));
     uint64_t bytes = uint64_t(w) * h * 4;
     s.format = TextureFormat(format);
-    if (s.format == TextureFormat::rgba8 && !c.length(body, 20 + bytes)) return false;
+    if (s.format == TextureFormat::rgba8 && !c.length(body, wire::texture::kFixed + bytes)) return false;
     if (!charge(c, bytes)) return false;
     Texture& t = s.texture;
     t.sampler.wrap_s = Sampler::Wrap(wrap_s);
@@ -754,7 +772,7 @@ class ClientDecoder {
   }
 
   bool material(Check& c, Reader& r, ClientRecord& out) {
-    if (!c.length(r.left(), 84)) return false;
+    if (!c.length(r.left(), wire::material::kFixed)) return false;
     SetMaterial s;
     Material& m = s.material;
     s.id = r.u32();
@@ -773,24 +791,27 @@ class ClientDecoder {
     m.refraction = r.f32();
     m.ior = r.f32();
     m.alpha_cutoff = r.f32();
-    if (!c.id(s.id, "id") || !c.enumeration(model, 2, "model") || !c.reserved(res)) return false;
+    if (!c.id(s.id, "id") || !c.enumeration(model, wire::enum_max::material_model, "model") || !c.reserved(res)) return false;
     if (flags & ~(kMaterialAlphaMask | kMaterialDoubleSided))
       return c.fail(ErrorCode::bad_reserved, "unknown material flags");
     m.model = Material::Model(model);
     m.alpha_mask = flags & kMaterialAlphaMask;
     m.double_sided = flags & kMaterialDoubleSided;
     if (!c.non_negative(m.diffuse_color, "diffuse_color") || !c.non_negative(m.specular_color, "specular_color") ||
-        !c.range(m.shininess, 0, 1e6f, "shininess") || !c.non_negative(m.emissive_color, "emissive_color") ||
-        !c.range(m.ambient_intensity, 0, 1e6f, "ambient_intensity") || !c.range(m.opacity, 0, 1, "opacity") ||
-        !c.range(m.reflection, 0, 1, "reflection") || !c.range(m.refraction, 0, 1, "refraction") ||
-        !c.range(m.ior, 1e-3f, 100, "ior") || !c.range(m.alpha_cutoff, 0, 1, "alpha_cutoff"))
+        !c.range(m.shininess, wire::material::shininess, "shininess") ||
+        !c.non_negative(m.emissive_color, "emissive_color") ||
+        !c.range(m.ambient_intensity, wire::material::ambient_intensity, "ambient_intensity") ||
+        !c.range(m.opacity, wire::material::opacity, "opacity") ||
+        !c.range(m.reflection, wire::material::reflection, "reflection") ||
+        !c.range(m.refraction, wire::material::refraction, "refraction") || !c.range(m.ior, wire::material::ior, "ior") ||
+        !c.range(m.alpha_cutoff, wire::material::alpha_cutoff, "alpha_cutoff"))
       return false;
     out = std::move(s);
     return true;
   }
 
   bool light(Check& c, Reader& r, ClientRecord& out) {
-    if (!c.length(r.left(), 68)) return false;
+    if (!c.length(r.left(), wire::light::kFixed)) return false;
     SetLight s;
     Light& l = s.light;
     s.id = r.u32();
@@ -803,13 +824,13 @@ class ClientDecoder {
     l.attenuation = r.vec3();
     l.cutoff = r.f32();
     l.softness = r.f32();
-    if (!c.id(s.id, "id") || !c.enumeration(type, 2, "type") || !c.flag(on, "on") || !c.reserved(res)) return false;
+    if (!c.id(s.id, "id") || !c.enumeration(type, wire::enum_max::light_type, "type") || !c.flag(on, "on") || !c.reserved(res)) return false;
     l.type = Light::Type(type);
     l.on = on != 0;
-    if (!c.non_negative(l.color, "color") || !c.range(l.intensity, 0, 1e30f, "intensity") ||
+    if (!c.non_negative(l.color, "color") || !c.range(l.intensity, wire::light::intensity, "intensity") ||
         !c.finite(l.position, "position") || !c.finite(l.direction, "direction") ||
-        !c.non_negative(l.attenuation, "attenuation") || !c.range(l.cutoff, 0, kPi, "cutoff") ||
-        !c.range(l.softness, 0, 1, "softness"))
+        !c.non_negative(l.attenuation, "attenuation") || !c.range(l.cutoff, wire::light::cutoff, "cutoff") ||
+        !c.range(l.softness, wire::light::softness, "softness"))
       return false;
     if (l.type != Light::Type::point && dot(l.direction, l.direction) == 0)
       return c.fail(ErrorCode::out_of_range, "direction is zero");
@@ -834,7 +855,7 @@ bool server_record(Check& c, Reader& r, const Limits& lim, ServerRecord& out) {
   switch (c.type) {
     case RecordType::handshake_reply: {
       const size_t body = r.left();
-      if (!c.min_length(body, 28)) return false;
+      if (!c.min_length(body, wire::handshake_reply::kFixed)) return false;
       HandshakeReply h;
       uint8_t renderer = r.u8(), display = r.u8();
       h.jpeg_quality = r.u8();
@@ -843,14 +864,15 @@ bool server_record(Check& c, Reader& r, const Limits& lim, ServerRecord& out) {
       uint32_t w = r.u32(), hh = r.u32();
       h.max_message_bytes = r.u32();
       h.max_buffer_bytes = r.u64();
-      if (!c.length(body, 28 + size_t(n))) return false;
+      if (!c.length(body, wire::handshake_reply::kFixed + size_t(n))) return false;
       h.server_version.assign(reinterpret_cast<const char*>(r.rest()), n);
-      if (!c.enumeration(renderer, 1, "renderer") || !c.enumeration(display, 2, "display")) return false;
+      if (!c.enumeration(renderer, wire::enum_max::renderer, "renderer") ||
+          !c.enumeration(display, wire::enum_max::display, "display"))
+        return false;
       h.renderer = RendererKind(renderer);
       h.display = DisplayKind(display);
-      if (h.jpeg_quality < 1 || h.jpeg_quality > 100)
-        return c.fail(ErrorCode::out_of_range, "jpeg_quality outside 1..100");
-      if (!c.resolution(w, hh, lim)) return false;
+      if (!c.range(h.jpeg_quality, wire::handshake_reply::jpeg_quality, "jpeg_quality")) return false;
+      if (!c.resolution(w, hh, wire::handshake_reply::width, wire::handshake_reply::height, lim)) return false;
       h.width = int32_t(w);
       h.height = int32_t(hh);
       out = std::move(h);
@@ -871,7 +893,9 @@ bool server_record(Check& c, Reader& r, const Limits& lim, ServerRecord& out) {
       t.tiling_ms = r.f32();
       t.pipeline_ms = r.f32();
       t.encode_ms = r.f32();
-      if (!c.enumeration(enc, 1, "encoding") || !c.reserved(res) || !c.resolution(w, h, lim)) return false;
+      if (!c.enumeration(enc, wire::enum_max::frame_encoding, "encoding") || !c.reserved(res) ||
+          !c.resolution(w, h, wire::frame::width, wire::frame::height, lim))
+        return false;
       f.encoding = FrameEncoding(enc);
       f.width = int32_t(w);
       f.height = int32_t(h);
@@ -883,7 +907,7 @@ bool server_record(Check& c, Reader& r, const Limits& lim, ServerRecord& out) {
       return true;
     }
     case RecordType::error: {
-      if (!c.min_length(r.left(), 8)) return false;
+      if (!c.min_length(r.left(), wire::error::kFixed)) return false;
       ErrorReply e;
       uint16_t code = r.u16();
       uint8_t fatal = r.u8(), res = r.u8();
@@ -897,7 +921,7 @@ bool server_record(Check& c, Reader& r, const Limits& lim, ServerRecord& out) {
       return true;
     }
     case RecordType::stats: {
-      if (!c.length(r.left(), 44)) return false;
+      if (!c.length(r.left(), wire::stats::kFixed)) return false;
       Stats s;
       s.frames = r.u32();
       s.dropped = r.u32();
@@ -912,27 +936,6 @@ bool server_record(Check& c, Reader& r, const Limits& lim, ServerRecord& out) {
     }
     default: return c.fail(ErrorCode::unknown_record, "not a server record");
   }
-}
-
-bool known_record(uint8_t t, Channel ch) {
-  switch (RecordType(t)) {
-    case RecordType::handshake:
-    case RecordType::settings:
-    case RecordType::resolution:
-    case RecordType::camera:
-    case RecordType::environment:
-    case RecordType::buffer:
-    case RecordType::texture:
-    case RecordType::material:
-    case RecordType::mesh:
-    case RecordType::light:
-    case RecordType::render: return ch == Channel::client;
-    case RecordType::handshake_reply:
-    case RecordType::frame:
-    case RecordType::error:
-    case RecordType::stats: return ch == Channel::server;
-  }
-  return false;
 }
 
 Error message_error(ErrorCode c, std::string m, uint32_t record = kNoRecord) {
@@ -982,7 +985,7 @@ Result<Ok> walk(const uint8_t* data, size_t size, const Limits& lim, Channel ch,
     if (len > size - at)
       return message_error(ErrorCode::truncated, "record " + std::to_string(i) + ": body of " + std::to_string(len) +
                                                      " bytes, only " + std::to_string(size - at) + " left", i);
-    if (!known_record(type, ch))
+    if (!wire::known_record(type, ch))
       return message_error(ErrorCode::unknown_record, "record " + std::to_string(i) + ": unknown record type " +
                                                           std::to_string(type), i);
     if (op > uint8_t(Op::remove))
@@ -1040,160 +1043,6 @@ Status check_session_order(bool handshake_done, const std::vector<ClientRecord>&
     return message_error(ErrorCode::bad_handshake, "the first message must be a handshake", 0);
   if (handshake_done && has) return message_error(ErrorCode::bad_handshake, "handshake repeated", 0);
   return Ok{};
-}
-
-// ---------------------------------------------------------------------------------------
-// Applying.
-
-uint64_t scene_bytes(const Scene& scene) { return scene.held_bytes(); }
-
-uint64_t PendingBytes::size_of(const Scene& scene, RecordType what, Id id) const {
-  if (auto it = latest_.find({what, id}); it != latest_.end()) return it->second;
-  if (what == RecordType::buffer) {
-    const Buffer* b = scene.buffer(id);
-    return b ? b->bytes() : 0;
-  }
-  const Texture* t = scene.texture(id);
-  return t ? t->rgba.size() : 0;
-}
-
-Status PendingBytes::admit(const Scene& scene, const ClientRecord& record, const Limits& limits) {
-  RecordType what;
-  Id id;
-  uint64_t bytes = 0;
-  if (const auto* b = std::get_if<SetBuffer>(&record)) {
-    what = RecordType::buffer, id = b->id, bytes = b->buffer.bytes();
-  } else if (const auto* t = std::get_if<SetTexture>(&record)) {
-    what = RecordType::texture, id = t->id, bytes = t->texture.rgba.size();
-  } else if (const auto* r = std::get_if<Remove>(&record);
-             r && (r->what == RecordType::buffer || r->what == RecordType::texture)) {
-    what = r->what, id = r->id;  // frees what it removes
-  } else {
-    return Ok{};  // holds no bytes
-  }
-  const uint64_t old = size_of(scene, what, id);
-  // Held once everything admitted so far is applied; freed_ never exceeds what is held.
-  const uint64_t held = scene_bytes(scene) + added_ - freed_ - old;
-  const uint64_t limit = limits.max_client_bytes;
-  if (bytes > limit || held > limit - bytes)
-    return message_error(ErrorCode::limit_exceeded,
-                       std::string(record_name(what)) + " " + std::to_string(id) +
-                           ": with the updates waiting for the frame in flight, the scene's buffers and textures would "
-                           "exceed the limit of " + std::to_string(limit) + " bytes");
-  latest_[{what, id}] = bytes;
-  added_ += bytes;
-  freed_ += old;
-  return Ok{};
-}
-
-void PendingBytes::clear() {
-  latest_.clear();
-  added_ = freed_ = 0;
-}
-
-bool is_scene_update(const ClientRecord& r) {
-  return !(std::holds_alternative<Handshake>(r) || std::holds_alternative<Settings>(r) ||
-           std::holds_alternative<RenderRequest>(r));
-}
-
-namespace {
-
-Error apply_error(ErrorCode c, std::string m) { return message_error(c, std::move(m)); }
-
-}  // namespace
-
-Status apply(Scene& scene, ClientRecord&& record, const Limits& lim) {
-  struct Visitor {
-    Scene& s;
-    const Limits& lim;
-    Status operator()(Handshake&) { return apply_error(ErrorCode::not_scene_update, "handshake is not a scene update"); }
-    Status operator()(Settings&) { return apply_error(ErrorCode::not_scene_update, "settings are not a scene update"); }
-    Status operator()(RenderRequest&) {
-      return apply_error(ErrorCode::not_scene_update, "a render request is not a scene update");
-    }
-    Status operator()(Resolution& r) {
-      s.set_resolution(r.width, r.height);
-      return Ok{};
-    }
-    Status operator()(SetCamera& c) {
-      s.set_camera(c.camera);
-      return Ok{};
-    }
-    Status operator()(SetEnvironment& e) {
-      s.set_environment(e.environment);
-      return Ok{};
-    }
-    Status bytes_check(uint64_t old_bytes, uint64_t new_bytes, const char* what, Id id) {
-      uint64_t total = scene_bytes(s) - old_bytes;
-      if (new_bytes > lim.max_client_bytes || total > lim.max_client_bytes - new_bytes)
-        return apply_error(ErrorCode::limit_exceeded, std::string(what) + " " + std::to_string(id) + ": the scene's buffers and textures would exceed the limit of " +
-                                                          std::to_string(lim.max_client_bytes) + " bytes");
-      return Ok{};
-    }
-    Status operator()(SetBuffer& b) {
-      const Buffer* old = s.buffer(b.id);
-      if (auto st = bytes_check(old ? old->bytes() : 0, b.buffer.bytes(), "buffer", b.id); !st) return st;
-      // Only meshes that take their triangles from this buffer change the count (O(log n):
-      // the scene keeps reference counts per buffer).
-      {
-        uint64_t tris = s.triangles_with_buffer(b.id, &b.buffer);
-        if (tris > lim.max_triangles && tris != s.triangle_count())  // a buffer no mesh draws from changes nothing
-          return apply_error(ErrorCode::limit_exceeded, "buffer " + std::to_string(b.id) + ": scene would hold " +
-                                                            std::to_string(tris) + " triangles, limit " +
-                                                            std::to_string(lim.max_triangles));
-      }
-      s.set_buffer(b.id, std::move(b.buffer));
-      return Ok{};
-    }
-    Status operator()(SetTexture& t) {
-      const Texture* old = s.texture(t.id);
-      if (auto st = bytes_check(old ? old->rgba.size() : 0, t.texture.rgba.size(), "texture", t.id); !st) return st;
-      s.set_texture(t.id, std::move(t.texture));
-      return Ok{};
-    }
-    Status operator()(SetMaterial& m) {
-      s.set_material(m.id, std::move(m.material));
-      return Ok{};
-    }
-    Status operator()(SetMesh& m) {
-      const Mesh& mesh = m.mesh;
-      // Progressive loading: a mesh whose buffers have not all arrived is accepted as is.
-      bool complete = s.buffer(mesh.positions) && (mesh.normals == kNoId || s.buffer(mesh.normals)) &&
-                      (mesh.texcoords == kNoId || s.buffer(mesh.texcoords)) &&
-                      (mesh.indices == kNoId || s.buffer(mesh.indices));
-      if (complete) {
-        std::string why = s.validate_mesh(mesh);
-        if (!why.empty()) return apply_error(ErrorCode::bad_mesh, "mesh " + std::to_string(m.id) + ": " + why);
-      }
-      uint64_t tris = s.triangles_with_mesh(m.id, &mesh);  // O(log n): the scene keeps a running total
-      if (tris > lim.max_triangles)
-        return apply_error(ErrorCode::limit_exceeded, "mesh " + std::to_string(m.id) + ": scene would hold " +
-                                                          std::to_string(tris) + " triangles, limit " +
-                                                          std::to_string(lim.max_triangles));
-      s.set_mesh(m.id, mesh);
-      return Ok{};
-    }
-    Status operator()(SetLight& l) {
-      s.set_light(l.id, l.light);
-      return Ok{};
-    }
-    Status operator()(Remove& r) {
-      bool found = false;
-      switch (r.what) {
-        case RecordType::buffer: found = s.remove_buffer(r.id); break;
-        case RecordType::texture: found = s.remove_texture(r.id); break;
-        case RecordType::material: found = s.remove_material(r.id); break;
-        case RecordType::mesh: found = s.remove_mesh(r.id); break;
-        case RecordType::light: found = s.remove_light(r.id); break;
-        default: return apply_error(ErrorCode::bad_op, "remove of a record type without ids");
-      }
-      if (!found)
-        return apply_error(ErrorCode::unknown_id, std::string("remove ") + record_name(r.what) + " " +
-                                                      std::to_string(r.id) + ": no such id");
-      return Ok{};
-    }
-  };
-  return std::visit(Visitor{scene, lim}, record);
 }
 
 }  // namespace tessera::protocol

@@ -1,30 +1,28 @@
 #pragma once
 // The client protocol: binary messages on the sync and display WebSockets (docs/protocol.md
-// documents every byte). Pure code: no sockets, no actors.
+// documents every byte). Pure code: bytes in, records out and back; no scene, no sockets, no actors.
 //
 // A WebSocket binary message is a header followed by one or more records:
 //   message = "TS" u8 version u8 channel u32 record_count, record*
 //   record  = u8 type u8 op u16 reserved(0) u32 body_length, body
 // Everything is little endian. Decoding validates the whole message before anything is
-// returned (all or nothing); `apply` then changes the scene record by record, checking what
-// depends on the scene (mesh consistency, per-client totals).
+// returned (all or nothing); `apply` (update/scene_update.h) then changes the scene record by
+// record, checking what depends on the scene (mesh consistency, per-client totals).
 #include <cstddef>
 #include <cstdint>
-#include <map>
 #include <string>
 #include <utility>
 #include <variant>
 #include <vector>
 
 #include "core/scene.h"
+// Generated at build time from protocol/wire.toml (protocol/gen_wire.py): the framing constants
+// (kVersion, kMagic0/1, kMessageHeaderSize, kRecordHeaderSize, kNoRecord), the enums RecordType,
+// Channel, Op, RendererKind, DisplayKind, FrameEncoding and TextureFormat, the flag bits, and
+// protocol::wire: every record's body size, field offsets and ranges, and the default limits.
+#include "protocol/wire.h"
 
 namespace tessera::protocol {
-
-constexpr uint8_t kVersion = 1;
-constexpr uint8_t kMagic0 = 'T', kMagic1 = 'S';
-constexpr size_t kMessageHeaderSize = 8;
-constexpr size_t kRecordHeaderSize = 8;
-constexpr uint32_t kNoRecord = 0xffffffffu;
 
 // ---------------------------------------------------------------------------------------
 // Errors are values.
@@ -97,57 +95,28 @@ using Status = Result<Ok>;
 // ---------------------------------------------------------------------------------------
 // Limits, enforced before any allocation that depends on a declared size.
 
+// The defaults are protocol/wire.toml's [limits].
 struct Limits {
-  uint32_t max_message_bytes = 64u << 20;      // one WebSocket message
-  uint32_t max_records = 1u << 16;             // records in one message
-  int32_t max_width = 7680, max_height = 4320; // resolution
-  uint64_t max_message_payload_bytes = 256ull << 20;  // inflated buffers + decoded textures in one message
-  uint64_t max_buffer_bytes = 256ull << 20;    // one buffer, inflated
-  uint64_t max_client_bytes = 1ull << 30;      // buffers + textures held in one client's scene
-  uint64_t max_triangles = 20'000'000;         // scene total, instances counted each time
-  uint64_t max_vertices = 20'000'000;          // elements in one buffer
-  int32_t max_texture_size = 8192;             // texture width and height each
-  uint32_t max_nodes = 1024;                   // handshake max_nodes
-  uint32_t max_ao_samples = 256;
-  uint32_t max_depth = 64;
+  uint32_t max_message_bytes = wire::limits::max_message_bytes;  // one WebSocket message
+  uint32_t max_records = wire::limits::max_records;              // records in one message
+  int32_t max_width = wire::limits::max_width, max_height = wire::limits::max_height;  // resolution
+  uint64_t max_message_payload_bytes = wire::limits::max_message_payload_bytes;  // inflated buffers + decoded textures in one message
+  uint64_t max_buffer_bytes = wire::limits::max_buffer_bytes;    // one buffer, inflated
+  uint64_t max_client_bytes = wire::limits::max_client_bytes;    // buffers + textures held in one client's scene
+  uint64_t max_triangles = wire::limits::max_triangles;          // scene total, instances counted each time
+  uint64_t max_vertices = wire::limits::max_vertices;            // elements in one buffer
+  int32_t max_texture_size = wire::limits::max_texture_size;     // texture width and height each
+  uint32_t max_nodes = wire::limits::max_nodes;                  // handshake max_nodes
+  uint32_t max_ao_samples = wire::limits::max_ao_samples;
+  uint32_t max_depth = wire::limits::max_depth;
 };
 
 // ---------------------------------------------------------------------------------------
-// Record types and enums on the wire.
+// Record types and enums on the wire: protocol/wire.h (RecordType, Channel, Op, RendererKind,
+// DisplayKind, FrameEncoding, TextureFormat; kBufferDeflate, kMaterialAlphaMask,
+// kMaterialDoubleSided).
 
-enum class Channel : uint8_t { client = 0, server = 1 };  // who sends the message
-
-enum class RecordType : uint8_t {
-  // client -> server
-  handshake = 0x01,
-  settings = 0x02,
-  resolution = 0x03,
-  camera = 0x04,
-  environment = 0x05,
-  buffer = 0x10,
-  texture = 0x11,
-  material = 0x12,
-  mesh = 0x13,
-  light = 0x14,
-  render = 0x20,
-  // server -> client
-  handshake_reply = 0x81,
-  frame = 0x82,
-  error = 0x83,
-  stats = 0x84,
-};
-
-enum class Op : uint8_t { set = 0, remove = 1 };  // set = add or change
-
-enum class RendererKind : uint8_t { raytracer = 0, rasterizer = 1 };
-enum class DisplayKind : uint8_t { jpeg = 0, s3tc = 1, mjpeg = 2 };
-enum class FrameEncoding : uint8_t { jpeg = 0, dxt1 = 1 };
-enum class TextureFormat : uint8_t { rgba8 = 0, png = 1, jpeg = 2 };
-
-// Buffer flags.
-constexpr uint8_t kBufferDeflate = 1;
-// Material flags.
-constexpr uint8_t kMaterialAlphaMask = 1, kMaterialDoubleSided = 2;
+const char* to_string(RecordType t);  // "handshake", "buffer", ...
 
 // ---------------------------------------------------------------------------------------
 // Client -> server records.
@@ -279,41 +248,6 @@ void encode_frame_header(const Frame& frame_without_payload, size_t payload_size
 
 Result<std::vector<ClientRecord>> decode_client(const uint8_t* data, size_t size, const Limits& limits);
 Result<std::vector<ServerRecord>> decode_server(const uint8_t* data, size_t size, const Limits& limits);
-
-// ---------------------------------------------------------------------------------------
-// Applying decoded client records to a scene.
-
-bool is_scene_update(const ClientRecord& r);  // resolution, camera, environment, set/remove of entries
-
-// Applies one scene update. Scene-dependent checks:
-// - a mesh whose referenced buffers are all present must pass Scene::validate_mesh, else
-//   bad_mesh and the scene is unchanged; a mesh with missing buffers is accepted (progressive
-//   loading: it is rendered once its buffers arrive and validate_mesh passes);
-// - buffers and textures held for the client stay within limits.max_client_bytes;
-// - the scene's triangle count stays within limits.max_triangles;
-// - remove of an id the scene does not hold: unknown_id.
-// Returns not_scene_update for handshake, settings and render requests (the session handles them).
-Status apply(Scene& scene, ClientRecord&& record, const Limits& limits);
-
-// Buffers + textures held by the scene (what max_client_bytes limits).
-uint64_t scene_bytes(const Scene& scene);
-
-// Scene updates that wait to be applied (a session caches them while a frame renders from
-// the scene) count against max_client_bytes as if they had been applied in order: admit()
-// checks one more waiting update against the buffers and textures the scene would hold once
-// it and every update admitted before it were applied (a replacement counts the size it
-// replaces out, a removal frees it). limit_exceeded says the update must not wait (it is
-// dropped; what waits already is kept). The scene must not change until clear().
-class PendingBytes {
- public:
-  Status admit(const Scene& scene, const ClientRecord& record, const Limits& limits);
-  void clear();  // the waiting updates were applied (or dropped)
-  uint64_t waiting_bytes() const { return added_; }  // bytes the admitted updates hold while they wait
- private:
-  uint64_t size_of(const Scene& scene, RecordType what, Id id) const;  // as the waiting updates leave it
-  std::map<std::pair<RecordType, Id>, uint64_t> latest_;  // last waiting size per entry
-  uint64_t added_ = 0, freed_ = 0;
-};
 
 // Session order on the sync channel: the first message is exactly one handshake, and no
 // handshake comes later (bad_handshake, fatal). `handshake_done` is the session's state.

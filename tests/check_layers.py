@@ -3,7 +3,7 @@
 
 The layers, lowest first, one folder each:
   core (rect, image, math, scene, validation, cost map, glTF) < lb < codecs < renderer
-  < protocol < actors < net < app
+  < protocol < update < actors < net < app
 A file may include its own layer and the layers below it, never a layer above, and no
 production file includes tests/. Quoted includes ("folder/file.h") are checked; system and
 third-party includes (<...>) are not Tessera's.
@@ -17,7 +17,7 @@ import re
 import sys
 import tempfile
 
-LAYERS = ["core", "lb", "codecs", "renderer", "protocol", "actors", "net", "app"]
+LAYERS = ["core", "lb", "codecs", "renderer", "protocol", "update", "actors", "net", "app"]
 RANK = {name: i for i, name in enumerate(LAYERS)}
 INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"', re.M)
 SOURCES = (".h", ".hpp", ".cpp", ".cc", ".inc")

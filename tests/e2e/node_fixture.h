@@ -16,6 +16,7 @@
 #include "actors/node.h"
 #include "protocol/protocol.h"
 #include "protocol/scene_records.h"
+#include "update/scene_update.h"
 #include "net/server.h"
 #include "net/ws_client.h"
 #include "codecs/jpeg.h"

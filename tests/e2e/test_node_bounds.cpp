@@ -180,7 +180,7 @@ TEST_CASE("A handshake record that fails decoding ends the session", "[e2e][faul
 }
 
 TEST_CASE("The node-wide memory budget refuses the client that would cross it and nobody else", "[e2e][fault]") {
-  const uint64_t pavilion_bytes = protocol::scene_bytes(pavilion().scene);
+  const uint64_t pavilion_bytes = scene_bytes(pavilion().scene);
   auto budget = std::make_shared<MemoryBudget>(pavilion_bytes + (1u << 20));
   TestNode node(8, [&](NodeSettings& s, ServerOptions&) { s.budget = budget; });
   ProtoClient a, b;

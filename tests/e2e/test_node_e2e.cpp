@@ -358,7 +358,7 @@ TEST_CASE("A client streaming frames for more than a second receives Stats recor
     // The node sends the Stats record right after the frame it counts last.
     CHECK(s.frames == frames_before[i]);
     CHECK(s.bytes_sent == stats[i].second);
-    CHECK(s.scene_bytes == protocol::scene_bytes(pavilion().scene));
+    CHECK(s.scene_bytes == scene_bytes(pavilion().scene));
     CHECK(s.triangles == pavilion().scene.triangle_count());
     CHECK(s.nodes == 1);
     CHECK(s.dropped == 0);  // never more than one request waits while a frame renders

@@ -8,6 +8,7 @@
 #include <cstdio>
 
 #include "protocol/protocol.h"
+#include "update/scene_update.h"
 
 using namespace tessera;
 using namespace tessera::protocol;

@@ -15,6 +15,7 @@
 #include <tbb/global_control.h>
 
 #include "protocol/protocol.h"
+#include "update/scene_update.h"
 #include "core/gltf_loader.h"
 #include "renderer/raytracer.h"
 #include "tests/fuzz/fuzz_common.h"

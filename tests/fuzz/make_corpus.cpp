@@ -16,6 +16,7 @@
 #include "codecs/jpeg.h"
 #include "protocol/protocol.h"
 #include "protocol/scene_records.h"
+#include "update/scene_update.h"
 #include "lb/sat.h"
 
 using namespace tessera;

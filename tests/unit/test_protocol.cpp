@@ -15,6 +15,7 @@
 #include "codecs/dxt1.h"
 #include "codecs/jpeg.h"
 #include "protocol/protocol.h"
+#include "update/scene_update.h"
 #include "core/image.h"
 
 using namespace tessera;
@@ -1041,7 +1042,7 @@ TEST_CASE("The scene's running triangle and byte totals equal a direct recount a
         b.id = id;
         b.buffer.components = 3;
         b.buffer.f.assign(size_t(3 * 3 * (1 + rng() % 10)), 0.5f);
-        (void)protocol::apply(scene, b, lim);
+        (void)apply(scene, b, lim);
         break;
       }
       case 1: {  // an index buffer
@@ -1049,7 +1050,7 @@ TEST_CASE("The scene's running triangle and byte totals equal a direct recount a
         b.id = id;
         b.buffer.type = Buffer::Type::u32;
         b.buffer.u.assign(size_t(3 * (rng() % 6)), 0u);
-        (void)protocol::apply(scene, b, lim);
+        (void)apply(scene, b, lim);
         break;
       }
       case 2: {  // a mesh, indexed or not, visible or not
@@ -1058,15 +1059,15 @@ TEST_CASE("The scene's running triangle and byte totals equal a direct recount a
         m.mesh.positions = Id(1 + rng() % 12);
         m.mesh.indices = rng() % 2 ? Id(1 + rng() % 12) : kNoId;
         m.mesh.visible = rng() % 4 != 0;
-        (void)protocol::apply(scene, m, lim);
+        (void)apply(scene, m, lim);
         break;
       }
-      case 3: (void)protocol::apply(scene, protocol::Remove{protocol::RecordType::buffer, id}, lim); break;
-      default: (void)protocol::apply(scene, protocol::Remove{protocol::RecordType::mesh, id}, lim); break;
+      case 3: (void)apply(scene, protocol::Remove{protocol::RecordType::buffer, id}, lim); break;
+      default: (void)apply(scene, protocol::Remove{protocol::RecordType::mesh, id}, lim); break;
     }
     auto [tris, bytes] = recount();
     REQUIRE(scene.triangle_count() == tris);
-    REQUIRE(protocol::scene_bytes(scene) == bytes);
+    REQUIRE(scene_bytes(scene) == bytes);
   }
   // And a copy carries them along.
   Scene copy = scene;

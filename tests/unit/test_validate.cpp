@@ -16,6 +16,7 @@
 #include <string>
 
 #include "protocol/protocol.h"
+#include "update/scene_update.h"
 #include "core/gltf_loader.h"
 #include "core/image.h"
 #include "renderer/raytracer.h"
@@ -182,13 +183,13 @@ TEST_CASE("apply refuses a mesh whose vertices its transform puts beyond the wor
   b.id = 2;
   b.buffer.components = 3;
   b.buffer.f = {0, 0, 0, 1e6f, 0, 0, 0, 1e6f, 0};
-  REQUIRE(protocol::apply(scene, b, lim).ok());
+  REQUIRE(apply(scene, b, lim).ok());
   protocol::SetMesh m;
   m.id = 1;
   m.mesh.positions = 2;
   m.mesh.transform = Mat4::scale(Vec3{1e4f});  // fine alone, but 1e6 x 1e4 = 1e10 > 2^32
   auto before = scene.version();
-  auto st = protocol::apply(scene, m, lim);
+  auto st = apply(scene, m, lim);
   REQUIRE_FALSE(st.ok());
   CHECK(st.error().code == protocol::ErrorCode::bad_mesh);
   CHECK(has(st.error().message, "world limit"));
