@@ -6,6 +6,7 @@
 #include <cstdlib>
 #include <limits>
 
+#include "app/bench_kernels.h"
 #include "app/command.h"
 #include "app/common.h"
 #include "renderer/rasterizer.h"
@@ -71,10 +72,10 @@ int run_rasterizer(SceneSetup& setup, long frames, long step, long warmup, bool 
     // Alternate which side goes first, so that neither always pays for a cold cache.
     double bare = 0;
     uint64_t n = 0;
-    if (rt && f % 2 == 1) bare = rt->trace_primary_only(full, &n);
+    if (rt && f % 2 == 1) bare = bench::trace_primary_only(*rt, full, &n);
     TaskResult r;
     gl.render(full, settings, r);
-    if (rt && f % 2 == 0) bare = rt->trace_primary_only(full, &n);
+    if (rt && f % 2 == 0) bare = bench::trace_primary_only(*rt, full, &n);
     rendering.push_back(r.rendering_ms);
     std::printf("{\"frame\": %zu, \"rendering_ms\": %.3f, \"sync_ms\": %.3f", k, r.rendering_ms, sync_ms.back());
     if (rt) {
@@ -134,7 +135,7 @@ int run(const std::vector<std::string>& argv) {
   // --compare specialised times the general kernel (render() itself picks the specialised one
   // for such scenes, so comparing it would compare a kernel with itself).
   auto ours = [&](TaskResult& r) {
-    if (compare == "specialised") rt.render_general(full, settings, r);
+    if (compare == "specialised") bench::render_general(rt, full, settings, r);
     else rt.render(full, settings, r);
   };
   for (long i = 0; i < warmup; ++i) { TaskResult r; ours(r); }
@@ -154,7 +155,7 @@ int run(const std::vector<std::string>& argv) {
       TaskResult t;
       RenderSettings off = settings;
       off.cost_map = false;
-      if (compare == "specialised") rt.render_specialised(full, settings, t);
+      if (compare == "specialised") bench::render_specialised(rt, full, settings, t);
       else rt.render(full, off, t);
       return t;
     };
@@ -183,18 +184,16 @@ int run(const std::vector<std::string>& argv) {
     };
     if (compare == "bare") {
       uint64_t n = 0;
-      double ms = rt.trace_primary_only(full, &n);
-      best(r.rendering_ms, ms, [&] { return rt.trace_primary_only(full, nullptr); });
-      // The floor: ours with no shading (RenderSettings::shading_floor), its R runs in turn
+      double ms = bench::trace_primary_only(rt, full, &n);
+      best(r.rendering_ms, ms, [&] { return bench::trace_primary_only(rt, full, nullptr); });
+      // The floor: ours with no shading (bench::render_shading_floor), its R runs in turn
       // with R more of the bare loop.
-      RenderSettings no_shading = settings;
-      no_shading.shading_floor = true;
       double floor_ms = std::numeric_limits<double>::infinity();
       for (long i = 0; i < reps; ++i) {
         TaskResult fl;
-        rt.render(full, no_shading, fl);
+        bench::render_shading_floor(rt, full, settings, fl);
         floor_ms = std::min(floor_ms, fl.rendering_ms);
-        ms = std::min(ms, rt.trace_primary_only(full, nullptr));
+        ms = std::min(ms, bench::trace_primary_only(rt, full, nullptr));
       }
       double ours = mrays(r.rays.primary, r.rendering_ms), bare = mrays(n, ms);
       cmp_ms.push_back(ms);
@@ -211,15 +210,14 @@ int run(const std::vector<std::string>& argv) {
       // (ray set-up, shading, output, cost map). The 0.8 target allows the latter
       // 1.25 x bare - ours inside Embree (more than the bare loop when shading evicts its data).
       RenderSettings timed = settings;
-      timed.time_intersections = true;
       timed.cost_map = true;
       TaskResult ti;
-      rt.render(full, timed, ti);
+      const double ti_isect = bench::render_timing_intersections(rt, full, timed, ti);
       double bare_isect = 0;
-      rt.trace_primary_only(full, nullptr, &bare_isect);
-      isect.push_back(ti.primary_intersect_ms);
+      bench::trace_primary_only(rt, full, nullptr, &bare_isect);
+      isect.push_back(ti_isect);
       bare_isects.push_back(bare_isect);
-      after_hit.push_back(ti.kernel_ms - ti.primary_intersect_ms);
+      after_hit.push_back(ti.kernel_ms - ti_isect);
       std::printf(", \"intersect_ms\": %.3f, \"bare_intersect_ms\": %.3f, \"after_hit_ms\": %.3f, \"after_hit_budget_ms\": %.3f",
                   isect.back(), bare_isect, after_hit.back(), 1.25 * bare_isect - isect.back());
     } else if (against_variant) {

@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cstdio>
 
+#include "app/bench_kernels.h"
 #include "app/command.h"
 #include "app/common.h"
 #include "renderer/raytracer.h"
@@ -27,6 +28,7 @@ const char* kHelp =
     "relative to X (negative: static is slower), as the paper's Table 2. The summary gives the\n"
     "median over frames of the per-frame ratios. The three images must be identical.\n";
 
+using bench::ThreadSchedule;
 constexpr ThreadSchedule kSchedules[] = {ThreadSchedule::static_tiles, ThreadSchedule::work_stealing,
                                          ThreadSchedule::shared_queue};
 constexpr int kNs = 3;
@@ -66,7 +68,7 @@ int run(const std::vector<std::string>& argv) {
     for (long r = 0; r < reps; ++r)
       for (int j = 0; j < kNs; ++j) {
         int s = int((j + r) % kNs);  // rotate the order so no schedule always runs first
-        rt.render_scheduled(full, settings, kSchedules[s], tiles, threads, res[s]);
+        bench::render_scheduled(rt, full, settings, kSchedules[s], tiles, threads, res[s]);
         wall[s].push_back(res[s].rendering_ms);
         kern[s].push_back(res[s].kernel_ms);
       }

@@ -65,7 +65,7 @@ table(["ours inside Embree ms", "bare inside Embree ms", "rest of ours ms", "res
       lambda r: r.get("compare") == "bare" and "intersect_ms" in r,
       lambda r: [f"{r[k]:.1f}" for k in ("intersect_ms", "bare_intersect_ms", "after_hit_ms", "after_hit_budget_ms")])
 md += ["", "## The floor: our kernel with no shading at all (`--compare bare`)", "",
-       "Our render with `RenderSettings::shading_floor` (every hit white: tracing, ray set-up, output",
+       "Our render with `bench::render_shading_floor` (every hit white: tracing, ray set-up, output",
        "and cost map without any shading), timed like the others (fastest of 3, in turn with the bare",
        "loop), medians over frames: its rate over the bare loop's, the time our real shading adds to",
        "it, and what the 0.8 target leaves the shading: 1.25 x bare - floor.", ""]

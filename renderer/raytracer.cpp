@@ -1,5 +1,5 @@
 #include "renderer/raytracer.h"
-#include "renderer/embree_device.h"
+#include "renderer/raytracer_impl.h"
 
 #include "core/validate.h"
 
@@ -25,6 +25,8 @@
 
 namespace tessera {
 
+using namespace raytracer_detail;
+
 // ---------------------------------------------------------------------------------------
 // CPU facts
 // ---------------------------------------------------------------------------------------
@@ -41,9 +43,8 @@ PacketLayout detect_packet_layout() {
   return {2, 2};
 }
 
-// Which copy of the kernel runs: the packet width's own instruction set where this CPU has
-// it (16 lanes: AVX-512, 8 lanes: AVX2 with FMA), else the SSE2 copy, which every x86-64 runs.
-static bool cpu_avx512() {
+// Which copy of the kernel runs (raytracer_impl.h).
+bool raytracer_detail::cpu_avx512() {
   static const bool yes = __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") &&
                           __builtin_cpu_supports("avx512dq") && __builtin_cpu_supports("avx512bw") &&
                           __builtin_cpu_supports("avx512cd") && __builtin_cpu_supports("avx2") &&
@@ -55,7 +56,7 @@ static bool cpu_f16c() {
   unsigned a = 0, b = 0, c = 0, d = 0;
   return __get_cpuid(1, &a, &b, &c, &d) && (c & bit_F16C);
 }
-static bool cpu_avx2() {
+bool raytracer_detail::cpu_avx2() {
   static const bool yes = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma") &&
                           __builtin_cpu_supports("bmi2") && cpu_f16c();
   return yes;
@@ -88,33 +89,6 @@ double tsc_khz() {
 namespace {
 
 // ---------------------------------------------------------------------------------------
-// Embree packet types by width
-// ---------------------------------------------------------------------------------------
-
-template <int N> struct Packet;
-template <> struct Packet<4> {
-  using RayHit = RTCRayHit4;
-  using Ray = RTCRay4;
-  static void intersect(const int* v, RTCScene s, RTCIntersectContext* c, RayHit* r) { rtcIntersect4(v, s, c, r); }
-  static void occluded(const int* v, RTCScene s, RTCIntersectContext* c, Ray* r) { rtcOccluded4(v, s, c, r); }
-};
-template <> struct Packet<8> {
-  using RayHit = RTCRayHit8;
-  using Ray = RTCRay8;
-  static void intersect(const int* v, RTCScene s, RTCIntersectContext* c, RayHit* r) { rtcIntersect8(v, s, c, r); }
-  static void occluded(const int* v, RTCScene s, RTCIntersectContext* c, Ray* r) { rtcOccluded8(v, s, c, r); }
-};
-template <> struct Packet<16> {
-  using RayHit = RTCRayHit16;
-  using Ray = RTCRay16;
-  static void intersect(const int* v, RTCScene s, RTCIntersectContext* c, RayHit* r) { rtcIntersect16(v, s, c, r); }
-  static void occluded(const int* v, RTCScene s, RTCIntersectContext* c, Ray* r) { rtcOccluded16(v, s, c, r); }
-};
-
-// Compile-time features of a kernel: the general kernel has all, the specialised none.
-enum Feature : unsigned { kAO = 1, kSecondary = 2, kTextures = 4, kAll = 7, kNone = 0 };
-
-// ---------------------------------------------------------------------------------------
 // Colour helpers
 // ---------------------------------------------------------------------------------------
 
@@ -132,248 +106,13 @@ const SrgbLut& srgb_lut() {
   return lut;
 }
 
-// Output encoding: a channel, clamped to [0, 1] (NaN to 0), to its 8-bit code, as it is or on
-// the sRGB curve. The curve's power segment, 1.055 c^(1/2.4) - 0.055 for c > 0.0031308, is a
-// degree-6 polynomial in sqrt(c), fitted minimax over that segment: within 0.04 of a code
-// step of the exact curve, so a code differs from the exactly rounded one only where the curve
-// passes within 0.04 of a half step. Plain arithmetic, no table: lane loops are vector code.
-inline float clamp_unit(float c) { return c > 0.0f ? (c < 1.0f ? c : 1.0f) : 0.0f; }
-inline int encode_plain(float c) { return int(clamp_unit(c) * 255.0f + 0.5f); }
-inline int encode_srgb(float c) {
-  c = clamp_unit(c);
-  const float s = std::sqrt(c);
-  float p = -0.947538009f;
-  p = p * s + 3.41827786f;
-  p = p * s - 5.00269119f;
-  p = p * s + 3.89817749f;
-  p = p * s - 1.8994062f;
-  p = p * s + 1.57526277f;
-  p = p * s - 0.0422316502f;
-  const float e = c <= 0.0031308f ? 12.92f * c : p;
-  return int(e * 255.0f + 0.5f);
-}
-
-// Integer hash for per-pixel sample rotations (deterministic per frame).
-inline uint32_t hash32(uint32_t x) {
-  x ^= x >> 16; x *= 0x7feb352dU; x ^= x >> 15; x *= 0x846ca68bU; x ^= x >> 16;
-  return x;
-}
-inline float radical_inverse2(uint32_t i) {  // van der Corput sequence in base 2
-  i = (i << 16) | (i >> 16);
-  i = ((i & 0x55555555u) << 1) | ((i & 0xAAAAAAAAu) >> 1);
-  i = ((i & 0x33333333u) << 2) | ((i & 0xCCCCCCCCu) >> 2);
-  i = ((i & 0x0F0F0F0Fu) << 4) | ((i & 0xF0F0F0F0u) >> 4);
-  i = ((i & 0x00FF00FFu) << 8) | ((i & 0xFF00FF00u) >> 8);
-  return float(i) * 2.3283064365386963e-10f;
-}
-
-// Orthonormal basis around n (Duff et al. 2017).
-inline void basis(const Vec3& n, Vec3& t, Vec3& b) {
-  float s = std::copysign(1.0f, n.z);
-  float a = -1.0f / (s + n.z);
-  float c = n.x * n.y * a;
-  t = {1 + s * n.x * n.x * a, s * c, -s * n.x};
-  b = {c, s + n.y * n.y * a, -n.y};
-}
-
 inline float max_abs(const Vec3& p) { return std::fmax(std::fabs(p.x), std::fmax(std::fabs(p.y), std::fabs(p.z))); }
-
-// A texture's addressing (size, wrap modes, filter) as plain numbers, fixed when the texture
-// is converted, for texel_coords: GCC 12 leaves a lane loop scalar when it selects on a bool
-// or nests two selects of one value, and selects on these numbers vectorise.
-struct TexelAddressing {
-  int32_t w = 1, h = 1;
-  float fw = 1, fh = 1;
-  float shift = 0.5f;                  // texel centres: 0.5 bilinear, 0 nearest
-  float filter = 1;                    // 1 bilinear; 0 nearest (the second texel gets weight 0)
-  int32_t repeat_s = 1, repeat_t = 1;  // 1 repeat, 0 clamp
-  int32_t below_x = 0, above_x = 0, below_y = 0, above_y = 0;  // column (row) for -1 and w (h)
-
-  TexelAddressing() = default;
-  TexelAddressing(int32_t width, int32_t height, bool rs, bool rt, bool nearest)
-      : w(width), h(height), fw(float(width)), fh(float(height)), shift(nearest ? 0.0f : 0.5f),
-        filter(nearest ? 0.0f : 1.0f), repeat_s(rs), repeat_t(rt), below_x(rs ? width - 1 : 0),
-        above_x(rs ? 0 : width - 1), below_y(rt ? height - 1 : 0), above_y(rt ? 0 : height - 1) {}
-};
 
 }  // namespace
 
 // ---------------------------------------------------------------------------------------
-// Renderer state
-// ---------------------------------------------------------------------------------------
-
-struct RayTracer::Impl {
-  struct Tex {
-    // RGBA, 16 bits a channel (low to high), colour already as shading uses it (decoded from
-    // sRGB for glTF scenes), so a lookup is one 64-bit load per texel and no table.
-    std::vector<uint64_t> texels;
-    TexelAddressing addr;  // size, wrap modes and filter
-    bool decoded = false;  // colour channels decoded from sRGB
-    uint64_t version = 0;
-  };
-  struct Geom {
-    Impl* owner = nullptr;
-    RTCScene blas = nullptr;
-    std::vector<float> normals;    // object space, 3 per vertex (empty: flat)
-    std::vector<float> texcoords;  // 2 per vertex (empty: none)
-    std::vector<uint32_t> indices; // 3 per triangle
-    uint64_t version = 0;          // max version of the buffers it was built from
-    bool filter = false;           // alpha-mask filter attached
-    bool see_through = false;      // occlusion filter for refracting materials attached
-    bool used = false;
-  };
-  struct Inst {
-    Id mesh = kNoId;
-    RTCGeometry geom = nullptr;
-    unsigned id = RTC_INVALID_GEOMETRY_ID;
-    Geom* g = nullptr;
-    int material = 0;      // index into materials_
-    Mat4 normal_matrix;    // inverse transpose of the object-to-world transform
-    float det_sign = 1;
-    uint64_t version = 0;
-    uint64_t geom_version = 0;
-    Vec3 origin_used;      // the rebasing origin its transform was built for
-  };
-  using GeomKey = std::tuple<Id, Id, Id, Id>;  // positions, normals, texcoords, indices
-
-  std::shared_ptr<EmbreeDevice> shared_device = EmbreeDevice::acquire();  // one per process
-  RTCDevice device = shared_device->get();
-  RTCScene top = nullptr;
-  PacketLayout layout;
-  std::map<GeomKey, Geom> geoms;
-  std::map<Id, Inst> insts;         // by mesh id
-  std::vector<Inst*> inst_by_rtc;   // by Embree instance id
-  std::map<Id, Tex> textures;
-  std::vector<Material> materials;  // [0] = the default material
-  std::vector<const Tex*> mat_diffuse_tex, mat_specular_tex, mat_emissive_tex;
-  std::map<Id, int> material_index;
-  // What the shading kernel reads per lane and per light, prepared once per sync.
-  struct ShadeMat {
-    Vec3 diffuse, specular, emissive;
-    float ambient = 0, exponent = 1, opacity = 1, reflection = 0, refraction = 0, ior = 1;
-    bool lit = true;         // not matte
-    bool phong = false;      // has a specular highlight
-    bool alpha_mask = false;
-    bool textured = false;   // some texture of it is loaded
-  };
-  std::vector<ShadeMat> shade_mats;  // by material index
-  struct LightConst {
-    Light::Type type;
-    Vec3 position, direction, to_light, radiance, attenuation;
-    float cos_outer = 0, inv_edge = 0;  // spot: smoothstep from cos_outer over 1 / inv_edge
-    bool hard_edge = true;
-  };
-  std::vector<LightConst> light_consts;
-  Camera camera;
-  bool camera_ok = true;  // the camera's transform passes check_camera's transform bounds; else frames are background
-  bool camera_check = true;  // set_camera_check (tests)
-  Environment env;
-  int32_t width = 0, height = 0;
-  Vec3 origin;  // world position subtracted from everything (camera-relative rebasing)
-  float extent = 1;
-  SceneFeatures features;
-  SyncStats stats;
-  bool committed = false;
-
-  // Throws what the device reported since `before` (EmbreeDevice::errors()): the frame or
-  // sync that saw it fails with Embree's message instead of going on with a broken scene.
-  void check_device(uint64_t before) const {
-    if (shared_device->errors() != before) throw std::runtime_error(shared_device->last_error());
-  }
-
-  explicit Impl(PacketLayout l) : layout(l) {
-    top = rtcNewScene(device);
-    rtcSetSceneFlags(top, RTC_SCENE_FLAG_DYNAMIC);
-    rtcSetSceneBuildQuality(top, RTC_BUILD_QUALITY_LOW);
-    materials.push_back(default_material());
-  }
-  ~Impl() {
-    for (auto& [id, inst] : insts) rtcReleaseGeometry(inst.geom);
-    for (auto& [k, g] : geoms) rtcReleaseScene(g.blas);
-    rtcReleaseScene(top);
-  }
-
-  static Material default_material() {  // XML3D: matte red
-    Material m;
-    m.model = Material::Model::matte;
-    m.diffuse_color = {1, 0, 0};
-    return m;
-  }
-
-  void sync(const Scene& scene, std::vector<std::string>& warnings);
-  void build_geom(const Scene& scene, const GeomKey& key, Geom& g);
-  // How a non-default schedule spreads the packets (render_scheduled); nullptr = work stealing.
-  struct SchedulePlan {
-    ThreadSchedule schedule;
-    const std::vector<Rect>* tiles;
-    int threads;
-  };
-};
-
-// ---------------------------------------------------------------------------------------
 // Alpha masks: an Embree filter function rejects hits where the mask is transparent.
 // ---------------------------------------------------------------------------------------
-// max/min as the vector instructions compute them (the second operand when either is NaN),
-// so that lane loops vectorise: std::fmax is a library call on baseline x86-64.
-inline float fmaxf_(float a, float b) { return a > b ? a : b; }
-inline float fminf_(float a, float b) { return a < b ? a : b; }
-
-// One texture lookup (bilinear, or nearest as bilinear with one weight) in three steps that a
-// loop over lanes sharing a texture can run as three loops: texel_coords and texel_blend are
-// branch-free and vectorise, the loads in between are scalar. sample_texture chains the same
-// steps for the scalar paths (lanes that hit different textures, alpha masks), so a pixel
-// never depends on its packet.
-struct TexelCoords {
-  int i00, i10, i01, i11;  // texel indices of the 2x2 footprint
-  float fx, fy;            // weights of the second column and row
-};
-__attribute__((always_inline)) inline TexelCoords texel_coords(const TexelAddressing& t, float u, float v) {
-  u = u - u == 0.0f ? u : 0.0f;  // NaN and infinities sample the origin
-  v = v - v == 0.0f ? v : 0.0f;
-  const float u_repeat = u - std::floor(u), u_clamp = fminf_(fmaxf_(u, 0.0f), 1.0f);  // [0, 1]
-  const float v_repeat = v - std::floor(v), v_clamp = fminf_(fmaxf_(v, 0.0f), 1.0f);
-  u = t.repeat_s != 0 ? u_repeat : u_clamp;
-  v = t.repeat_t != 0 ? v_repeat : v_clamp;
-  const float x = u * t.fw - t.shift, y = v * t.fh - t.shift;
-  const float xf = std::floor(x), yf = std::floor(y);
-  TexelCoords c;
-  c.fx = (x - xf) * t.filter;
-  c.fy = (y - yf) * t.filter;
-  // Texel columns and rows in [-1, size + 1]; across the edge: the other side (repeat) or
-  // the edge texel (clamp). The second texel of a nearest lookup has weight 0. One of the two
-  // selects' results is 0, so their sum is the wrapped index (nested selects stay scalar).
-  auto wrap = [](int i, int n, int below, int above) {
-    const int inside = i < 0 ? below : i;
-    return (i >= n ? above : 0) + (i >= n ? 0 : inside);
-  };
-  int x0 = int(xf), y0 = int(yf), x1 = x0 + 1, y1 = y0 + 1;
-  x0 = wrap(x0, t.w, t.below_x, t.above_x); x1 = wrap(x1, t.w, t.below_x, t.above_x);
-  y0 = wrap(y0, t.h, t.below_y, t.above_y); y1 = wrap(y1, t.h, t.below_y, t.above_y);
-  c.i00 = y0 * t.w + x0; c.i10 = y0 * t.w + x1;
-  c.i01 = y1 * t.w + x0; c.i11 = y1 * t.w + x1;
-  return c;
-}
-// The bilinear blend of four texels, each given as its two 32-bit halves (RG and BA, 16 bits a
-// channel), so that the vector loop needs no 64-bit arithmetic.
-__attribute__((always_inline)) inline void texel_blend(const uint32_t (&lo)[4], const uint32_t (&hi)[4], float fx, float fy,
-                                                     float out[4]) {
-  const float w00 = (1 - fx) * (1 - fy) * (1 / 65535.0f), w10 = fx * (1 - fy) * (1 / 65535.0f);
-  const float w01 = (1 - fx) * fy * (1 / 65535.0f), w11 = fx * fy * (1 / 65535.0f);
-  auto ch = [&](int k, int c) {
-    const uint32_t half = c < 2 ? lo[k] : hi[k];
-    return float(int((c & 1) ? half >> 16 : half & 0xFFFFu));
-  };
-  for (int c = 0; c < 4; ++c) out[c] = w00 * ch(0, c) + w10 * ch(1, c) + w01 * ch(2, c) + w11 * ch(3, c);
-}
-template <class Tex>
-__attribute__((always_inline)) inline void sample_texture(const Tex& t, float u, float v, float out[4]) {
-  const TexelCoords c = texel_coords(t.addr, u, v);
-  const uint64_t* texels = t.texels.data();
-  const int idx[4] = {c.i00, c.i10, c.i01, c.i11};
-  uint32_t lo[4], hi[4];
-  for (int k = 0; k < 4; ++k) { lo[k] = uint32_t(texels[idx[k]]); hi[k] = uint32_t(texels[idx[k]] >> 32); }
-  texel_blend(lo, hi, c.fx, c.fy, out);
-}
 
 template <bool kOcclusion>
 static void alpha_filter(const RTCFilterFunctionNArguments* args) {
@@ -715,19 +454,20 @@ RayTracer::SyncStats RayTracer::last_sync() const { return impl_->stats; }
 
 template <unsigned F>
 static void render_dispatch(const RayTracer::Impl& impl, const Rect& pixels, const RenderSettings& settings,
-                            TaskResult& out, const RayTracer::Impl::SchedulePlan* plan = nullptr) {
+                            TaskResult& out) {
   switch (impl.layout.size()) {
     case 16:
-      if (cpu_avx512()) return isa_avx512::render_task<16, F>(impl, pixels, settings, out, plan);
-      return isa_sse::render_task<16, F>(impl, pixels, settings, out, plan);
+      if (cpu_avx512()) isa_avx512::render_task<16, F>(impl, pixels, settings, out, isa_avx512::Production{});
+      else isa_sse::render_task<16, F>(impl, pixels, settings, out, isa_sse::Production{});
+      return;
     case 8:
-      if (cpu_avx2()) return isa_avx2::render_task<8, F>(impl, pixels, settings, out, plan);
-      return isa_sse::render_task<8, F>(impl, pixels, settings, out, plan);
+      if (cpu_avx2()) isa_avx2::render_task<8, F>(impl, pixels, settings, out, isa_avx2::Production{});
+      else isa_sse::render_task<8, F>(impl, pixels, settings, out, isa_sse::Production{});
+      return;
     default:
-      return isa_sse::render_task<4, F>(impl, pixels, settings, out, plan);
+      isa_sse::render_task<4, F>(impl, pixels, settings, out, isa_sse::Production{});
   }
 }
-
 
 bool RayTracer::plain_kernel(const RenderSettings& settings) const {
   const SceneFeatures& f = impl_->features;
@@ -737,59 +477,16 @@ bool RayTracer::plain_kernel(const RenderSettings& settings) const {
 // A scene that needs no AO, secondary rays or textures runs the kernel with them compiled out:
 // the general kernel's unused branches cost such scenes about 2% (`tessera bench --plain
 // --compare specialised` measures it), and both kernels give the same bytes.
-static void render_for_scene(const RayTracer& rt, const RayTracer::Impl& impl, const Rect& pixels,
-                             const RenderSettings& settings, TaskResult& out,
-                             const RayTracer::Impl::SchedulePlan* plan = nullptr) {
-  if (rt.plain_kernel(settings)) render_dispatch<kNone>(impl, pixels, settings, out, plan);
-  else render_dispatch<kAll>(impl, pixels, settings, out, plan);
+void raytracer_detail::render_production(const RayTracer::Impl& impl, bool plain, const Rect& pixels,
+                                         const RenderSettings& settings, TaskResult& out) {
+  if (plain) render_dispatch<kNone>(impl, pixels, settings, out);
+  else render_dispatch<kAll>(impl, pixels, settings, out);
 }
 
 void RayTracer::render(const Rect& pixels, const RenderSettings& settings, TaskResult& out) {
   const uint64_t before = impl_->shared_device->errors();
-  render_for_scene(*this, *impl_, pixels, settings, out);
+  render_production(*impl_, plain_kernel(settings), pixels, settings, out);
   impl_->check_device(before);
-}
-
-void RayTracer::render_general(const Rect& pixels, const RenderSettings& settings, TaskResult& out) {
-  render_dispatch<kAll>(*impl_, pixels, settings, out);
-}
-
-void RayTracer::render_specialised(const Rect& pixels, const RenderSettings& settings, TaskResult& out) {
-  if (!plain_kernel(settings))
-    throw std::invalid_argument("the specialised kernel renders only scenes without AO, secondary rays, textures and alpha masks");
-  render_dispatch<kNone>(*impl_, pixels, settings, out);
-}
-
-const char* schedule_name(ThreadSchedule s) {
-  switch (s) {
-    case ThreadSchedule::static_tiles: return "static tiles";
-    case ThreadSchedule::shared_queue: return "shared queue";
-    default: return "work stealing";
-  }
-}
-
-void RayTracer::render_scheduled(const Rect& pixels, const RenderSettings& settings, ThreadSchedule schedule,
-                                 const std::vector<Rect>& tiles, int threads, TaskResult& out) {
-  if (schedule == ThreadSchedule::static_tiles && tiles.empty())
-    throw std::invalid_argument("static_tiles needs at least one tile");
-  if (schedule == ThreadSchedule::shared_queue && threads < 1)
-    throw std::invalid_argument("shared_queue needs at least one thread");
-  const Impl::SchedulePlan plan{schedule, &tiles, threads};
-  render_for_scene(*this, *impl_, pixels, settings, out, &plan);
-}
-
-double RayTracer::trace_primary_only(const Rect& pixels, uint64_t* rays, double* intersect_ms) {
-  // The same instruction set as the shading kernel, so the comparison is like for like.
-  const RayTracer::Impl& impl = *impl_;
-  switch (impl.layout.size()) {
-    case 16:
-      return cpu_avx512() ? isa_avx512::trace_primary<16>(impl, pixels, rays, intersect_ms)
-                          : isa_sse::trace_primary<16>(impl, pixels, rays, intersect_ms);
-    case 8:
-      return cpu_avx2() ? isa_avx2::trace_primary<8>(impl, pixels, rays, intersect_ms)
-                        : isa_sse::trace_primary<8>(impl, pixels, rays, intersect_ms);
-    default: return isa_sse::trace_primary<4>(impl, pixels, rays, intersect_ms);
-  }
 }
 
 }  // namespace tessera

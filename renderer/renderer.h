@@ -19,13 +19,6 @@ struct RenderSettings {
   bool shadows = true;
   bool cost_map = true;       // time each packet with the TSC
   uint32_t frame = 0;         // seeds the AO sample pattern
-  // Benchmarks only: time the ray tracer's primary-ray intersection calls with the TSC (two
-  // more reads per packet) into TaskResult::primary_intersect_ms.
-  bool time_intersections = false;
-  // Benchmarks only: no shading at all. Every hit lane is white and every miss the background,
-  // so a render costs tracing, ray set-up, output and cost map alone (`tessera bench --compare
-  // bare` measures this floor beside the real shading).
-  bool shading_floor = false;
 };
 
 struct RayCounts {
@@ -45,9 +38,6 @@ struct TaskResult {
   double kernel_ms = 0;   // sum of the cost map, in milliseconds of one core
   double rendering_ms = 0;  // wall time of the multi-threaded rendering
   RayCounts rays;
-  // With RenderSettings::time_intersections: the time inside Embree's primary-ray intersection
-  // calls, summed over threads (milliseconds of one core, as kernel_ms); else 0.
-  double primary_intersect_ms = 0;
 };
 
 class Renderer {

@@ -13,6 +13,7 @@
 #include <tuple>
 #include <utility>
 
+#include "app/bench_kernels.h"
 #include "renderer/raytracer.h"
 #include "scene_builders.h"
 
@@ -387,8 +388,8 @@ TEST_CASE("sRGB output codes are the exact curve's, rounded, over the whole rang
   }
 }
 
-// The benchmarks' floor (RenderSettings::shading_floor): no shading, hits white, misses the
-// background, and the task still gets its cost map and ray counts.
+// The benchmarks' floor (bench::render_shading_floor, compiled into the app only): no shading,
+// hits white, misses the background, and the task still gets its cost map and ray counts.
 TEST_CASE("the shading floor renders hits white and misses as background, with a full cost map", "[raytracer][bench]") {
   const int W = 32, H = 16;
   Scene scene;
@@ -400,11 +401,10 @@ TEST_CASE("the shading floor renders hits white and misses as background, with a
   add_object(scene, 100, quad({-10, -10, 0}, {10, 0, 0}, {0, 20, 0}), 1);
   scene.set_camera(look({0, 0, 2}, {0, 0, 0}, 60 * kDeg));
   RayTracer rt;
-  RenderSettings floor = no_ao(1);
-  floor.shading_floor = true;
   TaskResult shaded, bare;
   render_full(rt, scene, no_ao(1), nullptr, &shaded);
-  Image img = render_full(rt, scene, floor, nullptr, &bare);
+  bench::render_shading_floor(rt, {0, 0, W, H}, no_ao(1), bare);
+  const Image& img = bare.image;
   int hits = 0;
   for (int y = 0; y < H; ++y)
     for (int x = 0; x < W; ++x) {
@@ -759,13 +759,12 @@ TEST_CASE("the cost map covers exactly the task's packets and sums to the kernel
     rt.render({0, 0, W, H}, s, r);
     CHECK(r.cost.cost.empty());
     CHECK(r.kernel_ms == 0);
-    CHECK(r.primary_intersect_ms == 0);  // not asked for
   }
 }
 
-// The bench's split of the kernel time (tessera bench --compare bare): the time inside Embree's
-// primary-ray intersections is part of the packets' time, and the bare loop times its own
-// calls the same way.
+// The bench's split of the kernel time (tessera bench --compare bare, bench::
+// render_timing_intersections): the time inside Embree's primary-ray intersections is part of
+// the packets' time, and the bare loop times its own calls the same way.
 TEST_CASE("timed primary intersections are a part of the kernel time, in render() and in the bare loop",
           "[raytracer][cost]") {
   const int W = 61, H = 37;
@@ -774,19 +773,18 @@ TEST_CASE("timed primary intersections are a part of the kernel time, in render(
     RayTracer rt(layout);
     std::vector<std::string> warnings;
     rt.sync(scene, warnings);
-    RenderSettings s = busy_settings();
-    s.time_intersections = true;
     TaskResult timed, plain;
-    rt.render({0, 0, W, H}, s, timed);
+    const double isect_ms = bench::render_timing_intersections(rt, {0, 0, W, H}, busy_settings(), timed);
     rt.render({0, 0, W, H}, busy_settings(), plain);
-    INFO("layout " << layout.w << "x" << layout.h << ": intersections " << timed.primary_intersect_ms << " ms of "
-                   << timed.kernel_ms << " ms");
-    CHECK(timed.primary_intersect_ms > 0);
-    CHECK(timed.primary_intersect_ms < timed.kernel_ms);  // busy_scene shades, shadows and reflects too
-    CHECK(timed.image.rgba == plain.image.rgba);          // timing changes nothing else
+    INFO("layout " << layout.w << "x" << layout.h << ": intersections " << isect_ms << " ms of " << timed.kernel_ms
+                   << " ms");
+    CHECK(isect_ms > 0);
+    CHECK(isect_ms < timed.kernel_ms);            // busy_scene shades, shadows and reflects too
+    CHECK(timed.image.rgba == plain.image.rgba);  // timing changes nothing else
+    CHECK(timed.rays.total() == plain.rays.total());
     uint64_t rays = 0;
     double bare_isect = 0;
-    rt.trace_primary_only({0, 0, W, H}, &rays, &bare_isect);
+    bench::trace_primary_only(rt, {0, 0, W, H}, &rays, &bare_isect);
     CHECK(rays == uint64_t(W * H));
     CHECK(bare_isect > 0);
   }
@@ -977,9 +975,10 @@ TEST_CASE("opacity below 1 is see-through along the straight ray", "[raytracer][
   CHECK(std::abs(px(flat, 14, 10).g - 128) <= 1);
 }
 
-// The thread-level schedules of render_scheduled (tessera threadbench) render exactly what
-// render() renders, time every packet, and refuse static tiles that do not cover the task.
+// The thread-level schedules of bench::render_scheduled (tessera threadbench) render exactly
+// what render() renders, time every packet, and refuse static tiles that do not cover the task.
 TEST_CASE("render_scheduled: every schedule gives render()'s image and a full cost map", "[raytracer][schedule]") {
+  using bench::ThreadSchedule;
   const int W = 61, H = 37;
   Scene scene = busy_scene(W, H);
   RayTracer rt;
@@ -997,9 +996,9 @@ TEST_CASE("render_scheduled: every schedule gives render()'s image and a full co
     struct Case { ThreadSchedule s; int threads; };
     for (Case c : {Case{ThreadSchedule::work_stealing, 0}, Case{ThreadSchedule::static_tiles, 0},
                    Case{ThreadSchedule::shared_queue, 1}, Case{ThreadSchedule::shared_queue, 3}}) {
-      INFO(schedule_name(c.s) << ", " << c.threads << " threads, task " << task.x0 << "," << task.y0);
+      INFO(bench::schedule_name(c.s) << ", " << c.threads << " threads, task " << task.x0 << "," << task.y0);
       TaskResult r;
-      rt.render_scheduled(task, busy_settings(), c.s, tiles, c.threads, r);
+      bench::render_scheduled(rt, task, busy_settings(), c.s, tiles, c.threads, r);
       CHECK(r.pixels == ref.pixels);
       CHECK(r.image.rgba == ref.image.rgba);
       CHECK(r.cost.packets == ref.cost.packets);
@@ -1012,12 +1011,14 @@ TEST_CASE("render_scheduled: every schedule gives render()'s image and a full co
   }
   TaskResult r;
   const Rect full{0, 0, W, H};
-  CHECK_THROWS_AS(rt.render_scheduled(full, busy_settings(), ThreadSchedule::static_tiles,
-                                      {{0, 0, space.x1, space.y1 - 1}}, 0, r), std::invalid_argument);  // a row missing
-  CHECK_THROWS_AS(rt.render_scheduled(full, busy_settings(), ThreadSchedule::static_tiles,
-                                      {{0, 0, space.x1, space.y1}, {0, 0, 1, 1}}, 0, r), std::invalid_argument);  // overlap
-  CHECK_THROWS_AS(rt.render_scheduled(full, busy_settings(), ThreadSchedule::static_tiles, {}, 0, r), std::invalid_argument);
-  CHECK_THROWS_AS(rt.render_scheduled(full, busy_settings(), ThreadSchedule::shared_queue, {}, 0, r), std::invalid_argument);
+  CHECK_THROWS_AS(bench::render_scheduled(rt, full, busy_settings(), ThreadSchedule::static_tiles,
+                                          {{0, 0, space.x1, space.y1 - 1}}, 0, r), std::invalid_argument);  // a row missing
+  CHECK_THROWS_AS(bench::render_scheduled(rt, full, busy_settings(), ThreadSchedule::static_tiles,
+                                          {{0, 0, space.x1, space.y1}, {0, 0, 1, 1}}, 0, r), std::invalid_argument);  // overlap
+  CHECK_THROWS_AS(bench::render_scheduled(rt, full, busy_settings(), ThreadSchedule::static_tiles, {}, 0, r),
+                  std::invalid_argument);
+  CHECK_THROWS_AS(bench::render_scheduled(rt, full, busy_settings(), ThreadSchedule::shared_queue, {}, 0, r),
+                  std::invalid_argument);
 }
 
 TEST_CASE("a scene without AO, secondary rays and textures runs the kernel with them compiled out, with the same bytes",
@@ -1037,8 +1038,8 @@ TEST_CASE("a scene without AO, secondary rays and textures runs the kernel with 
   Image img = render_full(rt, scene, no_ao());
   REQUIRE(rt.plain_kernel(no_ao()));
   TaskResult general, specialised;
-  rt.render_general(all, no_ao(), general);
-  rt.render_specialised(all, no_ao(), specialised);
+  bench::render_general(rt, all, no_ao(), general);
+  bench::render_specialised(rt, all, no_ao(), specialised);
   CHECK(general.image.rgba == img.rgba);
   CHECK(specialised.image.rgba == img.rgba);
   CHECK(general.rays.primary == specialised.rays.primary);
@@ -1049,13 +1050,13 @@ TEST_CASE("a scene without AO, secondary rays and textures runs the kernel with 
   RenderSettings ao = no_ao();
   ao.ao_samples = 4;
   CHECK_FALSE(rt.plain_kernel(ao));
-  CHECK_THROWS_AS(rt.render_specialised(all, ao, specialised), std::invalid_argument);
+  CHECK_THROWS_AS(bench::render_specialised(rt, all, ao, specialised), std::invalid_argument);
   Material mirror = diffuse({0.8f, 0.6f, 0.4f});
   mirror.reflection = 0.5f;
   scene.set_material(1, mirror);
   render_full(rt, scene, no_ao());
   CHECK_FALSE(rt.plain_kernel(no_ao()));
-  CHECK_THROWS_AS(rt.render_specialised(all, no_ao(), specialised), std::invalid_argument);
+  CHECK_THROWS_AS(bench::render_specialised(rt, all, no_ao(), specialised), std::invalid_argument);
 }
 
 TEST_CASE("a spot light lights its cone on a plane: a hard edge at the cutoff, a smoothstep over the soft edge",

@@ -9,6 +9,7 @@
 #include <cstring>
 #include <limits>
 
+#include "app/bench_kernels.h"
 #include "renderer/raytracer.h"
 #include "scene_builders.h"
 
@@ -495,7 +496,7 @@ TEST_CASE("1x1 images, 0-sized images and 0-sized tasks", "[stability][sizes]") 
       rt.render({0, 0, 10, 10}, s, e);
       CHECK(e.image.rgba.empty());
       CHECK(e.cost.cost.empty());
-      CHECK(rt.trace_primary_only({0, 0, 10, 10}, nullptr) == 0);
+      CHECK(bench::trace_primary_only(rt, {0, 0, 10, 10}, nullptr) == 0);
     }
   }
   // An empty scene renders the background.
