@@ -23,6 +23,8 @@ struct frame_state {
   std::vector<NodeInfo> nodes;  // the root subtree's committed list
   std::vector<size_t> used;     // the entries of `nodes` this client renders on
   bool listed = false;          // `nodes` holds a list
+  bool recommit = true;         // the last batch reported a membership change: ask the root again
+  std::shared_ptr<const Scene> sent;  // the scene the root subtree was given last
   // The frame in flight.
   FrameStart cur;
   RenderBatch batch;            // its settings and one task per node
@@ -134,6 +136,7 @@ void finish_frame(self_ptr self, std::vector<TileResult>&& tiles, std::vector<do
 void recover(self_ptr self, BatchReply&& r) {
   auto& st = self->state;
   const std::vector<Rect>& tasks = st.batch.tasks;
+  if (r.changed) st.recommit = true;
   std::vector<size_t> lost;
   for (size_t i = 0; i < r.tiles.size() && i < tasks.size(); ++i)
     if (r.tiles[i].failed() && !tasks[i].empty()) lost.push_back(i);
@@ -188,12 +191,16 @@ void render_batch(self_ptr self) {
     st.cur.meta.tiling_ms = tl.tiling_ms;
     for (size_t k = 0; k < tl.tasks.size() && k < st.used.size(); ++k) st.batch.tasks[st.used[k]] = tl.tasks[k];
     st.cur.meta.nodes = uint32_t(st.used.size());
-    self->send(st.a.subtree, scene_atom::value, st.cur.scene);  // what the root renders this frame
+    if (st.cur.scene.scene != st.sent) {  // the session's scene object (changed in place between frames)
+      st.sent = st.cur.scene.scene;
+      self->send(st.a.subtree, scene_atom::value, st.cur.scene);
+    }
     self->request(st.a.subtree, caf::infinite, render_atom::value, st.batch)
         .then([=](BatchReply& r) { recover(self, std::move(r)); },
               [=](caf::error& e) {
                 auto& st = self->state;
                 BatchReply r;
+                r.changed = true;
                 for (const Rect& t : st.batch.tasks) r.tiles.push_back(failed_tile(task_of(st.batch, t), e, ErrorCode::node_lost));
                 recover(self, std::move(r));
               });
@@ -216,6 +223,7 @@ frame_actor::behavior_type frame_impl(self_ptr self, std::shared_ptr<const NodeS
             .then(
                 [=](std::vector<NodeInfo>& nodes) mutable {
                   on_nodes(self, std::move(nodes));
+                  self->state.recommit = false;
                   rp.deliver(uint32_t(std::max<size_t>(1, self->state.used.size())));
                 },
                 [=](caf::error& e) mutable { rp.deliver(std::move(e)); });
@@ -226,8 +234,14 @@ frame_actor::behavior_type frame_impl(self_ptr self, std::shared_ptr<const NodeS
         st.cur = std::move(fs);
         st.recovered = 0;
         st.done = self->make_response_promise<uint32_t>();
-        // Membership changes (lost nodes, nodes that joined) are committed between frames:
-        // the root answers at once when nothing changed.
+        // Membership changes (lost nodes, nodes that joined) are committed between frames,
+        // after a batch whose reply says the tree changed (a root sets `changed` when a child
+        // failed or joined); otherwise the committed list stands.
+        if (!st.recommit) {
+          render_batch(self);
+          return st.done;
+        }
+        st.recommit = false;
         self->request(st.a.subtree, caf::infinite, nodes_atom::value)
             .then(
                 [=](std::vector<NodeInfo>& nodes) {

@@ -5,14 +5,16 @@
 # median rendering and pipeline ms) and, at the end, the new/old ratio of each figure's median
 # over the pairs. Compare only as ratios within one run: the machine is shared.
 # Usage: bench/node_ab.sh OLD_TESSERA NEW_TESSERA [PAIRS] [SECONDS]   (default 3 pairs, 10 s)
+#        TESSERA_AB_WIDTH=64 TESSERA_AB_HEIGHT=36 bench/node_ab.sh ...   (frames of another size)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 OLD=$1; NEW=$2; PAIRS=${3:-3}; SECS=${4:-10}
+W=${TESSERA_AB_WIDTH:-1280}; H=${TESSERA_AB_HEIGHT:-720}  # a small frame measures the pipeline, not the kernel
 S=../shared/scenes/pavilion
 out=$(mktemp)
 run() {
   local bin=$1 tag=$2 clients=$3 line
-  line=$("$bin" loadtest --scene $S/scene.gltf --camera-loop $S/camera-loop.json --size 1280 720 \
+  line=$("$bin" loadtest --scene $S/scene.gltf --camera-loop $S/camera-loop.json --size "$W" "$H" \
          --clients "$clients" --display jpeg --seconds "$SECS" --warmup 2 2> /dev/null | grep '"summary": true')
   python3 -c 'import json,sys; d=json.loads(sys.argv[3]); print(json.dumps({"build": sys.argv[1], "clients": int(sys.argv[2]), "fps_total": d["fps_total"], "rendering_ms": d["median_rendering_ms"], "pipeline_ms": d["median_pipeline_ms"]}))' \
     "$tag" "$clients" "$line" | tee -a "$out"
