@@ -278,9 +278,10 @@ export class MarkupReader {
         const key = name === 'reflection' ? 'reflectionCoefficient' : name === 'refraction' ? 'refractionCoefficient'
           : name === 'ior' ? 'refractionIndex' : name;
         if (!MATERIAL_PARAMS.has(key)) continue;
-        if (e.type === 'texture') m[key] = e.value[0];
+        // useVertexColor first: it ends in "Color" but is a bool, not an RGB triple.
+        if (key === 'useVertexColor') m[key] = !!first(e, 0);
+        else if (e.type === 'texture') m[key] = e.value[0];
         else if (key.endsWith('Color')) m[key] = vec3(e, m[key]);
-        else if (key === 'useVertexColor') m[key] = !!first(e, 0);
         else m[key] = first(e, m[key]);
       }
     };
