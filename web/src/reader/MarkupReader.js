@@ -301,15 +301,16 @@ export class MarkupReader {
     const overrides = new Map([...data].filter(([k]) => MATERIAL_PARAMS.has(k)));
     const params = this.materialParams(materialRef, el);
     const mat = this.buildMaterial(params, overrides, el);
-    this.addGeometry(el, el, 0, {
+    this.addGeometry(el, el, this.ids.of(el, 0), {
       positions: data.get('position'), normals: data.get('normal'), texcoords: data.get('texcoord'),
       colors: data.get('color'), indices: data.get('index'), vertexCount: data.get('vertexCount'),
       type: type === 'derived' ? first(data.get('type'), 'triangles') : type,
     }, world, mat, visible);
   }
 
-  // Adds one drawable; `pick` is the element events and picking report.
-  addGeometry(el, pick, subKey, g, world, material, visible) {
+  // Adds one drawable with the given id; `el` is the element errors name, `pick` the one
+  // events and picking report.
+  addGeometry(el, pick, id, g, world, material, visible) {
     const what = `<${localName(el)}${el.id ? ` id="${el.id}"` : ''}>`;
     const val = (e) => (e && e.value !== undefined ? e.value : e);
     let positions = val(g.positions);
@@ -348,7 +349,7 @@ export class MarkupReader {
     }
     const s = this.scene;
     const mesh = {
-      id: this.ids.of(el, subKey),
+      id,
       element: pick,
       positions: s.addBuffer(positions, 3, this.ids),
       normals: normals ? s.addBuffer(normals, 3, this.ids) : 0,
@@ -421,7 +422,7 @@ export class MarkupReader {
         else if (p.material) mat = { ...MATERIAL_DEFAULTS, ...p.material };
         else mat = this.buildMaterial(fallback, null, el);
         const m = M.multiply(world, p.matrix);
-        this.addGeometry(el, el, `gltf:${i}`, { ...p, type: 'triangles' }, m, mat, visible);
+        this.addGeometry(el, el, this.ids.of(el, `gltf:${i}`), { ...p, type: 'triangles' }, m, mat, visible);
       });
       g.lights.forEach((l, i) => this.addLight(el, `gltf:${i}`, l.type, M.multiply(world, l.matrix), {
         color: l.color, attenuation: l.attenuation, cutoff: l.cutoff, softness: l.softness,
@@ -448,7 +449,7 @@ export class MarkupReader {
       for (const ch of a.children) {
         const t = localName(ch);
         if (t === 'assetdata' && ch.getAttribute('name')) named.set(ch.getAttribute('name'), ch);
-        else if (t === 'assetmesh') meshes.push(ch);
+        else if (t === 'assetmesh' && !meshes.includes(ch)) meshes.push(ch);
         else if (t === 'asset') gather(ch, depth + 1);
       }
     };
@@ -465,7 +466,7 @@ export class MarkupReader {
       for (const [k, v] of this.collect(el)) out.set(k, v);
       return out;
     };
-    meshes.forEach((am, i) => {
+    meshes.forEach((am) => {
       const name = am.getAttribute('name');
       const o = name && overrides.get(name);
       const style = this.style(am);
@@ -477,7 +478,8 @@ export class MarkupReader {
       const matRef = (o && o.getAttribute('material')) || am.getAttribute('material');
       const params = matRef ? this.materialParams(matRef, am) : fallback;
       const mat = this.buildMaterial(params, new Map([...data].filter(([k]) => MATERIAL_PARAMS.has(k))), am);
-      this.addGeometry(am, model, `asset:${i}`, {
+      // Keyed by model and asset mesh: several models may instantiate the same asset.
+      this.addGeometry(am, model, this.ids.of(model, am), {
         positions: data.get('position'), normals: data.get('normal'), texcoords: data.get('texcoord'),
         colors: data.get('color'), indices: data.get('index'), vertexCount: data.get('vertexCount'),
         type: (am.getAttribute('type') || 'triangles').trim(),
@@ -549,7 +551,8 @@ export class MarkupReader {
   }
 }
 
-// Stable numeric ids (from 1) for elements and their sub-parts, and for typed arrays.
+// Stable numeric ids (from 1) for elements and their sub-parts, and for typed arrays. A sub-part
+// key is a number, a string or another element (a model's instance of an asset mesh).
 export class IdRegistry {
   constructor() {
     this.next = 1;

@@ -26,3 +26,25 @@ test('useVertexColor true takes effect (not read as an RGB triple because it end
   assert.equal(scene.materials.get(b.material).useVertexColor, false, 'a mesh-level override turns it off');
   assert.deepEqual(scene.errors, []);
 });
+
+test('several models using the same asset each render (meshes keyed by model and asset mesh)', () => {
+  const doc = page(`<xml3d><defs>
+    <asset id="a"><assetdata name="geo">${TRI}</assetdata>
+      <assetmesh name="one" includes="geo"></assetmesh>
+      <assetmesh name="two" includes="geo" style="transform: translateY(5px)"></assetmesh></asset></defs>
+    <model id="m1" src="#a" style="transform: translateX(-2px)"></model>
+    <model id="m2" src="#a" style="transform: translateX(2px)"></model>
+    <group style="transform: translateZ(-3px)"><model id="m3" src="#a"></model></group></xml3d>`);
+  const reader = new MarkupReader();
+  const scene = reader.read(doc.querySelector('xml3d'));
+  const ms = [...scene.meshes.values()];
+  assert.equal(ms.length, 6, 'three models x two asset meshes');
+  assert.deepEqual(ms.map((m) => m.element.id), ['m1', 'm1', 'm2', 'm2', 'm3', 'm3']);
+  assert.deepEqual(ms.map((m) => [m.transform[12], m.transform[13], m.transform[14]]),
+    [[-2, 0, 0], [-2, 5, 0], [2, 0, 0], [2, 5, 0], [0, 0, -3], [0, 5, -3]]);
+  assert.equal(new Set(ms.map((m) => m.positions)).size, 1, 'the asset data is shared, not copied');
+  // Ids are stable across re-reads.
+  const again = reader.read(doc.querySelector('xml3d'));
+  assert.deepEqual([...again.meshes.keys()], [...scene.meshes.keys()]);
+  assert.deepEqual(scene.errors, []);
+});
