@@ -144,22 +144,37 @@ export class MarkupReader {
     return this.filter(el, nested);
   }
 
+  // filter="keep(a, b)" / "remove(a, b)" / "rename({new: old, ...})" / "keep({new: old, ...})"
+  // (XML3D spec, "Filters"): keep with a mapping keeps only the mapped entries, under their new
+  // names; one entry may be given several new names.
   filter(el, map) {
     const f = el.getAttribute('filter');
     if (!f || localName(el) === 'texture') return map;
-    const m = /^\s*(keep|remove|rename)\s*\((.*)\)\s*$/.exec(f);
+    const m = /^\s*(keep|remove|rename)\s*\((.*)\)\s*$/s.exec(f);
     if (!m) { this.error(el, `bad filter "${f}"`); return map; }
-    if (m[1] === 'rename') {
-      const out = new Map(map);
-      const body = m[2].trim().replace(/^\{|\}$/g, '');
-      for (const pair of body.split(',')) {
-        const [to, from] = pair.split(':').map((s) => s && s.trim().replace(/^['"]|['"]$/g, ''));
-        if (to && from && map.has(from)) { out.delete(from); out.set(to, map.get(from)); }
+    const [, op, arg] = m;
+    const unquote = (s) => s.trim().replace(/^['"]|['"]$/g, '');
+    const body = arg.trim();
+    const braced = body.startsWith('{');
+    if (braced || op === 'rename') {  // a mapping {new: old, ...} (rename also takes it without braces)
+      if ((braced && !body.endsWith('}')) || op === 'remove') { this.error(el, `bad filter "${f}"`); return map; }
+      const pairs = [];
+      for (const pair of (braced ? body.slice(1, -1) : body).split(',')) {
+        if (!pair.trim()) continue;
+        const parts = pair.split(':').map(unquote);
+        if (parts.length !== 2 || !parts[0] || !parts[1]) { this.error(el, `bad filter "${f}"`); return map; }
+        pairs.push(parts);
       }
+      const out = new Map();
+      if (op === 'rename') {
+        const renamed = new Set(pairs.map(([, from]) => from));
+        for (const [k, v] of map) if (!renamed.has(k)) out.set(k, v);
+      }
+      for (const [to, from] of pairs) if (map.has(from)) out.set(to, map.get(from));
       return out;
     }
-    const names = new Set(m[2].split(/[\s,]+/).filter((s) => s));
-    return new Map([...map].filter(([k]) => (m[1] === 'keep') === names.has(k)));
+    const names = new Set(body.split(/[\s,]+/).map(unquote).filter((s) => s));
+    return new Map([...map].filter(([k]) => (op === 'keep') === names.has(k)));
   }
 
   readTexture(el) {

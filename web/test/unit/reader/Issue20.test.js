@@ -48,3 +48,30 @@ test('several models using the same asset each render (meshes keyed by model and
   assert.deepEqual([...again.meshes.keys()], [...scene.meshes.keys()]);
   assert.deepEqual(scene.errors, []);
 });
+
+test('filter keep({newName: oldName}) keeps only the mapped entries, renamed', () => {
+  const { scene } = read(`<xml3d><defs>
+    <data id="raw"><float3 name="pos">0 0 0 1 0 0 0 1 0 1 1 0</float3><int name="idx">0 1 2 2 1 3</int>
+      <float3 name="normal">0 0 1 0 0 1 0 0 1 0 0 1</float3></data></defs>
+    <mesh id="k"><data filter="keep({position: pos, index: idx})" src="#raw"></data></mesh>
+    <mesh id="r"><data filter="rename( {position : pos, index : idx} )" src="#raw"></data></mesh>
+    <mesh id="l"><data filter="keep(pos, idx)" src="#raw"></data>${TRI}</mesh></xml3d>`);
+  const [k, r, l] = [...scene.meshes.values()];
+  assert.deepEqual([...scene.buffers.get(k.indices).data], [0, 1, 2, 2, 1, 3], 'the renamed index is kept');
+  assert.deepEqual([...scene.buffers.get(k.positions).data].slice(9), [1, 1, 0]);
+  assert.equal(k.normals, 0, 'keep drops what the mapping does not name');
+  assert.ok(r.normals && r.indices, 'rename keeps the other entries');
+  assert.equal(l.indices, 0, 'keep(pos, idx) keeps names, renames nothing');
+  assert.deepEqual(scene.errors, []);
+});
+
+test('filter: one entry under several names, and a malformed mapping is reported', () => {
+  const { scene } = read(`<xml3d>
+    <mesh id="twice"><data filter="keep({position: p, normal: p})"><float3 name="p">0 0 1 1 0 1 0 1 1</float3>
+      <float name="junk">1</float></data></mesh>
+    <mesh id="bad"><data filter="keep({position p})">${TRI}</data></mesh></xml3d>`);
+  const [twice, bad] = [...scene.meshes.values()];
+  assert.equal(twice.normals, twice.positions, 'position and normal are the same entry');
+  assert.ok(bad.positions, 'a bad filter leaves the data unfiltered');
+  assert.deepEqual(scene.errors.map((e) => e.message), ['bad filter "keep({position p})"']);
+});
