@@ -25,7 +25,7 @@ function inlineStyle(el) {
   for (const decl of s.split(';')) {
     const i = decl.indexOf(':');
     if (i < 0) continue;
-    out[decl.slice(0, i).trim().toLowerCase()] = decl.slice(i + 1).trim();
+    out[decl.slice(0, i).trim().toLowerCase()] = decl.slice(i + 1).replace(/!\s*important\s*$/i, '').trim();
   }
   return out;
 }
@@ -63,16 +63,20 @@ export class MarkupReader {
   }
 
   // ---- style --------------------------------------------------------------------------
+  // The computed style exists only for elements of the rendered page. In an external XML
+  // document (file.xml#asset) getComputedStyle answers empty strings, so there, and for any
+  // property the computed style leaves empty, the inline style attribute is used.
   style(el) {
     const inline = inlineStyle(el);
-    if (this.computedStyle) {
+    const pageDoc = this.scene && this.scene.xml3d && this.scene.xml3d.ownerDocument;
+    if (this.computedStyle && (!pageDoc || el.ownerDocument === pageDoc)) {
       try {
         const cs = this.computedStyle(el);
         return {
-          display: cs.display, visibility: cs.visibility,
+          display: cs.display || inline.display, visibility: cs.visibility || inline.visibility,
           transform: cs.transform && cs.transform !== 'none' ? cs.transform : inline.transform,
           material: inline.material,
-          computed: true,
+          computed: !!cs.visibility,  // computed visibility already holds what is inherited
         };
       } catch { /* fall through */ }
     }

@@ -4,6 +4,7 @@ import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import { page } from '../dom.js';
 import { MarkupReader } from '../../../src/reader/MarkupReader.js';
+import { Resources } from '../../../src/reader/Resources.js';
 
 const read = (body, opts = {}) => {
   const doc = page(body);
@@ -74,4 +75,44 @@ test('filter: one entry under several names, and a malformed mapping is reported
   assert.equal(twice.normals, twice.positions, 'position and normal are the same entry');
   assert.ok(bad.positions, 'a bad filter leaves the data unfiltered');
   assert.deepEqual(scene.errors.map((e) => e.message), ['bad filter "keep({position p})"']);
+});
+
+// As in MarkupReader.test.js: files served from a map, XML parsed by linkedom.
+function fakeFetch(files) {
+  return async (url) => {
+    const body = files[url];
+    if (body === undefined) return { ok: false, status: 404 };
+    return { ok: true, status: 200, text: async () => body, json: async () => JSON.parse(body) };
+  };
+}
+
+test('display:none on an asset mesh in an external XML document hides it', async () => {
+  const { DOMParser } = await import('linkedom');
+  const files = {
+    'http://localhost/res/assets.xml': `<xml3d xmlns="http://www.xml3d.org/2009/xml3d">
+      <asset id="a"><assetdata name="geo"><float3 name="position">0 0 0 1 0 0 0 1 0</float3></assetdata>
+        <assetmesh id="shown" name="shown" includes="geo"></assetmesh>
+        <assetmesh id="gone" name="gone" includes="geo" style="display:none"></assetmesh>
+        <assetmesh id="gone2" name="gone2" includes="geo" style="transform: translateX(1px); display: none !important"></assetmesh>
+        <assetmesh id="moved" name="moved" includes="geo" style="transform: translateX(4px)"></assetmesh></asset></xml3d>`,
+  };
+  let loaded;
+  const done = new Promise((r) => (loaded = r));
+  const resources = new Resources({ fetch: fakeFetch(files), onLoad: () => loaded(),
+    parseXml: (t) => new DOMParser().parseFromString(t, 'text/xml') });
+  const doc = page(`<xml3d><model id="m" src="res/assets.xml#a"></model></xml3d>`);
+  // What a browser's getComputedStyle answers: values for the page's elements, empty strings
+  // for elements of a document without a browsing context (the parsed XML file).
+  const computedStyle = (el) => (el.ownerDocument === doc
+    ? { display: 'inline', visibility: 'visible', transform: 'none' }
+    : { display: '', visibility: '', transform: '' });
+  const reader = new MarkupReader({ resources, computedStyle });
+  reader.read(doc.querySelector('xml3d'));
+  await done;
+  const scene = reader.read(doc.querySelector('xml3d'));
+  assert.deepEqual(scene.errors, []);
+  const ms = [...scene.meshes.values()];
+  assert.equal(ms.length, 2, 'the two display:none asset meshes are not drawn');
+  near(ms[0].transform[12], 0);
+  near(ms[1].transform[12], 4);  // the inline CSS transform still applies
 });
