@@ -527,14 +527,15 @@ export class MarkupReader {
   }
 
   addLight(el, sub, type, world, p) {
+    const cutoff = Math.min(Math.max(p.cutoff, 1e-4), Math.PI);
     const light = {
       id: this.ids.of(el, `light:${sub}`), element: el, type,
       color: p.color, intensity: 1,
       position: M.transformPoint(world, p.position),
       direction: M.normalize(M.transformDirection(world, p.direction)),
       attenuation: p.attenuation,
-      cutoff: Math.min(Math.max(p.cutoff, 1e-4), Math.PI),
-      softness: Math.min(Math.max(p.softness, 0), 1),
+      cutoff,
+      softness: spotSoftness(cutoff, p.softness),
       on: p.on,
     };
     this.scene.lights.set(light.id, light);
@@ -568,6 +569,19 @@ export class MarkupReader {
     if (!(cam.fovY > 0 && cam.fovY < Math.PI)) { this.error(cam.element, `fovVertical ${cam.fovY} outside (0, pi)`); cam.fovY = Math.PI / 4; }
     this.scene.camera = cam;
   }
+}
+
+// A spot light's softness as the scene description holds it (0..1: 0 = hard edge, 1 = fading
+// over the whole cone). XML3D's spot light is full inside the angle cutoff·(1 − softness) and
+// fades out to cutoff, and xml3d.js takes the cosine of that angle without clamping softness,
+// so softness 1.5 gives the inner angle cos(−cutoff/2) = cos(cutoff/2), i.e. softness 0.5, and
+// an inner angle whose cosine is at or below cos(cutoff) gives a hard edge. This maps any value
+// to the softness in 0..1 with the same inner cosine; 0..1 is kept as given.
+export function spotSoftness(cutoff, softness) {
+  if (!Number.isFinite(softness)) return 0;
+  if (softness >= 0 && softness <= 1) return softness;
+  const inner = Math.acos(Math.min(1, Math.max(-1, Math.cos(cutoff * (1 - softness)))));  // 0..pi
+  return inner < cutoff ? 1 - inner / cutoff : 0;
 }
 
 // Stable numeric ids (from 1) for elements and their sub-parts, and for typed arrays. A sub-part

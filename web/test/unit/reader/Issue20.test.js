@@ -116,3 +116,19 @@ test('display:none on an asset mesh in an external XML document hides it', async
   near(ms[0].transform[12], 0);
   near(ms[1].transform[12], 4);  // the inline CSS transform still applies
 });
+
+test('spot softness above 1 is not clamped: the inner cone angle cutoff*(1 - softness) is honoured', () => {
+  const spot = (cutoff, softness) => `<light model="urn:xml3d:light:spot"><float name="cutoffAngle">${cutoff}</float>
+    <float name="softness">${softness}</float></light>`;
+  const { scene } = read(`<xml3d>${spot(0.8, 1.5)}${spot(0.8, 2)}${spot(0.8, 1.25)}${spot(0.5, 3)}
+    ${spot(Math.PI / 4, 9)}${spot(0.8, 0.3)}${spot(0.8, -0.5)}</xml3d>`);
+  const soft = [...scene.lights.values()].map((l) => l.softness);
+  near(soft[0], 0.5);   // cos(0.8 * -0.5) = cos(0.4): inner angle 0.4 of 0.8 (clamped, it was 1)
+  near(soft[1], 0);     // cos(-0.8) = cos(cutoff): hard edge
+  near(soft[2], 0.75);  // inner angle 0.2
+  near(soft[3], 0);     // inner angle 1 > cutoff 0.5: hard edge
+  near(soft[4], 1);     // cos(-2 pi) = 1: fades over the whole cone
+  near(soft[5], 0.3);   // 0..1 as given
+  near(soft[6], 0);     // inner angle 1.2 > cutoff: hard edge
+  assert.deepEqual(scene.errors, []);
+});
