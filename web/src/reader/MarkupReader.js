@@ -45,6 +45,8 @@ export class MarkupReader {
     this.scene = scene;
     this.views = [];
     this.warned = new Set();
+    for (const df of xml3d.querySelectorAll('dataflow'))
+      this.warn(df, `${this.describe(df)} is ignored: Xflow (dataflow, compute) is not supported`);
     this.walk(xml3d, M.identity(), null, true, 'visible');
     this.chooseView(xml3d);
     // Tessera extension: ambient="r g b" (a uniform sky on diffuse surfaces; XML3D has none).
@@ -60,6 +62,21 @@ export class MarkupReader {
     if (this.warned.has(key)) return;
     this.warned.add(key);
     this.scene.errors.push({ element, message });
+  }
+
+  // Markup that is valid XML3D but not supported (Xflow): reported once, not an error.
+  warn(element, message) {
+    if (this.warned.has(message)) return;
+    this.warned.add(message);
+    this.scene.warnings.push({ element, message });
+  }
+
+  // <tag id="…"> (or name="…"), and the document's URL when it is not the page's.
+  describe(el) {
+    const id = el.getAttribute('id'), name = el.getAttribute('name');
+    const attr = id ? ` id="${id}"` : name ? ` name="${name}"` : '';
+    const url = this.resources && this.resources.urlOfDocument && this.resources.urlOfDocument(el.ownerDocument);
+    return `<${localName(el)}${attr}>${url ? ` in ${url}` : ''}`;
   }
 
   // ---- style --------------------------------------------------------------------------
@@ -120,6 +137,12 @@ export class MarkupReader {
   collect(el, seen = new Set()) {
     if (seen.has(el)) { this.error(el, `cyclic data reference at <${localName(el)} id="${el.id}">`); return new Map(); }
     seen.add(el);
+    const compute = el.getAttribute('compute');
+    if (compute) {
+      const c = compute.trim().replace(/\s+/g, ' ');
+      this.warn(el, `${this.describe(el)} compute="${c.length > 60 ? c.slice(0, 57) + '...' : c}" is ignored: ` +
+        'Xflow is not supported, the element\'s data is used without it');
+    }
     const nested = new Map(), own = new Map();
     const src = el.getAttribute('src');
     if (src && localName(el) !== 'model') {

@@ -51,6 +51,7 @@ export class SceneDescription {
     this.camera = null;
     this.environment = { ambient: [0, 0, 0], background: [0, 0, 0], exposure: 1, linear: false };
     this.errors = [];
+    this.warnings = [];  // valid markup that is not supported (Xflow): {element, message}
     this.pending = 0;  // external resources still loading
   }
 

@@ -119,12 +119,25 @@ export class XML3DHandler {
     this.setStatus('errors', n ? `⚠ ${n} problem${n > 1 ? 's' : ''} in the scene: ${errors.slice(0, 3).map((e) => e.message).join('; ')}${n > 3 ? ' …' : ''}` : null, true);
   }
 
+  // Valid XML3D that is not supported (Xflow): one console warning each, naming the element;
+  // no status line, as nothing in the markup is wrong.
+  reportWarnings(warnings) {
+    for (const w of warnings) {
+      const key = `warning:${w.message}`;
+      if (this.shownErrors.has(key)) continue;
+      this.shownErrors.add(key);
+      console.warn(`XML3D: ${w.message}`, w.element || '');
+    }
+    this.warnings = warnings.map((w) => w.message);
+  }
+
   frame() {
     const t0 = performance.now();
     const scene = this.reader.read(this.xml3d);
     this.scene = scene;
     this.installElementApi(scene);
     this.reportErrors(scene.errors);
+    this.reportWarnings(scene.warnings);
     this.setStatus('loading', scene.pending ? `loading ${scene.pending} resource${scene.pending > 1 ? 's' : ''}…` : null);
     this.backend.update(scene);
     const detail = this.backend.draw(scene, this.width, this.height);

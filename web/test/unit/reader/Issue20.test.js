@@ -132,3 +132,37 @@ test('spot softness above 1 is not clamped: the inner cone angle cutoff*(1 - sof
   near(soft[6], 0);     // inner angle 1.2 > cutoff: hard edge
   assert.deepEqual(scene.errors, []);
 });
+
+test('compute attributes and <dataflow> elements give one warning each that names the element', () => {
+  const { scene } = read(`<xml3d><defs>
+      <dataflow id="morph" out="position"><float3 name="a" param="true"></float3>
+        <compute>position = xflow.add(a, a);</compute></dataflow>
+      <data id="moved" compute="position = xflow.add(position, offset)">${TRI}<float3 name="offset">0 0 1</float3></data></defs>
+    <mesh id="m1" src="#moved"></mesh><mesh id="m2" src="#moved"></mesh>
+    <mesh compute="position = dataflow['#morph']">${TRI}</mesh></xml3d>`);
+  assert.deepEqual(scene.warnings.map((w) => w.message), [
+    '<dataflow id="morph"> is ignored: Xflow (dataflow, compute) is not supported',
+    '<data id="moved"> compute="position = xflow.add(position, offset)" is ignored: Xflow is not supported, the element\'s data is used without it',
+    '<mesh> compute="position = dataflow[\'#morph\']" is ignored: Xflow is not supported, the element\'s data is used without it',
+  ]);
+  assert.equal(scene.warnings[1].element.id, 'moved');
+  assert.equal(scene.meshes.size, 3, 'the data is still used without the computation');
+  assert.deepEqual(scene.errors, [], 'valid markup: no error, no red status line');
+});
+
+test('the page logs each unsupported-markup warning once with console.warn, across re-reads', async () => {
+  const { XML3DHandler } = await import('../../../src/ui/XML3DHandler.js');
+  const doc = page(`<xml3d><mesh id="m" compute="position = xflow.morph(position, d, w)">${TRI}</mesh></xml3d>`);
+  const reader = new MarkupReader();
+  const handler = { shownErrors: new Set() };
+  const logged = [];
+  const warn = console.warn;
+  console.warn = (...args) => logged.push(args);
+  try {
+    for (let i = 0; i < 3; i++) XML3DHandler.prototype.reportWarnings.call(handler, reader.read(doc.querySelector('xml3d')).warnings);
+  } finally { console.warn = warn; }
+  assert.equal(logged.length, 1);
+  assert.match(logged[0][0], /^XML3D: <mesh id="m"> compute="position = xflow\.morph\(position, d, w\)" is ignored/);
+  assert.equal(logged[0][1].id, 'm', 'the element itself is logged too');
+  assert.equal(handler.warnings.length, 1);
+});
