@@ -17,6 +17,8 @@ export function startStaticServer({ port = 0, root = WEB_ROOT, scenes = path.res
     let p = decodeURIComponent(new URL(req.url, 'http://x').pathname);
     let base = root;
     if (p.startsWith('/scenes/')) { base = scenes; p = p.slice('/scenes'.length); }
+    // As net/server.cpp: "/" is web/index.html, else web/demo/index.html.
+    else if (p === '/' && !fs.existsSync(path.join(root, 'index.html'))) p = '/demo/index.html';
     const file = path.join(base, path.normalize(p).replace(/^(\.\.[/\\])+/, ''));
     if (!file.startsWith(base)) { res.writeHead(403).end(); return; }
     fs.stat(file, (err, st) => {

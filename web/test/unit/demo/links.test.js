@@ -56,3 +56,17 @@ test('the root page is the demo index and links every demo page', () => {
   const ls = links(path.join(web, 'demo', 'index.html')).map((l) => new URL(l, `${ORIGIN}/`).pathname);
   for (const f of pages.filter((p) => p !== 'index.html')) assert.ok(ls.includes(`/demo/${f}`), `${f} is linked`);
 });
+
+test('over HTTP (tools/static-server.js, same "/" rule as the node): the root page and its links answer 200', async () => {
+  const { startStaticServer } = await import('../../../tools/static-server.js');
+  const server = await startStaticServer();
+  const base = `http://127.0.0.1:${server.address().port}`;
+  try {
+    const root = await fetch(`${base}/`);
+    assert.equal(root.status, 200);
+    const { document } = parseHTML(await root.text());
+    const urls = [...document.querySelectorAll('a[href], link[href]')].map((a) => new URL(a.getAttribute('href'), `${base}/`).href);
+    assert.ok(urls.length >= 5);
+    for (const u of urls) assert.equal((await fetch(u)).status, 200, u);
+  } finally { server.close(); }
+});
