@@ -121,7 +121,7 @@ export class XML3DHandler {
 
   // Valid XML3D that is not supported (Xflow): one console warning each, naming the element;
   // no status line, as nothing in the markup is wrong.
-  reportWarnings(warnings) {
+  reportWarnings(warnings = []) {
     for (const w of warnings) {
       const key = `warning:${w.message}`;
       if (this.shownErrors.has(key)) continue;
