@@ -72,6 +72,11 @@ void start_frame(self_ptr self, uint32_t client_frame) {
   m.dropped = st.dropped;  // for the display channel's Stats record
   m.scene_bytes = scene_bytes(*st.scene);
   m.triangles = st.scene->triangle_count();
+  // Settings that change nothing on this scene (AO without a sky, AO on the rasterizer) are
+  // said once, as a notice: the frame renders as asked.
+  for (std::string& why : ineffective_settings(*st.scene, int(st.render.ao_samples), st.hs.renderer == RendererKind::rasterizer))
+    if (st.noted.insert(why).second) fail(self, Error{ErrorCode::no_effect, std::move(why), kNoRecord});
+  if (st.closed) return;
   fs.scene = SceneSnapshot{st.scene};  // read-only until the frame actor answers: updates are cached meanwhile
   fs.ao_samples = int32_t(st.render.ao_samples);
   fs.max_depth = int32_t(st.render.max_depth);

@@ -4,6 +4,8 @@
 // decoding, applying or caching updates). Private to those two files.
 #include <memory>
 #include <optional>
+#include <set>
+#include <string>
 #include <vector>
 
 #include <caf/all.hpp>
@@ -44,6 +46,7 @@ struct session_state {
   std::optional<uint32_t> pending;   // the latest render request that arrived while rendering
   uint32_t seq = 0, dropped = 0, errors = 0;
   std::vector<uint8_t> forward;      // accepted scene records not yet sent down the tree
+  std::set<std::string> noted;       // the no_effect notices sent (each goes to the client once)
   static inline const char* name = "tessera.session";
 };
 

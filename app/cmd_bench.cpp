@@ -115,6 +115,8 @@ int run(const std::vector<std::string>& argv) {
   RenderSettings settings = read_settings(args);
   std::string kind = read_renderer_kind(args);
   args.finish();
+  for (auto& w : ineffective_settings(setup.loaded.scene, settings.ao_samples, kind == "rasterizer"))
+    std::fprintf(stderr, "warning: %s\n", w.c_str());
   if (kind == "rasterizer") {
     if (!compare.empty() && compare != "bare")
       throw std::invalid_argument("--compare " + compare + " is for the ray tracer; the rasterizer takes only --compare bare");

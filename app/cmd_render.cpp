@@ -36,6 +36,8 @@ int run(const std::vector<std::string>& argv) {
   renderer->sync(setup.loaded.scene, warnings);
   for (auto& w : warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
   const Scene& scene = setup.loaded.scene;
+  for (auto& w : ineffective_settings(scene, settings.ao_samples, kind == "rasterizer"))
+    std::fprintf(stderr, "warning: %s\n", w.c_str());
   TaskResult res;
   renderer->render({0, 0, scene.width(), scene.height()}, settings, res);
   if (res.image.width > 0 && res.image.height > 0) write_png(out_path, res.image);

@@ -38,6 +38,7 @@ const char* to_string(ErrorCode c) {
     case ErrorCode::bad_handshake: return "bad_handshake";
     case ErrorCode::not_scene_update: return "not_scene_update";
     case ErrorCode::internal: return "internal";
+    case ErrorCode::no_effect: return "no_effect";
     case ErrorCode::bad_task: return "bad_task";
     case ErrorCode::render_failed: return "render_failed";
     case ErrorCode::no_scene: return "no_scene";

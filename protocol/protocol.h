@@ -51,6 +51,7 @@ enum class ErrorCode : uint16_t {
   bad_handshake = 20,    // handshake missing, repeated or not alone in its message (fatal)
   not_scene_update = 21, // apply() given a record that is not a scene update
   internal = 22,         // server-side failure (server -> client only)
+  no_effect = 23,        // a setting changes nothing on this scene (server -> client, once; a notice, not fatal)
   // A node's own failures (64 and up): its actors' and its cluster's errors, from the renderer's
   // reply to a parent's view of its children (actors/errors.h). They never go on the wire to a
   // client: to_reply sends them as `internal`, with their name in the message.
@@ -62,7 +63,7 @@ enum class ErrorCode : uint16_t {
   node_lost = 69,        // a node or its link went down, or it did not answer in time
   no_node = 70,          // no node could render the task
 };
-constexpr uint16_t kMaxErrorCode = 22;  // the largest code on the wire
+constexpr uint16_t kMaxErrorCode = 23;  // the largest code on the wire
 
 const char* to_string(ErrorCode c);
 // Whether the session ends after this error (the server closes both channels).

@@ -55,4 +55,19 @@ class Renderer {
   virtual PacketLayout packet_layout() const = 0;
 };
 
+// The settings that change nothing on `scene`, each as one sentence for the user (none: empty).
+// Ambient occlusion only occludes the sky's ambient light (Environment::ambient), so AO rays on
+// a scene without one are never traced; the rasterizer has no AO at all.
+inline std::vector<std::string> ineffective_settings(const Scene& scene, int ao_samples, bool rasterizer) {
+  std::vector<std::string> out;
+  if (ao_samples <= 0) return out;
+  const Vec3& a = scene.environment().ambient;
+  if (rasterizer)
+    out.push_back("ao-samples " + std::to_string(ao_samples) + " has no effect: the rasterizer has no ambient occlusion");
+  else if (!(a.x > 0 || a.y > 0 || a.z > 0))
+    out.push_back("ao-samples " + std::to_string(ao_samples) +
+                  " has no effect: the scene has no sky or ambient light for ambient occlusion to occlude");
+  return out;
+}
+
 }  // namespace tessera

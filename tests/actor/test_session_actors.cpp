@@ -259,6 +259,28 @@ CAF_TEST(malformed and inconsistent messages get errors and the session keeps re
   CAF_CHECK_EQUAL(frames_sent(), std::vector<uint32_t>{5});
 }
 
+CAF_TEST(a setting that changes nothing on the scene is said once as a notice and the frames render as asked) {
+  // tiny_scene has no sky or ambient light: its AO rays would occlude nothing.
+  client({protocol::Settings{4, 2}, SetCamera{camera_at(3)}, RenderRequest{1}});
+  run();
+  client({RenderRequest{2}});
+  run();
+  CAF_CHECK_EQUAL(frames_sent(), (std::vector<uint32_t>{1, 2}));
+  auto notices = sink->all<ErrorReply>();
+  CAF_REQUIRE_EQUAL(notices.size(), 1u);
+  CAF_CHECK_EQUAL(notices[0].code, ErrorCode::no_effect);
+  CAF_CHECK(!notices[0].fatal);
+  CAF_CHECK(notices[0].message.find("ao-samples 4 has no effect") != std::string::npos);
+  CAF_CHECK_EQUAL(sink->closes, 0);
+  // With a sky the same setting matters: nothing more is said.
+  SetEnvironment env;
+  env.environment.ambient = {0.5f, 0.5f, 0.5f};
+  client({env, RenderRequest{3}});
+  run();
+  CAF_CHECK_EQUAL(sink->all<ErrorReply>().size(), 1u);
+  CAF_CHECK_EQUAL(frames_sent(), (std::vector<uint32_t>{1, 2, 3}));
+}
+
 CAF_TEST(the node budget holds the scene and refuses only the update that would cross it) {
   CAF_CHECK_EQUAL(budget->used(), 72u);  // tiny_scene's buffers
   // Other clients hold all but 300 bytes of the node's budget.

@@ -1118,3 +1118,40 @@ TEST_CASE("a spot light lights its cone on a plane: a hard edge at the cutoff, a
     else CHECK(partial > 100);
   }
 }
+
+// ineffective_settings says AO changes nothing where it really does not: on a scene without
+// sky or ambient light the render with AO rays is the render without them, and no AO ray is
+// traced; with a sky, AO shows and nothing is said.
+TEST_CASE("AO on a scene without sky or ambient light is reported as changing nothing, and it does not", "[raytracer][settings]") {
+  Scene scene;
+  scene.set_resolution(32, 32);
+  scene.set_environment(plain_env({0, 0, 1}));
+  scene.set_material(1, diffuse({1, 1, 1}));
+  add_object(scene, 100, sphere(1.0f, 32), 1);
+  add_object(scene, 200, quad({-10, -1, 0.5f}, {20, 0, 0}, {0, 0, -20.5f}), 1);
+  scene.set_light(1, directional({0, -1, -1}));
+  scene.set_camera(look({0, 0, 5}, {0, 0, 0}, 30 * kDeg));
+  CHECK(ineffective_settings(scene, 0, false).empty());
+  auto said = ineffective_settings(scene, 4, false);
+  REQUIRE(said.size() == 1);
+  CHECK(said[0].find("no sky or ambient light") != std::string::npos);
+  CHECK(ineffective_settings(scene, 4, true).size() == 1);  // the rasterizer: never any AO
+
+  RayTracer rt;
+  RenderSettings with_ao = no_ao();
+  with_ao.ao_samples = 4;
+  TaskResult a, b;
+  std::vector<std::string> w;
+  rt.sync(scene, w);
+  rt.render({0, 0, 32, 32}, no_ao(), a);
+  rt.render({0, 0, 32, 32}, with_ao, b);
+  CHECK(b.rays.ao == 0);
+  CHECK(a.image.rgba == b.image.rgba);
+
+  scene.set_environment(plain_env({0, 0, 1}, {0.5f, 0.5f, 0.5f}));
+  CHECK(ineffective_settings(scene, 4, false).empty());
+  TaskResult c;
+  rt.sync(scene, w);
+  rt.render({0, 0, 32, 32}, with_ao, c);
+  CHECK(c.rays.ao > 0);
+}

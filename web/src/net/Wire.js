@@ -252,8 +252,8 @@ export const RANGES = Object.freeze(Object.fromEntries(Object.entries(RECORDS).m
   [k, Object.freeze(Object.fromEntries(r.fields.filter((f) => f.range).map((f) => [f.name, f.range])))])));
 
 // protocol/protocol.h's ErrorCode names, by value, up to kMaxErrorCode (the codes on the wire).
-export const ErrorCode = Object.freeze(['ok', 'truncated', 'bad_magic', 'bad_version', 'bad_channel', 'too_large', 'unknown_record', 'bad_op', 'bad_length', 'bad_reserved', 'bad_id', 'bad_enum', 'bad_components', 'not_finite', 'out_of_range', 'limit_exceeded', 'bad_payload', 'bad_texture', 'bad_mesh', 'unknown_id', 'bad_handshake', 'not_scene_update', 'internal']);
-export const MAX_ERROR_CODE = 22;
+export const ErrorCode = Object.freeze(['ok', 'truncated', 'bad_magic', 'bad_version', 'bad_channel', 'too_large', 'unknown_record', 'bad_op', 'bad_length', 'bad_reserved', 'bad_id', 'bad_enum', 'bad_components', 'not_finite', 'out_of_range', 'limit_exceeded', 'bad_payload', 'bad_texture', 'bad_mesh', 'unknown_id', 'bad_handshake', 'not_scene_update', 'internal', 'no_effect']);
+export const MAX_ERROR_CODE = 23;
 
 // core/validate.h: the bounds of camera and mesh transforms, points and directions.
 export const MESH_TRANSFORM = Object.freeze({ maxNorm: 4294967296, maxInverseNorm: 16777216, maxCondition: 1048576, maxTranslation: 4294967296 });

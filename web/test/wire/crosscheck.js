@@ -22,8 +22,8 @@ import { ENUMS } from '../../src/net/Wire.js';
 const { RECORDS, ErrorCode, LIMITS, MESSAGE_HEADER, RECORD_HEADER, ProtocolError } = Protocol;
 
 // The classes protocol.cpp's decoders report. Not here: ok, and what only `apply` (bad_mesh,
-// unknown_id, not_scene_update) or only a server (internal) reports.
-const DECODER_CLASSES = ErrorCode.filter((c) => !['ok', 'bad_mesh', 'unknown_id', 'not_scene_update', 'internal'].includes(c));
+// unknown_id, not_scene_update) or only a server (internal, no_effect) reports.
+const DECODER_CLASSES = ErrorCode.filter((c) => !['ok', 'bad_mesh', 'unknown_id', 'not_scene_update', 'internal', 'no_effect'].includes(c));
 const SERVER_CLASSES = ['too_large', 'truncated', 'bad_magic', 'bad_version', 'bad_channel', 'unknown_record', 'bad_op',
   'bad_length', 'bad_reserved', 'bad_enum', 'out_of_range', 'limit_exceeded'];
 
