@@ -116,16 +116,23 @@ TEST_CASE("50 sessions through a master leave its worker at the baseline: no liv
   for (uint32_t s = 2; s <= 50; ++s) one_session(m.http, s);
   const double churn_s = seconds_since(t0);
   INFO("worker stderr tail: " << w.p->err().substr(w.p->err().size() > 3000 ? w.p->err().size() - 3000 : 0));
-  // One worker per session; an open that timed out at the master (3 s, a loaded machine) is
-  // retried, and the first worker then ends with its session too (or as an orphan).
+  // One worker per session. On a loaded machine (or under ASan) the master may give up on one:
+  // an open that timed out (3 s) is retried, and the first worker then ends with its session
+  // too (or as an orphan); a batch or node-list query that timed out makes the master drop the
+  // worker ("node_lost") and open another at its next reconnect, and it ends the dropped one
+  // itself at its next commit (an exit, which the worker does not log as "ended") unless the
+  // session ends first ("parent down").
   const size_t opened = w.p->err_count("\"worker_opened\"");
+  const size_t given_up = m.p->err_count("\"join_failed\"") + m.p->err_count("\"node_lost\"");
   INFO("master's failed joins: " << m.p->err_count("\"join_failed\"") << ", lost nodes: " << m.p->err_count("\"node_lost\"")
                                   << ", recovered frames: " << m.p->err_count("\"recovering\""));
   CHECK(opened >= 50);
-  CHECK(opened <= 50 + m.p->err_count("\"join_failed\""));
+  CHECK(opened <= 50 + given_up);
   // Every worker ends with its session (the log's count of live workers comes back to 0).
   CHECK(wait_for([&] { return w.p->err_count("\"worker_closed\"") == opened && w.live_workers() == 0; }, 10000));
-  CHECK(w.p->err_count("\"ended\": \"parent down\"") + w.p->err_count("\"orphaned\"") == opened);
+  const size_t ended = w.p->err_count("\"ended\": \"parent down\"") + w.p->err_count("\"orphaned\"");
+  CHECK(ended <= opened);
+  CHECK(ended + m.p->err_count("\"node_lost\"") >= opened);
   // The node hands freed heap back to the OS a tick or two after its last worker ended
   // ("heap_trimmed"); measure after that.
   CHECK(wait_for(
