@@ -27,10 +27,6 @@ struct display_state {
   static inline const char* name = "tessera.display";
 };
 
-int64_t now_ns() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
-      .count();
-}
 
 constexpr int64_t kStatsPeriodNs = 1'000'000'000;
 
@@ -85,7 +81,7 @@ display_actor::behavior_type display_impl(display_actor::stateful_pointer<displa
   st.encoder = encoder;
   st.settings = std::move(settings);
   st.session = session;
-  st.t0_ns = now_ns();
+  st.t0_ns = steady_ns();
   return {
       [=](display_atom, FrameTiles& ft) {
         EncodeJob job;
@@ -118,7 +114,7 @@ display_actor::behavior_type display_impl(display_actor::stateful_pointer<displa
               f.timings.tiling_ms = float(m.tiling_ms);
               f.timings.encode_ms = float(ef.encode_ms);
               const size_t payload = ef.message.size() - ef.header_bytes;
-              const int64_t sent_ns = now_ns();
+              const int64_t sent_ns = steady_ns();
               f.timings.pipeline_ms = float(double(sent_ns - m.render_end_ns) / 1e6);
               std::vector<uint8_t> header;
               header.reserve(ef.header_bytes);

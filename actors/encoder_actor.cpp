@@ -17,10 +17,6 @@ struct encoder_state {
   static inline const char* name = "tessera.encoder";
 };
 
-int64_t now_ns() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
-      .count();
-}
 
 // Bytes of the message header + frame record header + frame fields (everything before the payload).
 uint32_t frame_header_bytes() {
@@ -38,7 +34,7 @@ encoder_actor::behavior_type encoder_impl(encoder_actor::stateful_pointer<encode
         EncodedFrame out;
         out.meta = job.meta;
         out.header_bytes = frame_header_bytes();
-        out.encode_start_ns = now_ns();
+        out.encode_start_ns = steady_ns();
         const auto& m = job.meta;
         if (job.rgba.size() != size_t(m.width) * size_t(m.height) * 4) {
           out.error = "composed image has the wrong size";
@@ -54,7 +50,7 @@ encoder_actor::behavior_type encoder_impl(encoder_actor::stateful_pointer<encode
                                        out.header_bytes))
             out.error = "JPEG encoding failed: " + err;
         }
-        out.encode_end_ns = now_ns();
+        out.encode_end_ns = steady_ns();
         out.encode_ms = double(out.encode_end_ns - out.encode_start_ns) / 1e6;
         return out;
       },

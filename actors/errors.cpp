@@ -1,6 +1,10 @@
 // Typed errors between actors. See errors.h.
 #include "actors/errors.h"
 
+#include <algorithm>
+
+#include "actors/checks.h"
+
 #include <caf/message.hpp>
 #include <caf/make_message.hpp>
 
@@ -37,6 +41,13 @@ TileResult failed_tile(const RenderTask& t, protocol::ErrorCode code, std::strin
 
 TileResult failed_tile(const RenderTask& t, const caf::error& e, protocol::ErrorCode otherwise) {
   return failed_tile(t, error_code(e, otherwise), error_message(e));
+}
+
+BatchReply failed_batch(const RenderBatch& b, protocol::ErrorCode code, const std::string& message) {
+  BatchReply r;
+  r.tiles.resize(std::min<size_t>(b.tasks.size(), 65536));
+  for (size_t i = 0; i < r.tiles.size(); ++i) r.tiles[i] = failed_tile(task_of(b, b.tasks[i]), code, message);
+  return r;
 }
 
 }  // namespace tessera

@@ -8,7 +8,7 @@
 
 #include <caf/error.hpp>
 
-#include "actors/renderer_protocol.h"
+#include "actors/subtree_protocol.h"
 #include "protocol/protocol.h"
 
 namespace tessera {
@@ -31,5 +31,8 @@ std::string error_message(const caf::error& e);
 TileResult failed_tile(const RenderTask& t, protocol::ErrorCode code, std::string message);
 // The same from an actor's error reply; an error not of ours counts as `otherwise`.
 TileResult failed_tile(const RenderTask& t, const caf::error& e, protocol::ErrorCode otherwise);
+
+// Every tile of a batch (at most 65536) failed with `code` and `message`.
+BatchReply failed_batch(const RenderBatch& b, protocol::ErrorCode code, const std::string& message);
 
 }  // namespace tessera

@@ -40,10 +40,6 @@ void log(self_ptr self, Event e) {
   node_log(*self->state.settings, std::move(e));
 }
 
-int64_t now_ns() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
-      .count();
-}
 
 // The committed node list: pick the nodes this client may use (the strongest first, at most
 // max_nodes) and give their coefficients to the tiler.
@@ -83,7 +79,7 @@ void render_here(self_ptr self, const RenderTask& t, std::function<void(TileResu
 void finish_frame(self_ptr self, std::vector<TileResult>&& tiles, std::vector<double>&& perf) {
   auto& st = self->state;
   FrameMeta& meta = st.cur.meta;
-  meta.render_end_ns = now_ns();
+  meta.render_end_ns = steady_ns();
   std::string error;
   SatReport rep{meta.seq, meta.width, meta.height, st.layout.w, st.layout.h, {}, {}};
   std::vector<TileResult> shown;

@@ -2,6 +2,7 @@
 #include "actors/checks.h"
 #include "actors/errors.h"
 
+#include <chrono>
 #include <condition_variable>
 #include <cstdio>
 #include <mutex>
@@ -28,6 +29,11 @@ caf::error scene_snapshot_from_bytes(const std::vector<uint8_t>& bytes, SceneSna
   if (!err.empty()) return caf::make_error(caf::sec::invalid_argument, "scene snapshot: " + err);
   out.scene = std::move(scene);
   return caf::none;
+}
+
+int64_t steady_ns() {
+  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
+      .count();
 }
 
 void register_message_types(caf::actor_system_config& cfg) {

@@ -70,6 +70,9 @@ struct NodeSettings {
 // Registers every message type of actors/messages.h (both sides of a remote link need it).
 void register_message_types(caf::actor_system_config& cfg);
 
+// Steady-clock nanoseconds: the time stamps of FrameMeta and EncodedFrame.
+int64_t steady_ns();
+
 // Reports an event: to settings.logger if there is one, else straight to settings.log.
 void node_log(const NodeSettings& settings, Event e);
 // The process's logger actor: writes the events it receives through `sink` (default stderr).

@@ -12,10 +12,6 @@
 namespace tessera {
 namespace session {
 
-int64_t now_ns() {
-  return std::chrono::duration_cast<std::chrono::nanoseconds>(std::chrono::steady_clock::now().time_since_epoch())
-      .count();
-}
 
 void log(self_ptr self, Event e) {
   e.scope = {{"session", self->state.id}};
@@ -37,7 +33,6 @@ void maybe_preload(self_ptr self) {
   settle_budget(self);  // the preloaded scene is the node's own: counted, never refused
   log(self, Event(Ev::preloaded_scene, true).with("triangles", st.scene->triangle_count()));
 }
-
 
 // The frame actor has the frame's tiles (or gave up on it): apply what was cached, then start
 // the remembered render request (the encoder meanwhile encodes the frame just rendered).
@@ -68,14 +63,18 @@ void start_frame(self_ptr self, uint32_t client_frame) {
   m.height = st.scene->height();
   m.display = uint8_t(st.hs.display);
   m.quality = st.hs.jpeg_quality;
-  m.render_start_ns = now_ns();
+  m.render_start_ns = steady_ns();
   m.dropped = st.dropped;  // for the display channel's Stats record
   m.scene_bytes = scene_bytes(*st.scene);
   m.triangles = st.scene->triangle_count();
   // Settings that change nothing on this scene (AO without a sky, AO on the rasterizer) are
-  // said once, as a notice: the frame renders as asked.
-  for (std::string& why : ineffective_settings(*st.scene, int(st.render.ao_samples), st.hs.renderer == RendererKind::rasterizer))
-    if (st.noted.insert(why).second) fail(self, Error{ErrorCode::no_effect, std::move(why), kNoRecord});
+  // said once, as a notice: the frame renders as asked. Checked when they or the sky change.
+  const std::pair<uint32_t, uint64_t> now{st.render.ao_samples, st.scene->environment_version()};
+  if (now != st.checked) {
+    st.checked = now;
+    for (std::string& why : ineffective_settings(*st.scene, int(now.first), st.hs.renderer == RendererKind::rasterizer))
+      if (st.noted.insert(why).second) fail(self, Error{ErrorCode::no_effect, std::move(why), kNoRecord});
+  }
   if (st.closed) return;
   fs.scene = SceneSnapshot{st.scene};  // read-only until the frame actor answers: updates are cached meanwhile
   fs.ao_samples = int32_t(st.render.ao_samples);

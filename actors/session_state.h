@@ -5,6 +5,7 @@
 #include <memory>
 #include <optional>
 #include <set>
+#include <utility>
 #include <string>
 #include <vector>
 
@@ -47,6 +48,7 @@ struct session_state {
   uint32_t seq = 0, dropped = 0, errors = 0;
   std::vector<uint8_t> forward;      // accepted scene records not yet sent down the tree
   std::set<std::string> noted;       // the no_effect notices sent (each goes to the client once)
+  std::pair<uint32_t, uint64_t> checked{0, 0};  // AO samples and environment version last checked for them
   static inline const char* name = "tessera.session";
 };
 

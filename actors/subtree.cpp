@@ -57,14 +57,6 @@ void on_update(subtree_ptr self, std::vector<uint8_t> bytes, bool reset) {
   else apply_update(self, bytes, reset);
 }
 
-// Every tile of a batch that this node will not render, failed with `code`.
-BatchReply failed_batch(const RenderBatch& b, ErrorCode code, const std::string& why) {
-  BatchReply r;
-  r.tiles.resize(std::min<size_t>(b.tasks.size(), 65536));
-  for (size_t i = 0; i < r.tiles.size(); ++i) r.tiles[i] = failed_tile(task_of(b, b.tasks[i]), code, why);
-  return r;
-}
-
 // The periodic work: a worker that was never adopted, or whose parent fell silent, ends.
 void on_tick(subtree_ptr self) {
   auto& st = self->state;

@@ -170,21 +170,19 @@ void keepalive(subtree_ptr self) {
 
 void dispatch(subtree_ptr self, RenderBatch b, caf::typed_response_promise<BatchReply> promise) {
   auto& st = self->state;
+  const size_t nodes = node_list(st).size();
+  if (b.tasks.size() != nodes) {
+    BatchReply reply = failed_batch(b, ErrorCode::bad_batch, "batch of " + std::to_string(b.tasks.size()) +
+                                                                 " tasks for a sub-tree of " + std::to_string(nodes) + " nodes");
+    reply.changed = true;
+    promise.deliver(std::move(reply));
+    return;
+  }
   BatchReply reply;
   reply.tiles.resize(b.tasks.size());
   for (size_t i = 0; i < b.tasks.size(); ++i) {
     reply.tiles[i].frame = b.frame;
     reply.tiles[i].pixels = b.tasks[i];
-  }
-  const size_t nodes = node_list(st).size();
-  if (b.tasks.size() != nodes) {
-    for (auto& t : reply.tiles) {
-      t.code = ErrorCode::bad_batch;
-      t.error = "batch of " + std::to_string(b.tasks.size()) + " tasks for a sub-tree of " + std::to_string(nodes) + " nodes";
-    }
-    reply.changed = true;
-    promise.deliver(std::move(reply));
-    return;
   }
   const uint64_t id = st.next_join++;
   Join& j = st.joins[id];
