@@ -621,6 +621,32 @@ CAF_TEST(a worker fails every tile of a batch outside the node limits and serves
   sched.run();
 }
 
+CAF_TEST(a worker refuses a scene message from a peer and renders the scene its parent sent) {
+  OpenRequest req = good_open(3);
+  auto w = spawn_worker(sys, settings, node_actor{}, req, caf::actor_cast<caf::strong_actor_ptr>(self));
+  self->send(w, update_atom::value, Payload{encode(tiny_scene())}, true);
+  sched.run();
+  // Someone hands the worker another scene (an empty one) as a root's frame actor would.
+  self->send(w, scene_atom::value, SceneSnapshot{std::make_shared<const Scene>()});
+  sched.run();
+  CAF_CHECK_EQUAL(count(Ev::update_failed), 1u);
+  auto replies = std::make_shared<std::vector<BatchReply>>();
+  auto asker = sys.spawn([=](caf::event_based_actor* a) -> caf::behavior {
+    return {[=](RenderBatch& b) {
+      a->request(w, caf::infinite, render_atom::value, std::move(b)).then([=](BatchReply& r) { replies->push_back(r); });
+    }};
+  });
+  self->send(asker, good_batch());
+  sched.run();
+  CAF_REQUIRE_EQUAL(replies->size(), 1u);
+  CAF_REQUIRE_EQUAL(replies->back().tiles.size(), 1u);
+  CAF_CHECK(!replies->back().tiles[0].failed());
+  CAF_CHECK_EQUAL(replies->back().tiles[0].rgba.size(), size_t(kSize * kSize * 4));
+  self->send_exit(asker, caf::exit_reason::user_shutdown);
+  self->send_exit(w, caf::exit_reason::user_shutdown);
+  sched.run();
+}
+
 CAF_TEST(a worker refuses an update whose chunks add up to more than max_update_bytes and recovers on a reset) {
   settings->max_update_bytes = 1000;
   OpenRequest req = good_open(3);
