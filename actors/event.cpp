@@ -24,6 +24,8 @@ const char* event_name(Ev kind) {
     case Ev::joined: return "joined";
     case Ev::join_failed: return "join_failed";
     case Ev::node_lost: return "node_lost";
+    case Ev::node_late: return "node_late";
+    case Ev::caught_up: return "caught_up";
     case Ev::rejected_tile: return "rejected_tile";
     case Ev::update_failed: return "update_failed";
     case Ev::ended: return "ended";

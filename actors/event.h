@@ -26,7 +26,7 @@ enum class Ev : uint8_t {
   // A session (actors/session_actor.cpp, frame_actor.cpp, display_actor.cpp): scope {"session": id}.
   opened, closed, handshake, error, nodes, preloaded_scene, recovering, cluster_frame, frame,
   // A subtree (actors/subtree*.cpp): a root with the session's scope, a worker with its own.
-  joined, join_failed, node_lost, rejected_tile,
+  joined, join_failed, node_lost, node_late, caught_up, rejected_tile,
   // A worker subtree (actors/subtree.cpp): scope {"node": name, "session": id}.
   update_failed, ended, bad_batch, orphaned,
   // The node actor (actors/node_actor.cpp): scope {"node": name}.

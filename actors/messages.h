@@ -41,6 +41,8 @@ using links_atom = caf::atom_constant<caf::atom("links")>;
 using tick_atom = caf::atom_constant<caf::atom("tick")>;
 using scene_atom = caf::atom_constant<caf::atom("scene")>;
 using snapshot_atom = caf::atom_constant<caf::atom("snapshot")>;
+using ping_atom = caf::atom_constant<caf::atom("ping")>;
+using deadline_atom = caf::atom_constant<caf::atom("deadline")>;
 
 // --- Byte vectors from other processes ----------------------------------------------------
 //

@@ -85,6 +85,7 @@ void on_tick(subtree_ptr self) {
   const bool from_parent = self->current_sender() && self->current_sender()->address() == st.parent;
   if (!own && !from_parent) return;
   keepalive(self);
+  probe_late(self);
   join_children(self);
   if (own) self->delayed_send(self, std::chrono::milliseconds(st.settings->reconnect_ms), tick_atom::value);
 }
@@ -247,6 +248,16 @@ subtree_actor::behavior_type subtree_impl(subtree_ptr self, std::shared_ptr<cons
         subtree_log(self, Event(Ev::update_failed, "a scene message from a peer (a worker's scene comes from its parent's updates)"));
       },
       [=](tick_atom) { on_tick(self); },
+      // A parent asks whether this subtree, late with a batch, is still there: the batches in
+      // flight here.
+      [=](ping_atom) -> uint64_t {
+        heard(self);
+        return uint64_t(self->state.joins.size());
+      },
+      [=](deadline_atom, uint64_t join, uint64_t part) {
+        if (self->current_sender() != self->ctrl()) return;  // only its own timers
+        part_deadline(self, join, size_t(part));
+      },
   };
 }
 

@@ -31,6 +31,33 @@ namespace {
 
 void send_batch(subtree_ptr self, SubtreeChild& c, uint64_t id, size_t part);
 
+// A late child that has answered every batch sent to it, with nothing queued for it, is on time
+// again (updates sent and not yet taken come before any new batch: a worker takes its messages
+// in order).
+void check_caught_up(subtree_ptr self, SubtreeChild& c) {
+  if (!c.late || c.outstanding > 0 || !c.outbox.items.empty()) return;
+  c.late = false;
+  subtree_log(self, Event(Ev::caught_up, c.name));
+}
+
+// Is a late child still there? It answers a ping unless it is hung or cut off (its renderer
+// may be busy: the ping goes to its subtree actor). No answer within the task timeout: lost.
+void ping(subtree_ptr self, SubtreeChild& c) {
+  if (c.probing) return;
+  c.probing = true;
+  const caf::actor_addr addr = c.actor.address();
+  const uint32_t ms = self->state.settings->task_timeout_ms;
+  self->request(c.actor, std::chrono::milliseconds(ms), ping_atom::value)
+      .then(
+          [=](uint64_t) {
+            if (SubtreeChild* x = find_child(self->state, addr)) x->probing = false;
+          },
+          [=](caf::error& e) {
+            child_failed(self, addr, ErrorCode::node_lost,
+                         "late, and no answer to a ping within " + std::to_string(ms) + " ms: " + to_string(e));
+          });
+}
+
 // Sends what the child's window allows: chunks of the update at the head, and the batches
 // queued behind an update once all of it has been sent. An acknowledgement opens the window
 // again; an error fails the child.
@@ -69,6 +96,7 @@ void pump(subtree_ptr self, SubtreeChild& c) {
               if (SubtreeChild* x = find_child(self->state, addr)) {
                 x->outbox.acked = std::max(x->outbox.acked, mark);
                 pump(self, *x);
+                check_caught_up(self, *x);
               }
             },
             [=](caf::error& e) { child_failed(self, addr, ErrorCode::node_lost, "scene update: " + to_string(e)); });
@@ -87,8 +115,9 @@ void enqueue_update(subtree_ptr self, SubtreeChild& c, std::shared_ptr<const std
 
 namespace {
 
-// The child's part of batch `id` goes out; its timeout runs from now. What comes back is
-// checked tile by tile against the tasks that were sent.
+// The child's part of batch `id` goes out (its deadline runs from the dispatch: a batch that
+// waits behind updates the child has not taken counts as late too). What comes back is checked
+// tile by tile against the tasks that were sent; what comes back after the deadline is dropped.
 void send_batch(subtree_ptr self, SubtreeChild& c, uint64_t id, size_t part) {
   auto j = self->state.joins.find(id);
   if (j == self->state.joins.end() || j->second.parts[part].done) return;
@@ -100,10 +129,15 @@ void send_batch(subtree_ptr self, SubtreeChild& c, uint64_t id, size_t part) {
   // parent and the healthy tiles of that sub-tree still arrive in time.
   sub.timeout_ms = std::max<uint32_t>(50, b.timeout_ms * 4 / 5);
   const caf::actor_addr addr = c.actor.address();
-  self->request(c.actor, std::chrono::milliseconds(b.timeout_ms), render_atom::value, std::move(sub))
+  ++c.outstanding;
+  self->request(c.actor, caf::infinite, render_atom::value, std::move(sub))
       .then(
           [=](BatchReply& r) {
             auto& st = self->state;
+            if (SubtreeChild* x = find_child(st, addr)) {
+              --x->outstanding;
+              check_caught_up(self, *x);
+            }
             auto j = st.joins.find(id);
             if (j == st.joins.end() || j->second.parts[part].done) return;
             Join& join = j->second;
@@ -125,7 +159,7 @@ void send_batch(subtree_ptr self, SubtreeChild& c, uint64_t id, size_t part) {
                     t.code = ErrorCode::bad_tile;
                     t.error = "node " + p.name + " sent an impossible tile: " + bad;
                   }
-                } else if (t.code == ErrorCode::ok || uint16_t(t.code) > uint16_t(ErrorCode::no_node)) {
+                } else if (t.code == ErrorCode::ok || uint16_t(t.code) > uint16_t(ErrorCode::node_late)) {
                   t.code = ErrorCode::bad_tile;  // a failure without a code of ours
                 }
                 t.frame = join.batch.frame;
@@ -220,6 +254,12 @@ void dispatch(subtree_ptr self, RenderBatch b, caf::typed_response_promise<Batch
       finish_part(self, id, part);
       continue;
     }
+    if (c->late) {
+      fail_part(join, p, ErrorCode::node_late, "node " + p.name + " is still late with earlier work");
+      finish_part(self, id, part);
+      continue;
+    }
+    self->delayed_send(self, std::chrono::milliseconds(join.batch.timeout_ms), deadline_atom::value, id, uint64_t(part));
     // The batch goes after the updates queued for this child (the worker renders the scene
     // as of the frame).
     if (c->outbox.items.empty()) {
@@ -251,6 +291,27 @@ void finish_part(subtree_ptr self, uint64_t id, size_t part) {
   auto reply = std::move(j.reply);
   st.joins.erase(it);
   promise.deliver(std::move(reply));
+}
+
+void part_deadline(subtree_ptr self, uint64_t id, size_t part) {
+  auto& st = self->state;
+  auto it = st.joins.find(id);
+  if (it == st.joins.end() || part >= it->second.parts.size() || it->second.parts[part].done) return;
+  Join& j = it->second;
+  const Join::Part p = j.parts[part];
+  fail_part(j, p, ErrorCode::node_late,
+            "node " + p.name + " returned no tiles within " + std::to_string(j.batch.timeout_ms) + " ms");
+  if (SubtreeChild* c = find_child(st, p.child); c && !c->late) {
+    c->late = true;
+    subtree_log(self, Event(Ev::node_late, c->name).with("frame", j.batch.frame).with("timeout_ms", j.batch.timeout_ms));
+    ping(self, *c);
+  }
+  finish_part(self, id, part);
+}
+
+void probe_late(subtree_ptr self) {
+  for (auto& c : self->state.children)
+    if (c.alive && c.late) ping(self, c);
 }
 
 }  // namespace tessera

@@ -89,7 +89,9 @@ using subtree_actor = caf::typed_actor<caf::reacts_to<update_atom, Payload, bool
                                        caf::replies_to<render_atom, RenderBatch>::with<BatchReply>,
                                        caf::replies_to<nodes_atom>::with<std::vector<NodeInfo>>,
                                        caf::reacts_to<scene_atom, SceneSnapshot>,
-                                       caf::reacts_to<tick_atom>>;
+                                       caf::reacts_to<tick_atom>,
+                                       caf::replies_to<ping_atom>::with<uint64_t>,
+                                       caf::reacts_to<deadline_atom, uint64_t, uint64_t>>;
 
 // Where a root subtree gets the whole scene for a child that joins: the session's sync actor,
 // which owns the scene (a worker makes its snapshot from its own scene).

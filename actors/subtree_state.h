@@ -48,6 +48,16 @@ struct SubtreeChild {
   bool alive = true;
   bool routed = false;          // part of the committed list (batches are indexed by it)
   Outbox outbox;
+  // Slow is not lost. A child whose part of a batch is past its deadline is late: that part is
+  // rendered elsewhere, it gets no new tasks until it has answered every batch sent to it and
+  // taken every update queued for it, and it is pinged; only a child that does not answer the
+  // ping within the task timeout (or goes down) is lost, dropped and opened afresh, which
+  // resends the whole scene. Dropping a merely slow child did exactly that on every frame of a
+  // large scene on a loaded machine: each new worker was late again building the scene it was
+  // sent, so no frame was ever composed by the cluster.
+  uint32_t outstanding = 0;     // batches sent and not yet answered
+  bool late = false;
+  bool probing = false;         // a ping is in flight
 };
 
 // One batch in flight: the reply assembled part by part (this node's own task, one part per
@@ -127,6 +137,11 @@ void keepalive(subtree_ptr self);
 void dispatch(subtree_ptr self, RenderBatch batch, caf::typed_response_promise<BatchReply> promise);
 // Part `part` of batch `join` is in (its tiles are in the reply).
 void finish_part(subtree_ptr self, uint64_t join, size_t part);
+// Part `part` of batch `join` reached its deadline: if it is not in, its tiles fail as late and
+// its child is late (SubtreeChild::late).
+void part_deadline(subtree_ptr self, uint64_t join, size_t part);
+// Each late child that has no ping in flight is pinged again (the subtree's tick).
+void probe_late(subtree_ptr self);
 // --- subtree_members.cpp ---
 // Commits membership and delivers the new list; waits behind a commit in flight and, with
 // wait_joins, behind the opens in flight (the first list of a subtree should have its children).

@@ -46,6 +46,7 @@ const char* to_string(ErrorCode c) {
     case ErrorCode::bad_tile: return "bad_tile";
     case ErrorCode::node_lost: return "node_lost";
     case ErrorCode::no_node: return "no_node";
+    case ErrorCode::node_late: return "node_late";
   }
   return "unknown";
 }

@@ -60,8 +60,9 @@ enum class ErrorCode : uint16_t {
   no_scene = 66,         // a worker has no valid scene (its last update failed)
   bad_batch = 67,        // a worker refused its parent's batch
   bad_tile = 68,         // a child's tile or batch reply failed its parent's checks
-  node_lost = 69,        // a node or its link went down, or it did not answer in time
+  node_lost = 69,        // a node or its link went down, or it stopped answering
   no_node = 70,          // no node could render the task
+  node_late = 71,        // a node that still answers returned no tiles in time (they are rendered elsewhere)
 };
 constexpr uint16_t kMaxErrorCode = 23;  // the largest code on the wire
 

@@ -31,7 +31,8 @@ namespace {
 constexpr int kSize = 16;
 
 // What a fake child does with its tasks.
-enum class Mode { liar, hang, straggler, bad_info, slow_acks };
+// late: holds its batches until the test releases them, and answers pings meanwhile.
+enum class Mode { liar, hang, straggler, bad_info, slow_acks, late };
 
 struct FakeLog {
   std::vector<RenderBatch> batches;
@@ -41,10 +42,35 @@ struct FakeLog {
   size_t plain_bytes = 0;  // bytes of whole updates sent as one plain message
   size_t max_chunk = 0;    // the largest chunk
   std::vector<std::string> order;  // "u" per whole update, "b" per batch, as they arrived
+  size_t pings = 0;
   std::vector<caf::response_promise> held;
+  std::vector<std::pair<caf::typed_response_promise<BatchReply>, RenderBatch>> held_batches;  // late
   std::vector<caf::typed_response_promise<uint64_t>> held_acks;  // slow_acks: not yet acknowledged
   std::vector<uint64_t> held_ack_sizes;  // hang: never answered
 };
+
+// Tiles for every task of `b`: valid pixels, and a cost map that says every packet costs 1 ms
+// (a node on a CPU shared with something else); a liar's have the wrong size.
+BatchReply reply_for(const RenderBatch& b, Mode mode) {
+  BatchReply r;
+  for (const Rect& task : b.tasks) {
+    TileResult t;
+    t.frame = b.frame;
+    t.pixels = task;
+    if (mode == Mode::liar) {
+      t.rgba.assign(7, 0);  // not width x height x 4
+    } else {
+      t.rgba.assign(size_t(task.area()) * 4, 128);
+      CostMap cm;
+      cm.packets = {task.x0 / 2, task.y0 / 2, (task.x1 + 1) / 2, (task.y1 + 1) / 2};
+      cm.cost.assign(size_t(cm.packets.area()), 1'000'000);
+      Sat::from_cost_map(cm).serialize_into(t.sat);
+      t.kernel_ms = double(cm.packets.area());
+    }
+    r.tiles.push_back(std::move(t));
+  }
+  return r;
+}
 
 // A worker that answers (or not) as its mode says; one node named `name`.
 subtree_actor::behavior_type fake_worker(subtree_actor::pointer self, Mode mode, std::shared_ptr<FakeLog> log) {
@@ -76,33 +102,30 @@ subtree_actor::behavior_type fake_worker(subtree_actor::pointer self, Mode mode,
           log->held.push_back(self->make_response_promise());
           return caf::delegated<BatchReply>{};
         }
-        BatchReply r;
-        for (const Rect& task : b.tasks) {
-          TileResult t;
-          t.frame = b.frame;
-          t.pixels = task;
-          if (mode == Mode::liar) {
-            t.rgba.assign(7, 0);  // not width x height x 4
-          } else {
-            // Valid pixels, and a cost map that says every packet costs 1 ms: a node on a
-            // CPU shared with something else.
-            t.rgba.assign(size_t(task.area()) * 4, 128);
-            CostMap cm;
-            cm.packets = {task.x0 / 2, task.y0 / 2, (task.x1 + 1) / 2, (task.y1 + 1) / 2};
-            cm.cost.assign(size_t(cm.packets.area()), 1'000'000);
-            Sat::from_cost_map(cm).serialize_into(t.sat);
-            t.kernel_ms = double(cm.packets.area());
-          }
-          r.tiles.push_back(std::move(t));
+        if (mode == Mode::late) {
+          log->held_batches.emplace_back(self->make_response_promise<BatchReply>(), b);
+          return caf::delegated<BatchReply>{};
         }
-        return r;
+        return reply_for(b, mode);
       },
       [=](nodes_atom) {
         // bad_info: a node that claims an impossible coefficient (it would get all the work).
         return std::vector<NodeInfo>{mode == Mode::bad_info ? NodeInfo{"fake", -3, 1e300} : NodeInfo{"fake", 1, 1.0}};
       },
       [=](scene_atom, SceneSnapshot&) {},
+      [=](ping_atom) -> caf::result<uint64_t> {
+        log->pings++;
+        if (mode == Mode::hang) {  // hung: no answer to anything
+          log->held.push_back(self->make_response_promise());
+          return caf::delegated<uint64_t>{};
+        }
+        return uint64_t(0);
+      },
+      [=](deadline_atom, uint64_t, uint64_t) {},
       [=](tick_atom) {
+        auto batches = std::move(log->held_batches);  // late: its batches answered now
+        log->held_batches.clear();
+        for (auto& [promise, b] : batches) promise.deliver(reply_for(b, Mode::straggler));
         auto acks = std::move(log->held_acks);
         auto sizes = std::move(log->held_ack_sizes);
         log->held_acks.clear();
@@ -350,10 +373,62 @@ CAF_TEST(a child that is alive but never answers is failed by the timeout and it
   request_frame(1);
   sched.run();
   CAF_CHECK(frames_sent().empty());
-  sched.trigger_timeouts();
+  sched.trigger_timeouts();  // the part's deadline: late, rendered here, and a ping goes out
   sched.run();
   CAF_CHECK_EQUAL(frames_sent(), std::vector<uint32_t>{1});
   CAF_CHECK_EQUAL(count(Ev::recovering, 1), 1u);
+  CAF_CHECK_EQUAL(count(Ev::node_late, "hang:2"), 1u);
+  CAF_CHECK_EQUAL(log->pings, 1u);
+  CAF_CHECK_EQUAL(count(Ev::node_lost, "hang:2"), 0u);
+  // It does not answer the ping either: lost (and, its node still answering opens, opened
+  // again). The next frame does not wait for the lost one: its part is rendered here at once.
+  sched.trigger_timeouts();
+  sched.run();
+  CAF_CHECK_EQUAL(count(Ev::node_lost, [](const Event& e) {
+                    return e.value == Json("hang:2") && e.field("reason")->as_string().find("no answer to a ping") != std::string::npos;
+                  }),
+                  1u);
+  request_frame(2);
+  sched.run();
+  CAF_CHECK_EQUAL(frames_sent(), (std::vector<uint32_t>{1, 2}));
+  CAF_CHECK_EQUAL(count(Ev::recovering, 1), 2u);
+}
+
+CAF_TEST(a late child that still answers is kept: its tiles are rendered here until it catches up) {
+  auto log = std::make_shared<FakeLog>();
+  auto last = std::make_shared<subtree_actor>();
+  add_child("late:1", caf::actor_cast<caf::actor>(sys.spawn(fake_node, Mode::late, log, last)));
+  start();
+  request_frame(1);
+  sched.run();
+  CAF_REQUIRE_EQUAL(log->batches.size(), 1u);
+  CAF_CHECK(frames_sent().empty());
+  sched.trigger_timeouts();  // the deadline: the frame goes out with the child's part rendered here
+  sched.run();
+  CAF_CHECK_EQUAL(frames_sent(), std::vector<uint32_t>{1});
+  CAF_CHECK_EQUAL(count(Ev::node_late, "late:1"), 1u);
+  CAF_CHECK_EQUAL(log->pings, 1u);  // and it answered
+  // While it is late it gets no tasks, and frames do not wait for it.
+  request_frame(2);
+  sched.run();
+  CAF_CHECK_EQUAL(frames_sent(), (std::vector<uint32_t>{1, 2}));
+  CAF_CHECK_EQUAL(log->batches.size(), 1u);
+  CAF_CHECK_EQUAL(count(Ev::recovering, 1), 2u);
+  // Its late reply arrives (and is dropped): it is on time again, and the next frame uses it.
+  self->send(*last, tick_atom::value);
+  sched.run();
+  CAF_CHECK_EQUAL(count(Ev::caught_up, "late:1"), 1u);
+  request_frame(3);
+  sched.run();
+  CAF_CHECK_EQUAL(log->batches.size(), 2u);
+  CAF_CHECK_EQUAL(log->held_batches.size(), 1u);
+  self->send(*last, tick_atom::value);
+  sched.run();
+  CAF_CHECK_EQUAL(frames_sent(), (std::vector<uint32_t>{1, 2, 3}));
+  CAF_CHECK_EQUAL(count(Ev::recovering, 1), 2u);  // frame 3 was composed with it
+  // Never lost, so never opened again with the whole scene.
+  CAF_CHECK_EQUAL(count(Ev::node_lost), 0u);
+  CAF_CHECK_EQUAL(count(Ev::joined, "late:1"), 1u);
 }
 
 CAF_TEST(the cost maps of a straggler shift its share away in the next frame) {

@@ -3,8 +3,9 @@
 // master in the root namespace names them by those addresses. Frames streamed through the
 // master must match the ray tracer's direct render while one link is cut (the interface inside
 // the namespace goes down: the process lives on and its TCP connection stays open, so the
-// master only notices when the task timeout expires) and after the link comes back (the master
-// reopens a worker on it).
+// master only notices when the task timeout expires: the part is late and rendered by the
+// master, and a worker that does not answer a ping within another timeout is lost) and after
+// the link comes back (the master reopens a worker on it).
 //
 // Needs root (CAP_NET_ADMIN, and CAP_SYS_ADMIN for `ip netns exec`) and iproute2's `ip`.
 // Without them, or with TESSERA_NO_NETNS=1, it prints why and exits 77 (CTest: skipped).
@@ -311,8 +312,9 @@ TEST_CASE("Workers in two network namespaces render for a master; a cut link tim
   CHECK(wb.p->err_count("\"worker_opened\"") == 1);
 
   // The link of worker a goes down; its process and its TCP connection live on. The next frame
-  // waits for the task timeout, then the master renders a's tiles itself; later frames tile
-  // over b alone. Every frame arrives and is right.
+  // waits for the task timeout, then the master renders a's tiles itself; while a is late the
+  // master renders its tiles at once; once a has not answered a ping for another timeout it is
+  // lost, and the frames after that tile over b alone. Every frame arrives and is right.
   {
     std::string err = a.cut();
     INFO(err);
@@ -328,10 +330,15 @@ TEST_CASE("Workers in two network namespaces render for a master; a cut link tim
             std::to_string(std::chrono::duration_cast<std::chrono::milliseconds>(std::chrono::steady_clock::now() - t0).count()) +
             " ms; ";
     ++n;
+    if (k == 120) {  // a is late; it is lost a timeout after its deadline
+      INFO("master stderr: " << tail(log.err()));
+      REQUIRE(wait_for([&] { return log.err_count(lost) == 1; }, 3 * kTaskTimeoutMs));
+    }
   }
   {
     INFO("master stderr: " << tail(log.err()));
     INFO("frames: " << took);
+    CHECK(log.err_count("\"node_late\": \"" + addr_a + "\"") == 1);
     // While a is cut off, the session retries it (an open that waits for the task timeout)
     // every reconnect period; the frames after the first must not wait for those attempts.
     // They did: each waited for one failed join, about the task timeout per frame, so the

