@@ -1,5 +1,5 @@
 // tessera loadtest --scene S.gltf --camera-loop L.json [--clients N] [--display jpeg|s3tc|mjpeg]
-//                  [--seconds S] [--warmup K] [--size W H] [--ao A] [--quality Q] [--host H --port P] [--threads T]
+//                  [--seconds S | --frames F] [--warmup K] [--size W H] [--ao A] [--quality Q] [--host H --port P] [--threads T]
 // Uploads the scene from N simultaneous WebSocket clients; each replays the camera loop with two
 // render requests outstanding. Once every client has received K frames (all connected and
 // streaming), a common window of S seconds opens; the frames each client receives inside it
@@ -39,10 +39,12 @@ int run(const std::vector<std::string>& argv) {
   Args args(argv);
   if (args.flag("--help")) {
     std::puts("tessera loadtest --scene S.gltf --camera-loop L.json [--clients N] [--display jpeg|s3tc|mjpeg]\n"
-              "                 [--seconds S] [--warmup K] [--size W H] [--ao A] [--quality Q] [--host H --port P]\n"
-              "                 [--threads T]\n"
+              "                 [--seconds S | --frames F] [--warmup K] [--size W H] [--ao A] [--quality Q]\n"
+              "                 [--host H --port P] [--threads T]\n"
               "Frames per second over a common window of S seconds (default 20) that opens once every client\n"
-              "has received K frames (default 2). mjpeg: frames counted from the WebSocket's Frame records\n"
+              "has received K frames (default 2). --frames F: the window closes instead once every client has\n"
+              "received F frames after its K warm-up frames (frame numbers K..K+F-1, the camera loop's frames\n"
+              "of those indices), so runs on different trees render the same frames. mjpeg: frames counted from the WebSocket's Frame records\n"
               "(timings, empty payload); the JPEG goes to /mjpeg/TOKEN, which nobody reads here.");
     return 0;
   }
@@ -53,13 +55,14 @@ int run(const std::vector<std::string>& argv) {
   const std::string display = args.str("--display", "jpeg");
   const double seconds = double(args.integer("--seconds", 20));
   const int warmup = int(args.integer("--warmup", 2));
+  const int frames_wanted = int(args.integer("--frames", 0));
   const int ao = int(args.integer("--ao", 0));
   const int quality = int(args.integer("--quality", 85));
   std::string host = args.str("--host", "127.0.0.1");
   long port = args.integer("--port", -1);
   args.finish();
-  if (clients < 1 || clients > 64 || seconds < 1 || warmup < 1)
-    throw std::invalid_argument("--clients 1..64, --seconds >= 1, --warmup >= 1");
+  if (clients < 1 || clients > 64 || seconds < 1 || warmup < 1 || frames_wanted < 0)
+    throw std::invalid_argument("--clients 1..64, --seconds >= 1, --warmup >= 1, --frames >= 0");
   if (display != "jpeg" && display != "s3tc" && display != "mjpeg")
     throw std::invalid_argument("--display must be jpeg, s3tc or mjpeg");
   const int W = setup.loaded.scene.width(), H = setup.loaded.scene.height();
@@ -90,7 +93,7 @@ int run(const std::vector<std::string>& argv) {
   std::vector<double> upload_ms(size_t(clients), 0);
   std::vector<protocol::Stats> last_stats(static_cast<size_t>(clients));  // the node's own figures
   std::vector<std::string> errors;
-  std::atomic<int> ready{0}, finished{0};
+  std::atomic<int> ready{0}, finished{0}, complete{0};  // complete: clients with their --frames
   std::atomic<bool> stop{false};
   auto client_main = [&](int ci) {
     WsClient ws;
@@ -142,11 +145,16 @@ int run(const std::vector<std::string>& argv) {
           auto* f = std::get_if<protocol::Frame>(&r);
           if (!f) continue;
           last = now;
+          if (frames_wanted > 0 && got >= warmup + frames_wanted) continue;  // requested ahead: not counted
           if (got == 0) upload_ms[size_t(ci)] = std::chrono::duration<double, std::milli>(now - t_up).count();
           received[size_t(ci)].push_back({now, FrameRecord{ci, f->frame, f->timings, msg->size(), 0}});
           if (++got == warmup && !counted_ready) {
             counted_ready = true;
             ++ready;
+          }
+          if (frames_wanted > 0 && got == warmup + frames_wanted) {
+            ++complete;
+            continue;
           }
           request();
         }
@@ -161,7 +169,7 @@ int run(const std::vector<std::string>& argv) {
   // The common window: opens when every client streams, lasts --seconds.
   while (ready < clients && finished == 0) std::this_thread::sleep_for(std::chrono::milliseconds(10));
   const auto w0 = Clock::now();
-  while (finished == 0 && Clock::now() - w0 < std::chrono::duration<double>(seconds))
+  while (finished == 0 && (frames_wanted > 0 ? complete < clients : Clock::now() - w0 < std::chrono::duration<double>(seconds)))
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   const auto w1 = Clock::now();
   stop = true;
@@ -172,9 +180,11 @@ int run(const std::vector<std::string>& argv) {
   std::vector<double> fps(size_t(clients), 0);
   std::vector<FrameRecord> all;
   for (int c = 0; c < clients; ++c) {
-    size_t n = 0;
+    size_t n = 0, i = 0;
     for (auto& [t, f] : received[size_t(c)])
-      if (t >= w0 && t < w1) {
+      // --frames: exactly the frames after the client's warm-up (the window may open a poll
+      // period after the last warm-up frame); otherwise those inside the common window.
+      if (frames_wanted > 0 ? i++ >= size_t(warmup) : (t >= w0 && t < w1)) {
         f.received_ms = std::chrono::duration<double, std::milli>(t - w0).count();
         all.push_back(f);
         ++n;

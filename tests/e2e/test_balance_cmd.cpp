@@ -223,3 +223,23 @@ TEST_CASE("tessera bench --reps: best-of-R comparisons, bad counts rejected", "[
     CHECK(run_tessera("bench " + base_args() + " --compare bare " + bad).rc != 0);
   }
 }
+
+TEST_CASE("tessera loadtest --frames: exactly the frames after the warm-up, numbered by the camera loop", "[loadtest]") {
+  // An in-process node; 2 warm-up frames, then 3 counted (the client requests two ahead, and
+  // those are not counted).
+  Run r = run_tessera("loadtest --scene " + kScene + "/scene.gltf --camera-loop " + kScene +
+                      "/camera-loop.json --size 64 36 --warmup 2 --frames 3 --threads 1");
+  REQUIRE(r.rc == 0);
+  std::vector<int> frames;
+  json summary;
+  for (auto& l : r.lines) {
+    if (l.contains("summary")) summary = l;
+    else frames.push_back(l["frame"].get<int>());
+  }
+  CHECK(frames == std::vector<int>{2, 3, 4});
+  REQUIRE(summary.is_object());
+  CHECK(summary["frames_in_window"].get<int>() == 3);
+  CHECK(summary["errors"].get<int>() == 0);
+  // Bad values are refused.
+  CHECK(run_tessera("loadtest --scene " + kScene + "/scene.gltf --camera-loop " + kScene + "/camera-loop.json --frames -1").rc != 0);
+}
