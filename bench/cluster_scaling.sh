@@ -7,11 +7,17 @@
 # master's `cluster_frame` lines (each node's kernel and rendering time) and the loadtest
 # output are kept in OUTDIR; bench/cluster_scaling_report.py OUTDIR makes the table.
 #
+# The control: N processes on the same cores each render the whole of one loop frame at once
+# (`tessera render --threads 1`, no cluster). On a shared machine (a VM's cores, one package's
+# turbo and caches) each is slower than one alone; that slowdown is the machine's, not the
+# balancer's, and the report shows it beside the efficiency.
+#
 #   bench/cluster_scaling.sh OUTDIR [SIZES="640x360 1280x720"] [FRAMES="12 6"] [WORKERS="1 2 4 8 15"]
 #
 # TESSERA: how to run the binary (default build/app/tessera; a bundle run by its own loader
 # works too, e.g. "bundle/ld.so --library-path bundle/lib bundle/tessera"). SCENE: a folder with
 # scene.gltf and camera-loop.json (default ../shared/scenes/pavilion). AO: AO samples (2).
+# PIN=0: no taskset. WORKER_ARGS: more options for every worker (e.g. CAF's scheduler threads).
 set -euo pipefail
 OUT=$1
 SIZES=${2:-"640x360 1280x720"}
@@ -25,7 +31,7 @@ load_before=$(cut -d' ' -f1-3 /proc/loadavg)
 read -r -a T <<< "$TESSERA"
 cores=$(nproc)
 pin() {  # core -> prefix
-  if command -v taskset > /dev/null && (( $1 < cores )); then echo "taskset -c $1"; fi
+  if [[ ${PIN:-1} != 0 ]] && command -v taskset > /dev/null && (( $1 < cores )); then echo "taskset -c $1"; fi
 }
 pids=()
 cleanup() { kill "${pids[@]}" 2> /dev/null || true; wait 2> /dev/null || true; }
@@ -42,10 +48,11 @@ wait_line() {  # file pattern count timeout_s
 }
 
 run() {  # name size frames workers
-  local name=$1 size=$2 frames=$3 n=$4 base=$((47000 + RANDOM % 500 * 40)) kids="" i
+  local name=$1 size=$2 frames=$3 n=$4 base=$((20000 + RANDOM % 1000 * 40)) kids="" i
   pids=()
   for ((i = 1; i <= n; ++i)); do
-    $(pin "$i") "${T[@]}" serve --no-http --cluster-port $((base + i)) --threads 1 --tessera.name=w$i \
+    # shellcheck disable=SC2086
+    $(pin "$i") "${T[@]}" serve --no-http --cluster-port $((base + i)) --threads 1 --tessera.name=w$i ${WORKER_ARGS:-} \
       > "$OUT/$name.w$i.out" 2> "$OUT/$name.w$i.err" &
     pids+=($!)
     kids="$kids${kids:+,}127.0.0.1:$((base + i))"
@@ -61,13 +68,25 @@ run() {  # name size frames workers
   echo "$name: $(grep -c cluster_frame "$OUT/$name.master.err" || true) frames" >&2
 }
 
+control() {  # size workers: N concurrent whole-frame renders of loop frame 10, pinned like the workers
+  local size=$1 n=$2 i
+  for ((i = 1; i <= n; ++i)); do
+    $(pin "$i") "${T[@]}" render --threads 1 --size "${size%x*}" "${size#*x}" --ao "$AO" --scene "$SCENE/scene.gltf" \
+      --camera-loop "$SCENE/camera-loop.json" --frame 10 --out "$OUT/control-$i.png" > "$OUT/control-$i.json" 2> /dev/null &
+  done
+  wait
+  cat "$OUT"/control-*.json > "$OUT/$size-control-n$n.json"
+  rm -f "$OUT"/control-*
+}
+
 k=0
 for size in $SIZES; do
   f=${FRAMES[$k]:-${FRAMES[0]}}
   k=$((k + 1))
   for n in $WORKERS; do run "$size-n$n" "$size" "$f" "$n"; done
+  for n in $WORKERS; do control "$size" "$n"; done
 done
 isa=$(grep -m1 -o -w 'avx512f' /proc/cpuinfo || grep -m1 -o -w 'avx2' /proc/cpuinfo || echo sse)
 printf '{"summary": true, "scene": "%s", "ao": %s, "sizes": "%s", "frames": "%s", "workers": "%s", "cpu": "%s", "cores": %s, "isa": "%s", "load_before": "%s", "load_after": "%s", "pinned": %s}\n' \
   "$SCENE" "$AO" "$SIZES" "${FRAMES[*]}" "$WORKERS" "$(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | xargs)" "$cores" "$isa" \
-  "$load_before" "$(cut -d' ' -f1-3 /proc/loadavg)" "$(command -v taskset > /dev/null && echo true || echo false)" > "$OUT/summary.json"
+  "$load_before" "$(cut -d' ' -f1-3 /proc/loadavg)" "$([[ ${PIN:-1} != 0 ]] && command -v taskset > /dev/null && echo true || echo false)" > "$OUT/summary.json"
