@@ -36,10 +36,15 @@ const char* kHelp =
     "--whole-task replaces each node's cost map by its task's average (whole-task timings, as\n"
     "Cosenza et al. 2008) to show what the per-packet cost map buys. --tiling-png draws the last\n"
     "frame's tiling of the last node count over the image (paper figure 6).\n"
-    "--reps R (default 1) renders the reference and every node's task R times in a row and keeps,\n"
+    "--reps R (default 3) renders the reference and every node's task R times in a row and keeps,\n"
     "per packet, the smallest cost (the kernel is the sum of that map): on a shared machine a TSC\n"
     "timing also counts the time a thread was descheduled, a spike on one packet that a repeat\n"
-    "does not repeat; a real node has its machine to itself.\n";
+    "does not repeat; a real node has its machine to itself. --threads defaults to 1: every\n"
+    "simulated node renders on one thread, as the reference does.\n"
+    "The noise floor: every frame's reference is rendered twice (R times each); the smaller kernel\n"
+    "over the larger is the efficiency of one node against itself, the best any row can be trusted\n"
+    "to. Each row names its predictor: area (frame 0), previous_frame (the last frame's cost maps),\n"
+    "whole_task.\n";
 
 double ms_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
@@ -89,7 +94,7 @@ int run(const std::vector<std::string>& argv) {
   Args args(argv);
   if (args.flag("--help")) { std::fputs(kHelp, stdout); return 0; }
   int threads = 0;
-  auto limit = limit_threads(args, &threads);
+  auto limit = limit_threads(args, &threads, 1);  // one thread per simulated node, as a real one has its cores
   SceneSetup setup = load_scene(args, 640, 360, LoopOption::required);
   std::vector<double> node_list = parse_number_list("--nodes", args.str("--nodes", "2"));
   long step = args.integer("--step", 1);
@@ -97,7 +102,7 @@ int run(const std::vector<std::string>& argv) {
   std::string coeff_arg = args.str("--coefficients");
   bool whole_task = args.flag("--whole-task");
   std::string png = args.str("--tiling-png");
-  long reps = args.integer("--reps", 1);
+  long reps = args.integer("--reps", 3);
   RenderSettings settings = read_settings(args);
   args.finish();
   if (step < 1 || frames < 2) throw std::invalid_argument("--step >= 1 and --frames >= 2 are needed");
@@ -120,14 +125,18 @@ int run(const std::vector<std::string>& argv) {
   const PacketLayout pl = rt.packet_layout();
   const Rect space = packet_space(scene.width(), scene.height(), pl);
   std::vector<std::string> warnings;
+  std::vector<double> noise_effs;  // per counted frame: the reference against itself
   for (long f = 0; f < frames; ++f) {
     size_t k = setup.replay(f, step, settings);
     warnings.clear();
     rt.sync(scene, warnings);
 
     // Reference: the whole frame as one node's task (shared by every node count).
-    TaskResult single;
+    TaskResult single, again;
     render_min(rt, {0, 0, scene.width(), scene.height()}, settings, reps, single);
+    render_min(rt, {0, 0, scene.width(), scene.height()}, settings, reps, again);
+    const double noise_eff = std::min(single.kernel_ms, again.kernel_ms) / std::max(1e-9, std::max(single.kernel_ms, again.kernel_ms));
+    if (f > 0) noise_effs.push_back(noise_eff);
 
     for (size_t ci = 0; ci < clusters.size(); ++ci) {
       Cluster& cl = clusters[ci];
@@ -179,10 +188,10 @@ int run(const std::vector<std::string>& argv) {
       });
       std::printf("{\"frame\": %zu, \"nodes\": %ld, \"whole_task\": %s, \"single_kernel_ms\": %.3f, \"node_kernel_ms\": %s, "
                   "\"node_kernel_sum_ratio\": %.4f, \"efficiency\": %.4f, \"balance\": %.4f, \"sat_ms\": %.3f, "
-                  "\"tiling_ms\": %.4f, \"tiled_from\": \"%s\"}\n",
+                  "\"tiling_ms\": %.4f, \"predictor\": \"%s\", \"noise_floor_efficiency\": %.4f}\n",
                   k, cl.nodes, whole_task ? "true" : "false", single.kernel_ms, list_json(kern, "%.3f").c_str(),
                   single.kernel_ms > 0 ? kern_sum / single.kernel_ms : 0, eff, bal, sat_ms, tiling_ms,
-                  f == 0 ? "area" : (whole_task ? "whole-task timings" : "previous frame's SATs"));
+                  f == 0 ? "area" : (whole_task ? "whole_task" : "previous_frame"), noise_eff);
       std::fflush(stdout);
       if (draw) {
         draw_tiling(frame_img, tasks, pl);
@@ -207,11 +216,12 @@ int run(const std::vector<std::string>& argv) {
   std::printf("{\"summary\": true, \"scene\": %s, \"nodes\": %s, \"frames\": %ld, \"step\": %ld, \"whole_task\": %s, "
               "\"coefficients\": %s, \"mean_efficiency\": %s, \"median_efficiency\": %s, "
               "\"reps\": %ld, \"width\": %d, \"height\": %d, \"ao\": %d, \"depth\": %d, \"cpu\": %s, \"isa\": %s, \"packet\": \"%dx%d\", "
-              "\"threads\": %d}\n",
+              "\"threads\": %d, \"noise_floor_median_efficiency\": %.4f, \"noise_floor_min_efficiency\": %.4f}\n",
               json_str(setup.scene_path).c_str(), list_json(node_list, "%g").c_str(), frames, step, whole_task ? "true" : "false",
               json_str(coeff_arg.empty() ? "equal" : coeff_arg).c_str(), list_json(means, "%.4f").c_str(),
               list_json(medians, "%.4f").c_str(), reps, scene.width(), scene.height(), settings.ao_samples, settings.max_depth,
-              json_str(cpu_model()).c_str(), json_str(isa_name(pl)).c_str(), pl.w, pl.h, threads);
+              json_str(cpu_model()).c_str(), json_str(isa_name(pl)).c_str(), pl.w, pl.h, threads, median(noise_effs),
+              noise_effs.empty() ? 0.0 : *std::min_element(noise_effs.begin(), noise_effs.end()));
   return 0;
 }
 

@@ -25,8 +25,8 @@ std::string cpu_model() {
 
 int hardware_threads() { return int(std::max(1u, std::thread::hardware_concurrency())); }
 
-std::unique_ptr<tbb::global_control> limit_threads(Args& args, int* threads) {
-  int t = int(args.integer("--threads", hardware_threads()));
+std::unique_ptr<tbb::global_control> limit_threads(Args& args, int* threads, int default_threads) {
+  int t = int(args.integer("--threads", default_threads > 0 ? default_threads : hardware_threads()));
   if (t < 1 || t > 1024) throw std::invalid_argument("--threads must be in 1..1024");
   if (threads) *threads = t;
   return std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, size_t(t));

@@ -15,8 +15,9 @@ namespace tessera::app {
 std::string cpu_model();
 int hardware_threads();
 
-// --threads N (default: all hardware threads) as a TBB limit that lives as long as the result.
-std::unique_ptr<tbb::global_control> limit_threads(Args& args, int* threads);
+// --threads N as a TBB limit that lives as long as the result.
+// default_threads: the count without --threads (0: every hardware thread).
+std::unique_ptr<tbb::global_control> limit_threads(Args& args, int* threads, int default_threads = 0);
 
 // --ao N --depth D --shadows 0|1 --ao-distance X
 RenderSettings read_settings(Args& args);

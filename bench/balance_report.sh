@@ -86,7 +86,7 @@ for k, rows in runs.items():
     ns = [r["nodes"] for r in rows if r.get("nodes_summary")]
     cells = []
     for n in ns:
-        v = [r["node_kernel_sum_ratio"] for r in rows if "efficiency" in r and r["nodes"] == n and r["tiled_from"] != "area"]
+        v = [r["node_kernel_sum_ratio"] for r in rows if "efficiency" in r and r["nodes"] == n and r.get("predictor", r.get("tiled_from")) != "area"]
         cells.append(f"{med(v):.3f}")
     md.append(f"| {labels[k]} | " + " | ".join(cells) + " |")
 md += ["", "![efficiency per frame and per node count](balance-efficiency.png)", "",
@@ -119,7 +119,7 @@ for k, rows in runs.items():
     with open(f"/tmp/bal-{k}-frames.dat", "w") as f:
         for n in [r["nodes"] for r in rows if r.get("nodes_summary")]:
             f.write(f"# N={n}\n")
-            for i, r in enumerate(x for x in rows if "efficiency" in x and x["nodes"] == n and x["tiled_from"] != "area"):
+            for i, r in enumerate(x for x in rows if "efficiency" in x and x["nodes"] == n and x.get("predictor", x.get("tiled_from")) != "area"):
                 f.write(f"{i+1} {100*r['efficiency']}\n")
             f.write("\n\n")
     with open(f"/tmp/bal-{k}-nodes.dat", "w") as f:

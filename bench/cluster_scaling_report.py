@@ -6,6 +6,10 @@ kernel and rendering efficiency frame by frame against the 1-worker run on the s
   rendering efficiency of frame k = R1(k) / (N x max_i R_i(k))
   balance                         = max_i K_i / mean_i K_i
   kernel sum                      = sum_i K_i / K1   (1.00: the tiles cost what the whole frame does)
+  machine slowdown                = median kernel of N concurrent single-threaded whole-frame
+                                    renders / the kernel of one alone (the control run: what
+                                    sharing the machine costs each process, with no cluster)
+  net kernel efficiency           = kernel efficiency x machine slowdown
 
 Frames with a recovered task (a late or lost worker) are left out and counted.
 
@@ -35,6 +39,13 @@ for path in glob.glob(os.path.join(out, "*-n*.master.err")):
     runs[key] = {k: e for k, e in frames.items() if k in counted}
 summary = json.load(open(os.path.join(out, "summary.json")))
 
+def slowdown(size, n):
+    def kernels(m):
+        p = os.path.join(out, "%s-control-n%d.json" % (size, m))
+        return [json.loads(l)["kernel_ms"] for l in open(p) if l.strip()] if os.path.exists(p) else []
+    one, many = kernels(1), kernels(n)
+    return statistics.median(many) / one[0] if one and many else float("nan")
+
 def fps(size, n):
     p = os.path.join(out, "%s-n%d.load" % (size, n))
     for line in open(p) if os.path.exists(p) else []:
@@ -46,8 +57,8 @@ rows = []
 for size in sorted({s for s, _ in runs}, key=lambda s: int(s.split("x")[0])):
     ref = runs.get((size, 1), {})
     print("### %s, AO %s, %s\n" % (size, summary["ao"], summary["scene"]))
-    print("| workers | frames | kernel eff. median (worst) | rendering eff. median (worst) | balance median (worst) | kernel sum / single | fps |")
-    print("|---|---|---|---|---|---|---|")
+    print("| workers | frames | kernel eff. median (worst) | rendering eff. median (worst) | balance median (worst) | kernel sum / single | machine slowdown | net kernel eff. | fps |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for n in sorted(n for s, n in runs if s == size):
         ke, re_, bal, ksum = [], [], [], []
         for k, e in sorted(runs[(size, n)].items()):
@@ -67,9 +78,10 @@ for size in sorted({s for s, _ in runs}, key=lambda s: int(s.split("x")[0])):
             continue
         pct = lambda xs, worst: "%.1f%% (%.1f%%)" % (100 * statistics.median(xs), 100 * worst(xs))
         rec = recovered.get((size, n), 0)
-        print("| %d | %d%s | %s | %s | %.3f (%.3f) | %.3f | %.2f |" % (
+        sd = slowdown(size, n)
+        print("| %d | %d%s | %s | %s | %.3f (%.3f) | %.3f | %.3f | %.1f%% | %.2f |" % (
             n, len(ke), " (+%d recovered)" % rec if rec else "", pct(ke, min), pct(re_, min),
-            statistics.median(bal), max(bal), statistics.median(ksum), fps(size, n)))
+            statistics.median(bal), max(bal), statistics.median(ksum), sd, 100 * statistics.median(ke) * sd, fps(size, n)))
     print()
 print("Conditions: " + ", ".join("%s %s" % (k, v) for k, v in summary.items() if k != "summary"))
 if jsonl:

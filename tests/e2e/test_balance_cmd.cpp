@@ -95,7 +95,11 @@ TEST_CASE("tessera balance: per-frame lines per node count, consistent efficienc
       // Efficiency = (single / sum of coefficients) / largest normalised node kernel.
       CHECK(eff == Approx(single / coeff_sum / worst).epsilon(0.01));
       CHECK(double(l["balance"]) >= 0.999);
-      CHECK(l["tiled_from"] == (l["frame"] == 0 ? "area" : "previous frame's SATs"));
+      CHECK(l["predictor"] == (l["frame"] == 0 ? "area" : "previous_frame"));
+      // The reference against itself: at most 1, and a render twice as slow as the other
+      // would be a broken measurement, not noise.
+      CHECK(double(l["noise_floor_efficiency"]) <= 1.0);
+      CHECK(double(l["noise_floor_efficiency"]) > 0.5);
       if (n == 1) {
         CHECK(l["balance"] == 1.0);
         CHECK(eff > 0.5);  // the reference against a re-render of itself
@@ -127,12 +131,28 @@ TEST_CASE("tessera balance --whole-task is reported as such", "[balance]") {
   REQUIRE(r.lines.size() == 3 + 1 + 1);
   for (size_t i = 0; i < 3; ++i) {
     CHECK(r.lines[i]["whole_task"] == true);
-    CHECK(r.lines[i]["tiled_from"] == (i == 0 ? "area" : "whole-task timings"));
+    CHECK(r.lines[i]["predictor"] == (i == 0 ? "area" : "whole_task"));
   }
   CHECK(r.lines[3]["nodes_summary"] == true);
   CHECK(r.lines[4]["summary"] == true);
   CHECK(r.lines[4]["whole_task"] == true);
   CHECK(r.lines[4]["reps"] == 2);
+}
+
+TEST_CASE("tessera balance defaults to the meaningful protocol: 1 thread per node, best of 3, and reports its noise floor",
+          "[balance]") {
+  Run r = run_tessera("balance --scene " + kScene + "/scene.gltf --camera-loop " + kScene +
+                      "/camera-loop.json --size 64 36 --frames 3 --nodes 2");
+  REQUIRE(r.rc == 0);
+  REQUIRE(!r.lines.empty());
+  const json& s = r.lines.back();
+  REQUIRE(s["summary"] == true);
+  CHECK(s["threads"] == 1);
+  CHECK(s["reps"] == 3);
+  const double median = s["noise_floor_median_efficiency"], worst = s["noise_floor_min_efficiency"];
+  CHECK(worst <= median);
+  CHECK(median <= 1.0);
+  CHECK(worst > 0.5);
 }
 
 TEST_CASE("tessera balance rejects bad options", "[balance]") {
