@@ -456,20 +456,18 @@ export class Ray {
 // Slab test. opt.dist: ray parameter of the entry point (0 when the origin is inside), Infinity on a miss.
 function rayBox(ray, box, opt) {
   const o = ray.data, b = box.data;
-  let tmin = -Infinity, tmax = Infinity;
-  if (!box.isEmpty()) {
-    for (let k = 0; k < 3; k++) {
-      const d = o[3 + k];
-      if (Math.abs(d) < 1e-12) {
-        if (o[k] < b[k] || o[k] > b[k + 3]) { tmin = Infinity; break; }
-        continue;
-      }
-      let t1 = (b[k] - o[k]) / d, t2 = (b[k + 3] - o[k]) / d;
-      if (t1 > t2) [t1, t2] = [t2, t1];
-      tmin = Math.max(tmin, t1); tmax = Math.min(tmax, t2);
+  let tmin = -Infinity, tmax = Infinity, miss = box.isEmpty();
+  for (let k = 0; k < 3 && !miss; k++) {
+    const d = o[3 + k];
+    if (Math.abs(d) < 1e-12) {
+      if (o[k] < b[k] || o[k] > b[k + 3]) miss = true;  // parallel to the slab and outside it
+      continue;
     }
-  } else tmin = Infinity;
-  const hit = tmin <= tmax && tmax >= 0;
+    let t1 = (b[k] - o[k]) / d, t2 = (b[k + 3] - o[k]) / d;
+    if (t1 > t2) [t1, t2] = [t2, t1];
+    tmin = Math.max(tmin, t1); tmax = Math.min(tmax, t2);
+  }
+  const hit = !miss && tmin <= tmax && tmax >= 0;
   if (opt && typeof opt === 'object') opt.dist = hit ? Math.max(tmin, 0) : Infinity;
   return hit;
 }
