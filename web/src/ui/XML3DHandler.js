@@ -174,6 +174,11 @@ export class XML3DHandler {
       return r ? new Ray(vec(r.origin), vec(r.direction)) : new Ray();
     };
     x.getRenderInterface = () => ({ handler: h, backend: h.backend });
+    // As xml3d.js: the hidden element's size and position are those of what is drawn in its place.
+    x.getBoundingClientRect = () => h.container.getBoundingClientRect();
+    x.getClientRects = () => h.container.getClientRects();
+    for (const k of ['clientWidth', 'clientHeight', 'clientLeft', 'clientTop', 'offsetWidth', 'offsetHeight', 'offsetLeft', 'offsetTop', 'offsetParent'])
+      Object.defineProperty(x, k, { configurable: true, get: () => h.container[k] });
     x.tessera = this;
   }
 
