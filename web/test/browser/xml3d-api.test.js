@@ -55,3 +55,40 @@ test('a page script rotates a <transform> with XML3D.AxisAngle, moves one with X
   assert.equal((await pixel(page, ...px(1.2, -0.4)))[3], 0, 'blue no longer reaches y = -0.4');
   await page.close();
 });
+
+test('XML3D.StandardCamera drives the view through a <transform>: translate, lookAt, examine, mouse drag', async () => {
+  const page = await open(env, '/test/pages/xml3d-api.html?still');
+  await page.waitForFunction(() => window.apiDone, null, { timeout: 10000 });
+  const r = await page.evaluate(() => {
+    const v = document.getElementById('v');
+    const cam = new XML3D.StandardCamera(v, { mode: 'examine' });
+    const pos = () => { const p = cam.position; return [p.x, p.y, p.z].map((n) => Math.round(n * 1000) / 1000); };
+    const out = { start: pos() };
+    cam.translate(new XML3D.Vec3(0, 0, 2));        // backwards in the view's frame
+    out.moved = pos();
+    out.transformRef = v.getAttribute('transform');
+    cam.lookAt(new XML3D.Vec3(1.2, 0, -5));
+    const fwd = new XML3D.Vec3(0, 0, -1).transformDirection(v.getWorldMatrix());
+    out.forward = [fwd.x, fwd.y, fwd.z];
+    cam.examine(document.getElementById('b'));
+    out.examined = pos();
+    out.examinePoint = cam.getExaminePoint().toDOMString();
+    return out;
+  });
+  assert.deepEqual(r.start, [0, 0, 0]);
+  assert.deepEqual(r.moved, [0, 0, 2]);
+  assert.match(r.transformRef, /^#/);
+  const d = [1.2, 0, -7], l = Math.hypot(...d);
+  r.forward.forEach((v, i) => assert.ok(Math.abs(v - d[i] / l) < 1e-4, String(r.forward)));
+  // Framed: along the viewing direction from the blue square's centre (1.2, 0, -5).
+  assert.ok(Math.hypot(r.examined[0] - 1.2, r.examined[1], r.examined[2] + 5) > 1, String(r.examined));
+  const before = await page.evaluate(() => Array.from(document.getElementById('v').getWorldMatrix().data));
+  const box = await page.evaluate(() => { const b = document.getElementById('x').getBoundingClientRect(); return [b.left, b.top]; });
+  await page.mouse.move(box[0] + 100, box[1] + 50);
+  await page.mouse.down();
+  await page.mouse.move(box[0] + 130, box[1] + 50, { steps: 3 });
+  await page.mouse.up();
+  const after = await page.evaluate(() => Array.from(document.getElementById('v').getWorldMatrix().data));
+  assert.ok(after.some((v, i) => Math.abs(v - before[i]) > 1e-3), 'a left drag orbits the view');
+  await page.close();
+});
