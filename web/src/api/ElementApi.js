@@ -7,8 +7,8 @@
 //   view: getViewMatrix() (world to view), getProjectionMatrix();
 //   mesh, data: getOutputNames(); getResult() warns (not supported);
 //   string attributes reflected as properties (mesh.src, group.transform, view.model, …).
-// In HTML documents XML3D elements are HTMLUnknownElements, so the members are defined once on
-// that prototype, each checking the element's tag (an element created by script has them before
+// In HTML documents XML3D elements are HTMLUnknownElements (<data>: HTMLDataElement), so the
+// members are defined once on those prototypes, each checking the element's tag (an element created by script has them before
 // it is inserted). Elements of other prototypes (the XHTML namespace) get them per element
 // (ensureElementApi). A member used on an element it does not belong to keeps ordinary expando
 // behaviour (properties) or warns once and returns null (methods).
@@ -225,14 +225,16 @@ function descriptors() {
   return d;
 }
 
-let installedProto = null;
-/** Defines the element members on HTMLUnknownElement.prototype of `win` (once). */
+const installed = new WeakSet();
+/** Defines the element members on HTMLUnknownElement.prototype of `win` (XML3D's tags in HTML)
+ * and HTMLDataElement.prototype (<data>), once each; native members are left alone. */
 export function installElementApi(win) {
-  const proto = win && win.HTMLUnknownElement && win.HTMLUnknownElement.prototype;
-  if (!proto || installedProto === proto) return;
-  installedProto = proto;
-  const d = descriptors();
-  for (const [k, desc] of Object.entries(d)) if (!Object.prototype.hasOwnProperty.call(proto, k)) Object.defineProperty(proto, k, desc);
+  for (const C of [win && win.HTMLUnknownElement, win && win.HTMLDataElement]) {
+    const proto = C && C.prototype;
+    if (!proto || installed.has(proto)) continue;
+    installed.add(proto);
+    for (const [k, desc] of Object.entries(descriptors())) if (!(k in proto)) Object.defineProperty(proto, k, desc);
+  }
 }
 
 /** Gives an element the members when its prototype lacks them (e.g. XHTML-namespace elements). */

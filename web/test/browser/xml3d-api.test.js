@@ -31,7 +31,7 @@ test('a page script rotates a <transform> with XML3D.AxisAngle, moves one with X
   assert.equal(error, undefined, error);
   const errors = page.logs.filter((l) => /^(error|pageerror):/.test(l));
   assert.deepEqual(errors, [], page.logs.join('\n'));
-  const warnings = page.logs.filter((l) => /^warning:/.test(l));
+  const warnings = page.logs.filter((l) => /^warning: XML3D/.test(l));
   assert.deepEqual(warnings, ['warning: XML3D: XML3D.materials.register() is not supported by Tessera and does nothing'], page.logs.join('\n'));
 
   // The script's own findings.
