@@ -1,9 +1,11 @@
 // Tessera's XML3D client. Import this module on a page: every <xml3d> element is rendered
-// locally with WebGL (three.js), or, with server="host:port", by a Tessera node.
+// locally with WebGL (three.js), or, with server="host:port", by a Tessera node. It also
+// installs window.XML3D (src/api/), the namespace xml3d.js pages script against.
 //   <script type="module" src="/src/xml3d.js"></script>
 import { XML3DHandler } from './ui/XML3DHandler.js';
 import { WebGLBackend } from './render/WebGLBackend.js';
 import { RemoteBackend } from './net/RemoteBackend.js';
+import { installGlobal } from './api/XML3DGlobal.js';
 
 export const version = '0.1.0-tessera';
 const handlers = new Map();
@@ -59,6 +61,8 @@ function start() {
     }
   }).observe(document.documentElement, { childList: true, subtree: true, attributes: true, attributeFilter: ['server', 'renderer', 'display', 'nodes'] });
 }
+
+if (typeof window !== 'undefined') installGlobal(window, { version, handlers: () => [...handlers.values()] });
 
 if (typeof document !== 'undefined') {
   if (document.readyState === 'loading') document.addEventListener('DOMContentLoaded', start); else start();

@@ -2,8 +2,7 @@
 // re-read page only touches what changed.
 import * as THREE from './three.js';
 import { createLightUniforms, updateLightUniforms, createMaterial } from './XML3DMaterial.js';
-import { worldBox, isEmpty } from '../scene/Bounds.js';
-import { invert, transformPoint } from '../math/Mat4.js';
+import { clippingPlanes } from '../scene/Bounds.js';
 
 export class ThreeRenderer {
   constructor(canvas, { onError = () => {}, onTextureLoad = () => {} } = {}) {
@@ -126,23 +125,7 @@ export class ThreeRenderer {
     c.aspect = aspect;
     const fovY = cam.fovX ? 2 * Math.atan(Math.tan(cam.fovX / 2) / aspect) : cam.fovY;
     c.fov = fovY * 180 / Math.PI;
-    let near = cam.near, far = cam.far;
-    if (near == null || far == null) {
-      const box = worldBox(desc);
-      let zmin = Infinity, zmax = -Infinity;
-      if (!isEmpty(box)) {
-        const view = invert(cam.toWorld);
-        for (let k = 0; k < 8; k++) {
-          const p = transformPoint(view, [k & 1 ? box.max[0] : box.min[0], k & 2 ? box.max[1] : box.min[1], k & 4 ? box.max[2] : box.min[2]]);
-          zmin = Math.min(zmin, -p[2]); zmax = Math.max(zmax, -p[2]);
-        }
-      }
-      if (!(zmax > 0)) { near = near ?? 1; far = far ?? 10; } else {
-        const margin = (zmax - Math.max(zmin, 0)) * 0.05 + 1e-3;
-        far = far ?? zmax + margin;
-        near = near ?? Math.max(zmin - margin, far * 1e-4, 0.01);
-      }
-    }
+    const { near, far } = clippingPlanes(desc, cam.toWorld, cam.near, cam.far);
     c.near = near; c.far = far;
     c.updateProjectionMatrix();
     c.matrix.fromArray(cam.toWorld);

@@ -1,5 +1,5 @@
 // Bounding boxes of a SceneDescription ({min, max} arrays; empty: min > max).
-import { transformPoint } from '../math/Mat4.js';
+import { transformPoint, invert } from '../math/Mat4.js';
 
 const localCache = new WeakMap();
 
@@ -51,4 +51,24 @@ export function worldBox(scene, element = null) {
     meshWorldBox(scene, m, box);
   }
   return box;
+}
+
+// Near and far planes for a camera (toWorld) when the view gives none: the scene's box in view
+// space with a 5% margin, near >= 0.01; an empty scene or one behind the camera gives 1 and 10.
+export function clippingPlanes(scene, toWorld, near = null, far = null) {
+  if (near != null && far != null) return { near, far };
+  const box = worldBox(scene);
+  let zmin = Infinity, zmax = -Infinity;
+  if (!isEmpty(box)) {
+    const view = invert(toWorld);
+    for (let k = 0; k < 8; k++) {
+      const p = transformPoint(view, [k & 1 ? box.max[0] : box.min[0], k & 2 ? box.max[1] : box.min[1], k & 4 ? box.max[2] : box.min[2]]);
+      zmin = Math.min(zmin, -p[2]); zmax = Math.max(zmax, -p[2]);
+    }
+  }
+  if (!(zmax > 0)) return { near: near ?? 1, far: far ?? 10 };
+  const margin = (zmax - Math.max(zmin, 0)) * 0.05 + 1e-3;
+  far = far ?? zmax + margin;
+  near = near ?? Math.max(zmin - margin, far * 1e-4, 0.01);
+  return { near, far };
 }

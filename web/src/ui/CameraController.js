@@ -2,16 +2,23 @@
 // Like StandardCamera it drives the view through a <transform> element, creating one (and a
 // view, if the page has none) when needed. Examine: left drag orbits the examine point (centre
 // of the scene's bounding box), right drag or wheel dollies, middle drag pans. Fly: left drag
-// looks around, W/S/A/D move (always on in fly mode).
+// looks around, W/S/A/D move (always on in fly mode, unless useKeys is false).
+// XML3D.StandardCamera (src/api/StandardCamera.js) drives a given <view> through this class.
 import * as M from '../math/Mat4.js';
 import { worldBox, isEmpty } from '../scene/Bounds.js';
+import { worldMatrixOf, parentWorldOf } from '../api/ElementApi.js';
 
 let generated = 0;
 
 export class CameraController {
-  constructor(handler, { mode = 'examine', rotateSpeed = 3, zoomSpeed = 20 } = {}) {
+  // view: the <view> to drive (default: the active view); examinePoint: [x, y, z] to orbit
+  // (default: the centre of the scene's bounding box); useKeys: WASD (default: in fly mode).
+  constructor(handler, { mode = 'examine', rotateSpeed = 3, zoomSpeed = 20, view = null, examinePoint = null, useKeys = null } = {}) {
     this.handler = handler;
     this.mode = mode;
+    this.view = view;
+    this.fixedExaminePoint = examinePoint;
+    this.useKeys = useKeys ?? (mode === 'fly');
     this.rotateSpeed = rotateSpeed;
     this.zoomSpeed = zoomSpeed;
     this.drag = null;
@@ -40,11 +47,13 @@ export class CameraController {
   }
 
   pose() {
+    if (this.view) return worldMatrixOf(this.view);
     const scene = this.handler.scene;
     return scene && scene.camera ? new Float32Array(scene.camera.toWorld) : M.identity();
   }
 
   examinePoint() {
+    if (this.fixedExaminePoint) return this.fixedExaminePoint;
     const box = worldBox(this.handler.scene);
     if (isEmpty(box)) return [0, 0, 0];
     return [0, 1, 2].map((k) => (box.min[k] + box.max[k]) / 2);
@@ -95,7 +104,7 @@ export class CameraController {
   }
 
   key(e) {
-    if (this.mode !== 'fly') return;
+    if (!this.useKeys) return;
     const step = this.sceneSize() * 0.01;
     const dir = { w: [0, 0, -1], s: [0, 0, 1], a: [-1, 0, 0], d: [1, 0, 0] }[e.key && e.key.toLowerCase()];
     if (!dir) return;
@@ -106,10 +115,10 @@ export class CameraController {
   }
 
   // Writes a camera-to-world matrix into the view's <transform> (translation + axis-angle).
-  // The view's parents are assumed untransformed (as for generated and typical page views).
+  // The matrix is taken into the space of the view's parent.
   write(m) {
     const xml3d = this.handler.xml3d, doc = xml3d.ownerDocument;
-    let view = this.handler.scene.camera.element;
+    let view = this.view || (this.handler.scene && this.handler.scene.camera && this.handler.scene.camera.element);
     if (!view) {
       view = doc.createElement('view');
       view.id = `Generated_View_${++generated}`;
@@ -126,6 +135,8 @@ export class CameraController {
       view.setAttribute('transform', `#${t.id}`);
       if (view.style) view.style.transform = '';
     }
+    const parent = M.invert(parentWorldOf(view));
+    if (parent) m = M.multiply(parent, m);
     const aa = M.toAxisAngle(m);
     t.setAttribute('translation', `${m[12]} ${m[13]} ${m[14]}`);
     t.setAttribute('rotation', aa.join(' '));

@@ -4,9 +4,10 @@
 import { MarkupReader, IdRegistry } from '../reader/MarkupReader.js';
 import { Resources } from '../reader/Resources.js';
 import { setScriptValue, isValueElement } from '../reader/Values.js';
-import { worldBox, isEmpty } from '../scene/Bounds.js';
 import { generateRay, pick } from '../scene/Picker.js';
 import { CameraController } from './CameraController.js';
+import { Vec3, Ray } from '../api/MathTypes.js';
+import { installElementApi, ensureElementApi } from '../api/ElementApi.js';
 
 const STYLE_ID = 'tessera-xml3d-style';
 const CSS = `
@@ -27,21 +28,12 @@ function injectStyle(doc) {
   doc.head.appendChild(s);
 }
 
-class Box {
-  constructor(b) {
-    this.min = { x: b.min[0], y: b.min[1], z: b.min[2] };
-    this.max = { x: b.max[0], y: b.max[1], z: b.max[2] };
-    this.empty = isEmpty(b);
-  }
-  isEmpty() { return this.empty; }
-  center() { return { x: (this.min.x + this.max.x) / 2, y: (this.min.y + this.max.y) / 2, z: (this.min.z + this.max.z) / 2 }; }
-}
-
-const vec = (a) => (a ? { x: a[0], y: a[1], z: a[2] } : null);
+const vec = (a) => (a ? new Vec3(a[0], a[1], a[2]) : null);
 function fill(out, a) {
   if (!out) return;
   const v = a || [NaN, NaN, NaN];
-  if (typeof out.set === 'function') out.set(v[0], v[1], v[2]);
+  if (out.data instanceof Float32Array && out.data.length >= 3) out.data.set(v);
+  else if (typeof out.set === 'function') out.set(v[0], v[1], v[2]);
   else { out.x = v[0]; out.y = v[1]; out.z = v[2]; }
 }
 
@@ -55,7 +47,7 @@ export class XML3DHandler {
     this.scene = null;
     this.shownErrors = new Set();
     this.ids = new IdRegistry();
-    this.resources = new Resources({ onLoad: () => this.invalidate() });
+    this.resources = new Resources({ onLoad: () => { this.dirty = true; this.invalidate(); } });
     this.reader = new MarkupReader({ resources: this.resources, ids: this.ids,
       computedStyle: (el) => doc.defaultView.getComputedStyle(el) });
 
@@ -78,7 +70,7 @@ export class XML3DHandler {
     this.installApi();
     this.installEvents();
     this.observer = new MutationObserver((records) => {
-      if (records.some((r) => !(r.type === 'attributes' && r.target === xml3d && r.attributeName === 'class'))) this.invalidate();
+      if (records.some((r) => !(r.type === 'attributes' && r.target === xml3d && r.attributeName === 'class'))) { this.dirty = true; this.invalidate(); }
     });
     this.observer.observe(xml3d, { attributes: true, childList: true, characterData: true, subtree: true });
     this.onResize = () => this.invalidate();
@@ -135,6 +127,7 @@ export class XML3DHandler {
     const t0 = performance.now();
     const scene = this.reader.read(this.xml3d);
     this.scene = scene;
+    this.dirty = false;
     this.installElementApi(scene);
     this.reportErrors(scene.errors);
     this.reportWarnings(scene.warnings);
@@ -153,31 +146,51 @@ export class XML3DHandler {
     }
   }
 
+  // The scene description with every DOM change made so far: pending mutation records are
+  // taken and the page is read again now (the next frame draws it), so that the element API
+  // answers for what a script has just written (XML3D.flushDOMChanges()).
+  sceneNow() {
+    if (this.disposed) return this.scene;
+    const pending = this.observer.takeRecords().some((r) => !(r.type === 'attributes' && r.target === this.xml3d && r.attributeName === 'class'));
+    if (pending || this.dirty || !this.scene) {
+      this.scene = this.reader.read(this.xml3d);
+      this.dirty = false;
+      this.invalidate();
+    }
+    return this.scene;
+  }
+
   // ---- API on the xml3d element (XML3D 5) ----------------------------------------------
+  // Matrices, bounding boxes and <transform> properties: src/api/ElementApi.js.
   installApi() {
     const x = this.xml3d, h = this;
+    installElementApi(x.ownerDocument.defaultView);
+    ensureElementApi(x);
     Object.defineProperty(x, 'complete', { configurable: true, get: () => h.complete });
     x.getElementByPoint = (px, py, hitPoint, hitNormal) => h.getElementByPoint(px, py, hitPoint, hitNormal);
+    x.getElementByRay = (ray, hitPoint, hitNormal) => h.getElementByRay(ray, hitPoint, hitNormal);
     x.generateRay = (px, py) => {
-      const r = h.rayAt(px, py);
-      return r && { origin: vec(r.origin), direction: vec(r.direction) };
+      const r = h.rayAt(px, py, h.sceneNow());
+      return r ? new Ray(vec(r.origin), vec(r.direction)) : new Ray();
     };
-    x.getWorldBoundingBox = () => new Box(h.scene ? worldBox(h.scene) : { min: [Infinity, Infinity, Infinity], max: [-Infinity, -Infinity, -Infinity] });
-    x.getLocalBoundingBox = x.getWorldBoundingBox;
     x.getRenderInterface = () => ({ handler: h, backend: h.backend });
+    // As xml3d.js: the hidden element's size and position are those of what is drawn in its place.
+    x.getBoundingClientRect = () => h.container.getBoundingClientRect();
+    x.getClientRects = () => h.container.getClientRects();
+    for (const k of ['clientWidth', 'clientHeight', 'clientLeft', 'clientTop', 'offsetWidth', 'offsetHeight', 'offsetLeft', 'offsetTop', 'offsetParent'])
+      Object.defineProperty(x, k, { configurable: true, get: () => h.container[k] });
     x.tessera = this;
   }
 
+  // Elements that are not HTMLUnknownElements (XHTML namespace) get the element API one by one.
   installElementApi(scene) {
-    const h = this;
-    const add = (el) => {
-      if (!el || el.getWorldBoundingBox) return;
-      el.getWorldBoundingBox = () => new Box(h.scene ? worldBox(h.scene, el) : { min: [1, 1, 1], max: [0, 0, 0] });
-      el.getLocalBoundingBox = el.getWorldBoundingBox;
-    };
-    for (const m of scene.meshes.values()) {
-      add(m.element);
-      for (let p = m.element.parentElement; p && p !== this.xml3d; p = p.parentElement) add(p);
+    const win = this.xml3d.ownerDocument.defaultView;
+    if (!(win && win.HTMLUnknownElement && this.xml3d instanceof win.HTMLUnknownElement)) {
+      for (const m of scene.meshes.values()) {
+        ensureElementApi(m.element);
+        for (let p = m.element.parentElement; p && p !== this.xml3d; p = p.parentElement) ensureElementApi(p);
+      }
+      for (const el of this.xml3d.querySelectorAll('transform,view,light,group,mesh,model,data')) ensureElementApi(el);
     }
     for (const v of this.xml3d.querySelectorAll('float,float2,float3,float4,float4x4,int,int4,bool,string')) {
       if (!v.setScriptValue && isValueElement(v)) v.setScriptValue = (value) => setScriptValue(v, value);
@@ -185,21 +198,35 @@ export class XML3DHandler {
   }
 
   // Page coordinates (as xml3d.js) to a world ray through that pixel.
-  rayAt(px, py) {
-    if (!this.scene) return null;
+  rayAt(px, py, scene = this.scene) {
+    if (!scene) return null;
     const win = this.xml3d.ownerDocument.defaultView;
     const r = this.container.getBoundingClientRect();
     const x = px - (r.left + win.scrollX), y = py - (r.top + win.scrollY);
-    return generateRay(this.scene.camera, x, y, this.width, this.height);
+    return generateRay(scene.camera, x, y, this.width, this.height);
   }
 
-  pickAt(px, py) {
-    const ray = this.rayAt(px, py);
-    return ray ? pick(this.scene, ray) : null;
+  pickAt(px, py, scene = this.scene) {
+    const ray = this.rayAt(px, py, scene);
+    return ray ? pick(scene, ray) : null;
+  }
+
+  // XML3D.Ray (or {origin, direction} with x/y/z or arrays) to the first element it hits.
+  getElementByRay(ray, hitPoint, hitNormal) {
+    const xyz = (v) => (v && v.data ? Array.from(v.data).slice(0, 3) : Array.isArray(v) ? v : v ? [v.x, v.y, v.z] : null);
+    const origin = ray && xyz(ray.origin), dir = ray && xyz(ray.direction);
+    let hit = null;
+    if (origin && dir && dir.every(Number.isFinite) && Math.hypot(...dir) > 0) {
+      const l = Math.hypot(...dir);
+      hit = pick(this.sceneNow(), { origin, direction: dir.map((d) => d / l) });
+    }
+    fill(hitPoint, hit && hit.point);
+    fill(hitNormal, hit && hit.normal);
+    return hit ? hit.element : null;
   }
 
   getElementByPoint(px, py, hitPoint, hitNormal) {
-    const hit = this.pickAt(px, py);
+    const hit = this.pickAt(px, py, this.sceneNow());
     fill(hitPoint, hit && hit.point);
     fill(hitNormal, hit && hit.normal);
     return hit ? hit.element : null;
