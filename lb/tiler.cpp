@@ -18,6 +18,7 @@ struct Tiler {
   std::vector<double> prefix;  // prefix[i] = sum of the coefficients of nodes [0, i)
   Rect* out;
   int32_t parallel_min_nodes;
+  TilerOptions::Search search;
 
   double weight(const Rect& r, bool by_area) const {
     if (by_area) return double(r.area());
@@ -31,6 +32,43 @@ struct Tiler {
   }
   static Rect second_side(const Rect& t, Axis axis, int32_t s) {
     return axis == Axis::x ? Rect{s, t.y0, t.x1, t.y1} : Rect{t.x0, s, t.x1, t.y1};
+  }
+
+  // The first s in [lo0, hi0] with w(s) >= target, where w(s) = weight(first_side(t, axis, s))
+  // is monotone, w(lo0) = 0 and w(hi0) = t_weight >= target; *w_s = w(s) and, for s > lo0,
+  // *w_before = w(s - 1).
+  int32_t find_line(const Rect& t, Axis axis, int32_t lo0, int32_t hi0, double target, double t_weight, bool by_area,
+                    double& w_s, double& w_before) const {
+    if (!(target > 0)) {  // w(lo0) = 0 already reaches it
+      w_s = 0;
+      return lo0;
+    }
+    // Invariant: w(lo) < target <= w(hi).
+    int32_t lo = lo0, hi = hi0;
+    double wlo = 0, whi = t_weight;
+    bool interpolate = search == TilerOptions::Search::interpolation;
+    while (hi - lo > 1) {
+      int32_t mid = lo + (hi - lo) / 2;
+      if (interpolate && whi > wlo) {
+        const double f = (target - wlo) / (whi - wlo);  // in (0, 1]
+        mid = lo + int32_t(f * double(hi - lo));
+        mid = std::min(std::max(mid, lo + 1), hi - 1);
+      }
+      const int32_t before = hi - lo;
+      const double wm = weight(first_side(t, axis, mid), by_area);
+      if (wm >= target) {
+        hi = mid;
+        whi = wm;
+      } else {
+        lo = mid;
+        wlo = wm;
+      }
+      // A guess that did not halve the bracket is followed by a halving step.
+      if (search == TilerOptions::Search::interpolation) interpolate = 2 * (hi - lo) <= before;
+    }
+    w_s = whi;
+    w_before = wlo;
+    return hi;
   }
 
   void run(const Rect& t, int32_t a, int32_t b, Axis axis, double t_weight, bool by_area) const {
@@ -63,21 +101,12 @@ struct Tiler {
     if (axis == Axis::y && t.height() < 2 && t.width() >= 2) axis = Axis::x;
     const int32_t lo0 = axis == Axis::x ? t.x0 : t.y0, hi0 = axis == Axis::x ? t.x1 : t.y1;
 
-    // Binary search: the first line s with weight(first side) >= target, then the nearer of
-    // s and s - 1. The first side's weight is monotone in s.
+    // The first line s with weight(first side) >= target, then the nearer of s and s - 1. The
+    // first side's weight is monotone in s, 0 at lo0 and t_weight at hi0.
     const double target = frac * t_weight;
-    int32_t lo = lo0, hi = hi0;
-    while (lo < hi) {
-      const int32_t mid = lo + (hi - lo) / 2;
-      if (weight(first_side(t, axis, mid), by_area) >= target)
-        hi = mid;
-      else
-        lo = mid + 1;
-    }
-    int32_t s = lo;
-    double w_first = s == hi0 ? t_weight : weight(first_side(t, axis, s), by_area);
+    double w_first = 0, w_prev = 0;
+    int32_t s = find_line(t, axis, lo0, hi0, target, t_weight, by_area, w_first, w_prev);
     if (s > lo0) {
-      const double w_prev = weight(first_side(t, axis, s - 1), by_area);
       const double d_prev = target - w_prev, d_s = w_first - target;
       bool take_prev = d_prev < d_s;
       if (d_prev == d_s) {
@@ -155,6 +184,7 @@ std::vector<Rect> tile(const SatArray* sats, Rect packet_space, const std::vecto
   }
   t.out = out.data();
   t.parallel_min_nodes = options.parallel_min_nodes;
+  t.search = options.search;
   const bool by_area = sats == nullptr;
   const double w = by_area ? double(packet_space.area()) : sats->cost(packet_space);
   const Axis first = packet_space.height() > packet_space.width() ? Axis::y : Axis::x;

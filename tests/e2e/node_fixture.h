@@ -105,8 +105,9 @@ struct ProtoClient {
   bool send(const std::vector<protocol::ClientRecord>& recs) { return ws.send(protocol::encode(recs)); }
   // Next server record of type T, skipping others (Stats); nullopt on timeout or close.
   template <class T>
+  // The timeout is scaled for sanitizer builds (time_scale.h).
   std::optional<T> next(int timeout_ms = 20000, std::vector<protocol::ErrorReply>* errors = nullptr) {
-    auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms);
+    auto deadline = std::chrono::steady_clock::now() + std::chrono::milliseconds(timeout_ms) * time_scale();
     while (true) {
       auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
       if (left.count() <= 0) return std::nullopt;
