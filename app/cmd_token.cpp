@@ -1,11 +1,11 @@
 // tessera token --key FILE --ttl SECONDS [--subject S]: prints one signed access token
-// (net/access.h, docs/protocol.md "Access tokens") for a node whose tessera.token-key is FILE.
+// (net/admission.h, docs/protocol.md "Access tokens") for a node whose tessera.token-key is FILE.
 #include <cstdio>
 #include <ctime>
 
 #include "app/args.h"
 #include "app/command.h"
-#include "net/access.h"
+#include "net/admission.h"
 
 namespace tessera::app {
 namespace {
@@ -27,8 +27,8 @@ int run(const std::vector<std::string>& argv) {
   const std::string subject = args.str("--subject");
   args.finish();
   if (ttl < 1 || ttl > kMaxTtl) throw std::invalid_argument("--ttl must be 1.." + std::to_string(kMaxTtl) + " seconds");
-  const std::string key = access::read_key_file(key_file);
-  std::printf("%s\n", access::make_token(key, int64_t(std::time(nullptr)) + ttl, subject).c_str());
+  const std::string key = admission::read_key_file(key_file);
+  std::printf("%s\n", admission::make_token(key, int64_t(std::time(nullptr)) + ttl, subject).c_str());
   return 0;
 }
 

@@ -183,11 +183,11 @@ auto for_setting(const char* setting, F&& read) {
 }  // namespace
 
 void NodeConfig::set_admission(ServerOptions& o) const {
-  if (!token_key.empty()) o.tokens.set_key(for_setting("token-key", [&] { return access::read_key_file(token_key); }));
+  if (!token_key.empty()) o.tokens.set_key(for_setting("token-key", [&] { return admission::read_key_file(token_key); }));
   if (!token_file.empty())
-    for (const std::string& t : for_setting("token-file", [&] { return access::read_token_file(token_file); }))
+    for (const std::string& t : for_setting("token-file", [&] { return admission::read_token_file(token_file); }))
       o.tokens.add_static(t);
-  o.origins = access::OriginPolicy::parse(allowed_origins, require_origin);
+  o.origins = admission::OriginPolicy::parse(allowed_origins, require_origin);
   if (max_connections_per_ip < 0) throw std::invalid_argument("tessera.max-connections-per-ip must be >= 0 (0: no limit)");
   o.max_connections_per_ip = size_t(max_connections_per_ip);
 }

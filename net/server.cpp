@@ -112,12 +112,12 @@ constexpr uint16_t kCloseBadToken = 4401;
 std::string peer_address(const WsServer::connection_ptr& con) {
   asio::error_code ec;
   auto ep = con->get_raw_socket().remote_endpoint(ec);
-  return ec ? "" : access::plain_address(ep.address().to_string());
+  return ec ? "" : admission::plain_address(ep.address().to_string());
 }
 std::string local_address(const WsServer::connection_ptr& con) {
   asio::error_code ec;
   auto ep = con->get_raw_socket().local_endpoint(ec);
-  return ec ? "" : access::plain_address(ep.address().to_string());
+  return ec ? "" : admission::plain_address(ep.address().to_string());
 }
 
 }  // namespace
@@ -159,9 +159,9 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl> {
   std::map<std::string, std::vector<std::shared_ptr<MjpegStream>>> mjpeg;
   std::map<std::string, std::shared_ptr<const std::vector<uint8_t>>> last_mjpeg;  // a viewer that opens late starts with it
   std::set<connection_hdl, std::owner_less<connection_hdl>> pending_opens;  // validated, not yet opened
-  // Admission (net/access.h): WebSocket connections per client address, counted from the
+  // Admission (net/admission.h): WebSocket connections per client address, counted from the
   // upgrade until they close, and each counted connection's address.
-  access::AddressCounter per_address;
+  admission::AddressCounter per_address;
   std::map<connection_hdl, std::string, std::owner_less<connection_hdl>> counted;
   // Browser connections refused for their access token: upgraded only to be closed with the
   // reason, since a page learns nothing of a refused upgrade (no status, no body).
@@ -417,8 +417,8 @@ std::optional<Refusal> Server::Impl::check_origin(const WsServer::connection_ptr
 
 std::optional<Refusal> Server::Impl::check_token(const WsServer::connection_ptr& con, const char* endpoint,
                                                  const std::string& address) {
-  using access::Verdict;
-  const access::TokenCheck c =
+  using admission::Verdict;
+  const admission::TokenCheck c =
       opts.tokens.check(http::query_param(con->get_resource(), kTokenParam), int64_t(std::time(nullptr)));
   if (c.verdict == Verdict::ok) return std::nullopt;
   const char* reason = c.verdict == Verdict::missing   ? "access token required"
@@ -426,7 +426,7 @@ std::optional<Refusal> Server::Impl::check_token(const WsServer::connection_ptr&
                                                        : "access token invalid";
   Event e(Ev::rejected, reason);
   e.with("endpoint", endpoint).with("address", address);
-  if (c.verdict != Verdict::missing && c.verdict != Verdict::expired) e.with("why", access::verdict_name(c.verdict));
+  if (c.verdict != Verdict::missing && c.verdict != Verdict::expired) e.with("why", admission::verdict_name(c.verdict));
   if (c.verdict == Verdict::expired) e.with("subject", c.subject).with("expired_at", c.expiry);
   log(std::move(e));
   return Refusal{websocketpp::http::status_code::unauthorized, reason, kCloseBadToken};

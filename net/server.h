@@ -14,7 +14,7 @@
 #include <caf/fwd.hpp>
 
 #include "actors/node.h"
-#include "net/access.h"
+#include "net/admission.h"
 
 namespace tessera {
 
@@ -27,9 +27,9 @@ struct ServerOptions {
   size_t max_clients = 16;     // further WebSocket handshakes get HTTP 503
   size_t max_mjpeg_per_session = 4;  // MJPEG viewers of one session token; further ones get HTTP 503
   size_t max_mjpeg_viewers = 64;     // MJPEG viewers on the node
-  // Session admission on /ws and /mjpeg/ (net/access.h; docs/operations.md, "Admission").
-  access::TokenPolicy tokens;        // none configured: no access token asked for
-  access::OriginPolicy origins = access::OriginPolicy::parse({"self", "loopback"});
+  // Session admission on /ws and /mjpeg/ (net/admission.h; docs/operations.md, "Admission").
+  admission::TokenPolicy tokens;        // none configured: no access token asked for
+  admission::OriginPolicy origins = admission::OriginPolicy::parse({"self", "loopback"});
   size_t max_connections_per_ip = 0;  // WebSocket connections per client address (0: no limit)
 };
 

@@ -1,7 +1,7 @@
 #pragma once
 // Session admission (issue 21, part 2): who may open a WebSocket session or an MJPEG stream on
 // a node. Pure code over strings, no sockets, so that it is tested alone
-// (tests/unit/test_access.cpp); net/server.cpp applies it to each request and `tessera token`
+// (tests/unit/test_admission.cpp); net/server.cpp applies it to each request and `tessera token`
 // makes signed tokens with it. HMAC-SHA256 and SHA-256 come from OpenSSL's libcrypto.
 //
 // - Access tokens (docs/protocol.md, "Access tokens"): a signed token
@@ -18,7 +18,7 @@
 #include <string>
 #include <vector>
 
-namespace tessera::access {
+namespace tessera::admission {
 
 // --- Encoding and MACs ----------------------------------------------------------------------
 
@@ -158,4 +158,4 @@ class AddressCounter {
   std::map<std::string, size_t> open_;
 };
 
-}  // namespace tessera::access
+}  // namespace tessera::admission

@@ -1,4 +1,4 @@
-// Session admission's pure code (net/access.h): base64url and HMAC-SHA256 against published
+// Session admission's pure code (net/admission.h): base64url and HMAC-SHA256 against published
 // vectors, signed tokens (expiry, clock skew, tampering), static tokens, the origin
 // allow-list and per-address counts.
 #include <catch2/catch.hpp>
@@ -8,9 +8,9 @@
 
 #include <unistd.h>
 
-#include "net/access.h"
+#include "net/admission.h"
 
-using namespace tessera::access;
+using namespace tessera::admission;
 
 namespace {
 

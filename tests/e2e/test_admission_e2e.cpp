@@ -11,7 +11,7 @@
 #include <ctime>
 #include <future>
 
-#include "net/access.h"
+#include "net/admission.h"
 #include "net/http.h"
 #include "tests/e2e/node_fixture.h"
 
@@ -26,10 +26,10 @@ const std::string kKey = "e2e-admission-key-0123456789abcdef-0123";
 int64_t now() { return int64_t(std::time(nullptr)); }
 
 std::string valid_token(const std::string& subject = "e2e-viewer") {
-  return access::make_token(kKey, now() + 600, subject);
+  return admission::make_token(kKey, now() + 600, subject);
 }
-std::string expired_token() { return access::make_token(kKey, now() - 3600, "e2e-late"); }
-std::string foreign_token() { return access::make_token(kKey + "-other", now() + 600, "e2e-forger"); }
+std::string expired_token() { return admission::make_token(kKey, now() - 3600, "e2e-late"); }
+std::string foreign_token() { return admission::make_token(kKey + "-other", now() + 600, "e2e-forger"); }
 
 // A node that asks for signed tokens made with kKey.
 std::unique_ptr<TestNode> node_with_key(size_t per_ip = 0) {
@@ -194,7 +194,7 @@ TEST_CASE("A foreign Origin gets HTTP 403 and no WebSocket; the node's own and l
 TEST_CASE("allowed-origins replaces the default: only the listed origins, and require-origin refuses non-browsers",
           "[e2e]") {
   TestNode node(8, [](NodeSettings&, ServerOptions& o) {
-    o.origins = access::OriginPolicy::parse({"https://app.example.com"}, true);
+    o.origins = admission::OriginPolicy::parse({"https://app.example.com"}, true);
   });
   std::string error;
   ProtoClient app;

@@ -1,5 +1,5 @@
-// Session admission: tokens, origins, per-address counts. See access.h.
-#include "net/access.h"
+// Session admission: tokens, origins, per-address counts. See admission.h.
+#include "net/admission.h"
 
 #include <algorithm>
 #include <cctype>
@@ -12,7 +12,7 @@
 #include <openssl/hmac.h>
 #include <openssl/sha.h>
 
-namespace tessera::access {
+namespace tessera::admission {
 
 namespace {
 
@@ -348,4 +348,4 @@ size_t AddressCounter::count(const std::string& address) const {
   return it == open_.end() ? 0 : it->second;
 }
 
-}  // namespace tessera::access
+}  // namespace tessera::admission
