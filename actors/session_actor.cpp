@@ -169,7 +169,9 @@ session_actor::behavior_type session_impl(self_ptr self, std::shared_ptr<ClientS
     node_log(*settings, std::move(closed));
     schedule_heap_trim();  // its scene, BVH and frames are freed as its linked actors end
   });
-  log(self, Event(Ev::opened, true).with("token", st.sink->token()));
+  // Whether the client named its session (an MJPEG stream needs it), not the name: whoever
+  // reads the log must not be able to watch the stream.
+  log(self, Event(Ev::opened, true).with("named", !st.sink->token().empty()));
   st.share.attach(st.settings->budget);
   if (st.settings->handshake_timeout_ms > 0)
     self->delayed_send(self, std::chrono::milliseconds(st.settings->handshake_timeout_ms), hs_timeout_atom::value);

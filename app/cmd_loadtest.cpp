@@ -1,5 +1,5 @@
 // tessera loadtest --scene S.gltf --camera-loop L.json [--clients N] [--display jpeg|s3tc|mjpeg]
-//                  [--seconds S | --frames F] [--warmup K] [--size W H] [--ao A] [--quality Q] [--host H --port P] [--threads T]
+//                  [--seconds S | --frames F] [--warmup K] [--size W H] [--ao A] [--quality Q] [--host H --port P [--token T]] [--threads T]
 // Uploads the scene from N simultaneous WebSocket clients; each replays the camera loop with two
 // render requests outstanding. Once every client has received K frames (all connected and
 // streaming), a common window of S seconds opens; the frames each client receives inside it
@@ -40,12 +40,13 @@ int run(const std::vector<std::string>& argv) {
   if (args.flag("--help")) {
     std::puts("tessera loadtest --scene S.gltf --camera-loop L.json [--clients N] [--display jpeg|s3tc|mjpeg]\n"
               "                 [--seconds S | --frames F] [--warmup K] [--size W H] [--ao A] [--quality Q]\n"
-              "                 [--host H --port P] [--threads T]\n"
+              "                 [--host H --port P [--token T]] [--threads T]\n"
               "Frames per second over a common window of S seconds (default 20) that opens once every client\n"
               "has received K frames (default 2). --frames F: the window closes instead once every client has\n"
               "received F frames after its K warm-up frames (frame numbers K..K+F-1, the camera loop's frames\n"
               "of those indices), so runs on different trees render the same frames. mjpeg: frames counted from the WebSocket's Frame records\n"
-              "(timings, empty payload); the JPEG goes to /mjpeg/TOKEN, which nobody reads here.");
+              "(timings, empty payload); the JPEG goes to /mjpeg/NAME, which nobody reads here. --token: the access\n"
+              "token for a node that asks for one (tessera token; sent as ?access_token=).");
     return 0;
   }
   int threads = 0;
@@ -60,6 +61,7 @@ int run(const std::vector<std::string>& argv) {
   const int quality = int(args.integer("--quality", 85));
   std::string host = args.str("--host", "127.0.0.1");
   long port = args.integer("--port", -1);
+  const std::string token = args.str("--token");
   args.finish();
   if (clients < 1 || clients > 64 || seconds < 1 || warmup < 1 || frames_wanted < 0)
     throw std::invalid_argument("--clients 1..64, --seconds >= 1, --warmup >= 1, --frames >= 0");
@@ -104,7 +106,8 @@ int run(const std::vector<std::string>& argv) {
       errors.push_back("client " + std::to_string(ci) + ": " + e);
     };
     auto body = [&] {
-      const std::string resource = display == "mjpeg" ? "/ws?session=loadtest" + std::to_string(ci) : "/ws";
+      std::string resource = display == "mjpeg" ? "/ws?session=loadtest" + std::to_string(ci) : "/ws";
+      if (!token.empty()) resource += (display == "mjpeg" ? "&access_token=" : "?access_token=") + token;
       if (!ws.connect(host, uint16_t(port), resource, &err)) return fail(err);
       protocol::Handshake hs;
       hs.display = display == "s3tc" ? protocol::DisplayKind::s3tc

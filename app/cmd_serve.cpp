@@ -31,7 +31,9 @@ const char* kHelp =
     "logical-cores, single-core-perf, max-width, max-height, max-message-bytes, max-buffer-bytes,\n"
     "max-client-bytes, max-triangles, max-texture-size, log-frames; resource bounds: handshake-timeout-ms,\n"
     "max-node-bytes (memory budget over all clients, 0: half the physical memory), max-mjpeg-per-session,\n"
-    "max-mjpeg-viewers.\n"
+    "max-mjpeg-viewers. Admission (docs/operations.md): token-key (key file of signed access tokens, see\n"
+    "`tessera token`), token-file (static tokens, one per line), allowed-origins (default [\"self\",\n"
+    "\"loopback\"]), require-origin, max-connections-per-ip.\n"
     "Cluster (docs/operations.md): [--cluster-port P] publishes this node to parents; [--children H:P,H:P]\n"
     "names its children; [--no-render] makes it a hub or dedicated master; [--no-http] serves no clients.\n"
     "INI: cluster-port, cluster-host, children, render, http, name, task-timeout-ms, reconnect-ms,\n"
@@ -40,6 +42,20 @@ const char* kHelp =
     "ray tracer unless the page says renderer=\"rasterizer\"); raytracer or rasterizer renders every\n"
     "session with that one. The listening line says whether the rasterizer's GL context can be created.\n"
     "Stops on SIGINT/SIGTERM.\n";
+
+// What the node admits, for the listening line: which kinds of token it asks for (never a
+// token, a key or a file's content), the page origins it takes and the per-address limit.
+std::string admission_json(const ServerOptions& o) {
+  const char* tokens = o.tokens.signed_tokens() && o.tokens.static_tokens() ? "signed+static"
+                       : o.tokens.signed_tokens()                          ? "signed"
+                       : o.tokens.static_tokens()                          ? "static"
+                                                                           : "none";
+  std::string origins;
+  for (const std::string& e : o.origins.describe()) origins += (origins.empty() ? "" : ", ") + json_str(e);
+  return std::string("{\"tokens\": ") + json_str(tokens) + ", \"allowed_origins\": [" + origins +
+         "], \"require_origin\": " + (o.origins.require_origin() ? "true" : "false") +
+         ", \"max_connections_per_ip\": " + std::to_string(o.max_connections_per_ip) + "}";
+}
 
 int run(const std::vector<std::string>& argv) {
   Args args(argv);
@@ -152,7 +168,7 @@ int run(const std::vector<std::string>& argv) {
   std::printf("{\"listening\": %s, \"websocket\": %s, \"cluster\": %s, \"name\": %s, \"children\": [%s], "
               "\"render\": %s, \"web_root\": %s, \"scene\": %s, \"max_clients\": %d, \"render_threads\": %d, "
               "\"cpu\": %s, \"renderer\": %s, \"rasterizer\": %s, \"max_node_bytes\": %llu, "
-              "\"handshake_timeout_ms\": %u}\n",
+              "\"handshake_timeout_ms\": %u, \"admission\": %s}\n",
               server ? json_str("http://" + opts.host + ":" + std::to_string(server->port()) + "/").c_str() : "null",
               server ? json_str("ws://" + opts.host + ":" + std::to_string(server->port()) + "/ws").c_str() : "null",
               published >= 0 ? json_str(cfg.cluster_host + ":" + std::to_string(published)).c_str() : "null",
@@ -161,7 +177,7 @@ int run(const std::vector<std::string>& argv) {
               cfg.render_threads > 0 ? cfg.render_threads : hardware_threads(), json_str(cpu_model()).c_str(),
               json_str(renderer).c_str(), json_str(gl_ok ? "available" : "unavailable: " + gl_why).c_str(),
               static_cast<unsigned long long>(settings->budget ? settings->budget->limit() : 0),
-              settings->handshake_timeout_ms);
+              settings->handshake_timeout_ms, admission_json(opts).c_str());
   std::fflush(stdout);
   int sig = 0;
   sigwait(&sigs, &sig);

@@ -66,6 +66,9 @@ NodeConfig::NodeConfig() {
            "memory budget over all clients: scene bytes + queued frames (0: half the physical memory)")
       .add(max_mjpeg_per_session, "max-mjpeg-per-session", "MJPEG viewers of one session")
       .add(max_mjpeg_viewers, "max-mjpeg-viewers", "MJPEG viewers on the node")
+      .add(token_key, "token-key", "key file of signed access tokens (tessera token); a token is then required")
+      .add(token_file, "token-file", "static access tokens, one per line; a token is then required")
+      .add(max_connections_per_ip, "max-connections-per-ip", "WebSocket connections per client address (0: no limit)")
       .add(cluster_port, "cluster-port", "publish this node to parent nodes on this port (-1: off, 0: any)")
       .add(cluster_host, "cluster-host", "address of the cluster port (0.0.0.0: all interfaces)")
       .add(name, "name", "this node's name in node lists and logs (default host:cluster-port)")
@@ -78,6 +81,12 @@ NodeConfig::NodeConfig() {
   custom_options_.add(string_list_option(
       web_public, "tessera", "web-public",
       "further folders of the web root to serve, as [\"dir/\", ...] (default: index.html, src/, demo/, three.js)"));
+  custom_options_.add(string_list_option(
+      allowed_origins, "tessera", "allowed-origins",
+      "page origins that may open sessions, as [\"https://app.example.com\", \"self\", \"loopback\"] or [\"*\"] "
+      "(default: self and loopback)"));
+  custom_options_.add(bool_option(require_origin, "tessera", "require-origin",
+                                  "refuse WebSocket requests without an Origin header (non-browser clients)"));
   custom_options_.add(bool_option(log_frames, "tessera", "log-frames", "log one JSON line per frame"));
   custom_options_.add(bool_option(renders, "tessera", "render", "render tasks here (false: hub or dedicated master)"));
   custom_options_.add(bool_option(http, "tessera", "http", "serve HTTP and WebSocket clients (false: worker or hub only)"));
@@ -155,7 +164,32 @@ ServerOptions NodeConfig::server_options() const {
   if (max_mjpeg_viewers < 1) throw std::invalid_argument("tessera.max-mjpeg-viewers must be >= 1");
   o.max_mjpeg_per_session = size_t(max_mjpeg_per_session);
   o.max_mjpeg_viewers = size_t(max_mjpeg_viewers);
+  set_admission(o);
   return o;
+}
+
+namespace {
+
+// Runs `read`, naming the setting in its error (which names files, never their content).
+template <class F>
+auto for_setting(const char* setting, F&& read) {
+  try {
+    return read();
+  } catch (const std::invalid_argument& e) {
+    throw std::invalid_argument(std::string("tessera.") + setting + ": " + e.what());
+  }
+}
+
+}  // namespace
+
+void NodeConfig::set_admission(ServerOptions& o) const {
+  if (!token_key.empty()) o.tokens.set_key(for_setting("token-key", [&] { return admission::read_key_file(token_key); }));
+  if (!token_file.empty())
+    for (const std::string& t : for_setting("token-file", [&] { return admission::read_token_file(token_file); }))
+      o.tokens.add_static(t);
+  o.origins = admission::OriginPolicy::parse(allowed_origins, require_origin);
+  if (max_connections_per_ip < 0) throw std::invalid_argument("tessera.max-connections-per-ip must be >= 0 (0: no limit)");
+  o.max_connections_per_ip = size_t(max_connections_per_ip);
 }
 
 }  // namespace tessera::app

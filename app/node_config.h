@@ -36,6 +36,12 @@ struct NodeConfig : caf::actor_system_config {
   int64_t max_node_bytes = 0;       // node-wide memory budget over all clients (0: half the physical memory)
   int max_mjpeg_per_session = 4;    // MJPEG viewers of one session
   int max_mjpeg_viewers = 64;       // MJPEG viewers on the node
+  // Session admission (docs/operations.md, "Admission"): who may open sessions and streams.
+  std::string token_key;    // key file of signed access tokens ("": none)
+  std::string token_file;   // static access tokens, one per line ("": none)
+  std::vector<std::string> allowed_origins{"self", "loopback"};  // page origins ("*": any)
+  bool require_origin = false;     // refuse WebSocket requests without an Origin header (non-browsers)
+  int max_connections_per_ip = 0;  // WebSocket connections per client address (0: no limit)
   // Cluster (docs/operations.md): this node's CAF endpoint and its children.
   int cluster_port = -1;          // publish the node actor here (-1: not a child of anyone; 0: any port)
   std::string cluster_host = "127.0.0.1";  // address the cluster port binds to
@@ -51,9 +57,13 @@ struct NodeConfig : caf::actor_system_config {
   bool cluster() const { return cluster_port >= 0 || !children.empty(); }
 
   NodeConfig();
-  // Fills NodeSettings and ServerOptions (limits checked; throws std::invalid_argument).
+  // Fills NodeSettings and ServerOptions (limits checked, key and token files read; throws
+  // std::invalid_argument).
   std::shared_ptr<NodeSettings> node_settings() const;
   ServerOptions server_options() const;
+
+ private:
+  void set_admission(ServerOptions& o) const;
 };
 
 }  // namespace tessera::app

@@ -13,6 +13,7 @@
 #include <sstream>
 #include <thread>
 #include <array>
+#include <ctime>
 
 #include <caf/all.hpp>
 
@@ -93,6 +94,32 @@ struct MjpegStream : std::enable_shared_from_this<MjpegStream> {
   }
 };
 
+// Why a request is not admitted: the HTTP status and a short body, or, for a browser refused
+// for its access token, the WebSocket close code and reason it is closed with at once.
+struct Refusal {
+  websocketpp::http::status_code::value status = websocketpp::http::status_code::forbidden;
+  std::string reason;       // the body (with a newline) or the close reason
+  uint16_t close_code = 0;  // 0: answered with the HTTP status
+};
+
+// The access token's query parameter on /ws and /mjpeg/NAME (docs/protocol.md, "Access tokens").
+constexpr const char* kTokenParam = "access_token";
+// Application close code for a refused access token (4000-4999 are the application's; 4401
+// mirrors HTTP's 401, as other WebSocket protocols do).
+constexpr uint16_t kCloseBadToken = 4401;
+
+// The client's address, and the address it connected to, as text ("" when the socket is gone).
+std::string peer_address(const WsServer::connection_ptr& con) {
+  asio::error_code ec;
+  auto ep = con->get_raw_socket().remote_endpoint(ec);
+  return ec ? "" : admission::plain_address(ep.address().to_string());
+}
+std::string local_address(const WsServer::connection_ptr& con) {
+  asio::error_code ec;
+  auto ep = con->get_raw_socket().local_endpoint(ec);
+  return ec ? "" : admission::plain_address(ep.address().to_string());
+}
+
 }  // namespace
 
 struct Server::Impl : std::enable_shared_from_this<Server::Impl> {
@@ -132,14 +159,27 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl> {
   std::map<std::string, std::vector<std::shared_ptr<MjpegStream>>> mjpeg;
   std::map<std::string, std::shared_ptr<const std::vector<uint8_t>>> last_mjpeg;  // a viewer that opens late starts with it
   std::set<connection_hdl, std::owner_less<connection_hdl>> pending_opens;  // validated, not yet opened
+  // Admission (net/admission.h): WebSocket connections per client address, counted from the
+  // upgrade until they close, and each counted connection's address.
+  admission::AddressCounter per_address;
+  std::map<connection_hdl, std::string, std::owner_less<connection_hdl>> counted;
+  // Browser connections refused for their access token: upgraded only to be closed with the
+  // reason, since a page learns nothing of a refused upgrade (no status, no body).
+  std::map<connection_hdl, Refusal, std::owner_less<connection_hdl>> refusing;
 
   Impl(caf::actor_system& s, std::shared_ptr<const NodeSettings> st, ServerOptions o)
-      : sys(s), settings(std::move(st)), opts(std::move(o)) {}
+      : sys(s), settings(std::move(st)), opts(std::move(o)), per_address(opts.max_connections_per_ip) {}
 
   void log(Event e) { node_log(*settings, std::move(e)); }
   void on_open(connection_hdl h);
   void on_close(connection_hdl h);
   bool on_validate(connection_hdl h);
+  std::optional<Refusal> check_origin(const WsServer::connection_ptr& con, const char* endpoint,
+                                      const std::string& address);
+  std::optional<Refusal> check_token(const WsServer::connection_ptr& con, const char* endpoint,
+                                     const std::string& address);
+  std::optional<Refusal> check_capacity(const std::string& address);
+  void release_address(connection_hdl h);
   void on_message(connection_hdl h, WsServer::message_ptr msg);
   void on_http(connection_hdl h);
   void enqueue(connection_hdl h, std::shared_ptr<const std::vector<uint8_t>> msg, bool frame);
@@ -313,6 +353,11 @@ void Server::Impl::close_conn(connection_hdl h, Conn& c, websocketpp::close::sta
   ws.close(h, code, reason, ec);
 }
 
+// A page's origin is checked first: a foreign page gets HTTP 403 and never a WebSocket. Then
+// the client's address (HTTP 429), its access token (HTTP 401; a browser's upgrade completes
+// and closes at once with 4401 and the reason, which is all a page can read), the node's
+// capacity (503) and the session name (400). Every refusal logs one `rejected` event, never
+// the token or the query string it came in.
 bool Server::Impl::on_validate(connection_hdl h) {
   auto con = ws.get_con_from_hdl(h);
   const std::string target = con->get_resource();
@@ -320,6 +365,28 @@ bool Server::Impl::on_validate(connection_hdl h) {
     con->set_status(websocketpp::http::status_code::not_found);
     con->set_body("WebSocket endpoint is /ws\n");
     return false;
+  }
+  const std::string address = peer_address(con);
+  std::optional<Refusal> refusal = check_origin(con, "/ws", address);
+  if (!refusal) refusal = check_capacity(address);
+  if (refusal) {
+    con->set_status(refusal->status);
+    con->set_body(refusal->reason + "\n");
+    if (refusal->status == websocketpp::http::status_code::too_many_requests) con->replace_header("Retry-After", "5");
+    return false;
+  }
+  if (auto bad_token = check_token(con, "/ws", address)) {
+    if (con->get_request_header("Origin").empty()) {  // not a browser: the plain HTTP answer
+      con->set_status(bad_token->status);
+      con->set_body(bad_token->reason + "\n");
+      con->replace_header("WWW-Authenticate", "Bearer realm=\"tessera\"");
+      return false;
+    }
+    // Counted per address until it has closed, so refused browsers cannot pile up either.
+    per_address.try_add(address);
+    counted[h] = address;
+    refusing[h] = *bad_token;
+    return true;
   }
   if (count + pending_opens.size() >= opts.max_clients) {
     con->set_status(websocketpp::http::status_code::service_unavailable);
@@ -333,12 +400,62 @@ bool Server::Impl::on_validate(connection_hdl h) {
     con->set_body(tokens.count(token) ? "session token in use\n" : "bad session token (8..64 of A-Z a-z 0-9 _ -)\n");
     return false;
   }
+  per_address.try_add(address);
+  counted[h] = address;
   pending_opens.insert(h);
   return true;
 }
 
+std::optional<Refusal> Server::Impl::check_origin(const WsServer::connection_ptr& con, const char* endpoint,
+                                                  const std::string& address) {
+  const std::string origin = con->get_request_header("Origin");
+  if (opts.origins.allows(origin, local_address(con), bound_port)) return std::nullopt;
+  const char* reason = origin.empty() ? "origin required" : "origin not allowed";
+  log(Event(Ev::rejected, reason).with("endpoint", endpoint).with("address", address).with("origin", origin.substr(0, 256)));
+  return Refusal{websocketpp::http::status_code::forbidden, reason};
+}
+
+std::optional<Refusal> Server::Impl::check_token(const WsServer::connection_ptr& con, const char* endpoint,
+                                                 const std::string& address) {
+  using admission::Verdict;
+  const admission::TokenCheck c =
+      opts.tokens.check(http::query_param(con->get_resource(), kTokenParam), int64_t(std::time(nullptr)));
+  if (c.verdict == Verdict::ok) return std::nullopt;
+  const char* reason = c.verdict == Verdict::missing   ? "access token required"
+                       : c.verdict == Verdict::expired ? "access token expired"
+                                                       : "access token invalid";
+  Event e(Ev::rejected, reason);
+  e.with("endpoint", endpoint).with("address", address);
+  if (c.verdict != Verdict::missing && c.verdict != Verdict::expired) e.with("why", admission::verdict_name(c.verdict));
+  if (c.verdict == Verdict::expired) e.with("subject", c.subject).with("expired_at", c.expiry);
+  log(std::move(e));
+  return Refusal{websocketpp::http::status_code::unauthorized, reason, kCloseBadToken};
+}
+
+std::optional<Refusal> Server::Impl::check_capacity(const std::string& address) {
+  if (opts.max_connections_per_ip == 0 || per_address.count(address) < opts.max_connections_per_ip) return std::nullopt;
+  log(Event(Ev::rejected, "too many connections from this address")
+          .with("address", address)
+          .with("max_connections_per_ip", opts.max_connections_per_ip));
+  return Refusal{websocketpp::http::status_code::too_many_requests,
+                 "too many connections from this address: " + std::to_string(opts.max_connections_per_ip) +
+                     " (max-connections-per-ip)"};
+}
+
+void Server::Impl::release_address(connection_hdl h) {
+  auto it = counted.find(h);
+  if (it == counted.end()) return;
+  per_address.remove(it->second);
+  counted.erase(it);
+}
+
 void Server::Impl::on_open(connection_hdl h) {
   pending_opens.erase(h);
+  if (auto r = refusing.find(h); r != refusing.end()) {  // no session: closed with the reason
+    websocketpp::lib::error_code ec;
+    ws.close(h, r->second.close_code, r->second.reason, ec);
+    return;
+  }
   auto con = ws.get_con_from_hdl(h);
   auto sink = std::make_shared<Sink>();
   sink->impl = shared_from_this();
@@ -356,6 +473,8 @@ void Server::Impl::on_open(connection_hdl h) {
 
 void Server::Impl::on_close(connection_hdl h) {
   pending_opens.erase(h);
+  refusing.erase(h);
+  release_address(h);
   auto it = conns.find(h);
   if (it == conns.end()) return;
   Conn& c = *it->second;
@@ -406,6 +525,17 @@ void Server::Impl::on_http(connection_hdl h) {
   }
   const bool head = method == "HEAD";
   if (path.rfind("/mjpeg/", 0) == 0) {
+    // Admission as on /ws: an <img> sends no Origin header, so the allow-list applies only to
+    // requests that carry one (a foreign page's fetch), the access token to every request.
+    const std::string address = peer_address(con);
+    std::optional<Refusal> refusal;
+    if (!con->get_request_header("Origin").empty()) refusal = check_origin(con, "/mjpeg/", address);
+    if (!refusal) refusal = check_token(con, "/mjpeg/", address);
+    if (refusal) {
+      respond(con, head, refusal->status, refusal->reason + "\n");
+      if (refusal->status == sc::unauthorized) con->replace_header("WWW-Authenticate", "Bearer realm=\"tessera\"");
+      return;
+    }
     std::string token = path.substr(7);
     if (!tokens.count(token)) {
       respond(con, head, sc::not_found, "no session with this token\n");

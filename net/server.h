@@ -1,8 +1,8 @@
 #pragma once
 // The node's network endpoint: one port serving
-//   /ws[?session=TOKEN]  the WebSocket carrying the client protocol (docs/protocol.md),
+//   /ws[?session=NAME]   the WebSocket carrying the client protocol (docs/protocol.md),
 //                        one session actor per connection;
-//   /mjpeg/TOKEN         the MJPEG stream of session TOKEN (multipart/x-mixed-replace);
+//   /mjpeg/NAME          the MJPEG stream of session NAME (multipart/x-mixed-replace);
 //   everything else      static files from the web root (the web client and demo pages).
 // websocketpp lives only in server.cpp (and in the client, net/ws_client.cpp).
 #include <cstdint>
@@ -14,6 +14,7 @@
 #include <caf/fwd.hpp>
 
 #include "actors/node.h"
+#include "net/admission.h"
 
 namespace tessera {
 
@@ -26,6 +27,10 @@ struct ServerOptions {
   size_t max_clients = 16;     // further WebSocket handshakes get HTTP 503
   size_t max_mjpeg_per_session = 4;  // MJPEG viewers of one session token; further ones get HTTP 503
   size_t max_mjpeg_viewers = 64;     // MJPEG viewers on the node
+  // Session admission on /ws and /mjpeg/ (net/admission.h; docs/operations.md, "Admission").
+  admission::TokenPolicy tokens;        // none configured: no access token asked for
+  admission::OriginPolicy origins = admission::OriginPolicy::parse({"self", "loopback"});
+  size_t max_connections_per_ip = 0;  // WebSocket connections per client address (0: no limit)
 };
 
 class Server {

@@ -25,6 +25,9 @@ struct WsClient::Impl {
   std::deque<std::vector<uint8_t>> inbox;
   bool opened = false, failed = false, is_closed = false;
   std::string fail_reason;
+  uint16_t close_code = 0;
+  std::string close_reason;
+  int http_status = 0;
 };
 
 WsClient::WsClient() : impl_(std::make_unique<Impl>()) {}
@@ -36,7 +39,7 @@ WsClient::~WsClient() {
 }
 
 bool WsClient::connect(const std::string& host, uint16_t port, const std::string& resource, std::string* error,
-                       int timeout_ms) {
+                       int timeout_ms, const std::vector<std::pair<std::string, std::string>>& headers) {
   Impl& i = *impl_;
   i.ep.clear_access_channels(websocketpp::log::alevel::all);
   i.ep.clear_error_channels(websocketpp::log::elevel::all);
@@ -56,12 +59,16 @@ bool WsClient::connect(const std::string& host, uint16_t port, const std::string
     i.failed = true;
     i.is_closed = true;
     auto con = i.ep.get_con_from_hdl(h);
+    i.http_status = int(con->get_response_code());
     i.fail_reason = "HTTP " + std::to_string(int(con->get_response_code())) + " " + con->get_response_msg() + ": " +
                     con->get_ec().message();
     i.cv.notify_all();
   });
-  i.ep.set_close_handler([&i](connection_hdl) {
+  i.ep.set_close_handler([&i](connection_hdl h) {
+    auto con = i.ep.get_con_from_hdl(h);
     std::lock_guard<std::mutex> l(i.mu);
+    i.close_code = con->get_remote_close_code();
+    i.close_reason = con->get_remote_close_reason();
     i.is_closed = true;
     i.cv.notify_all();
   });
@@ -77,6 +84,7 @@ bool WsClient::connect(const std::string& host, uint16_t port, const std::string
     if (error) *error = ec.message();
     return false;
   }
+  for (const auto& [name, value] : headers) con->replace_header(name, value);
   i.hdl = con->get_handle();
   i.ep.connect(con);
   i.thread = std::thread([&i] {
@@ -119,6 +127,21 @@ std::optional<std::vector<uint8_t>> WsClient::receive(int timeout_ms) {
 bool WsClient::closed() const {
   std::lock_guard<std::mutex> l(impl_->mu);
   return impl_->is_closed;
+}
+
+uint16_t WsClient::close_code() const {
+  std::lock_guard<std::mutex> l(impl_->mu);
+  return impl_->close_code;
+}
+
+std::string WsClient::close_reason() const {
+  std::lock_guard<std::mutex> l(impl_->mu);
+  return impl_->close_reason;
+}
+
+int WsClient::http_status() const {
+  std::lock_guard<std::mutex> l(impl_->mu);
+  return impl_->http_status;
 }
 
 void WsClient::close() {

@@ -5,6 +5,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace tessera {
@@ -19,13 +20,20 @@ class WsClient {
   WsClient& operator=(const WsClient&) = delete;
 
   // ws://host:port + resource (e.g. "/ws"). False and *error (e.g. "HTTP 503") on failure.
+  // `headers` go with the upgrade request (e.g. {"Origin", "http://127.0.0.1:8080"}, as a
+  // browser sends it; without one the client is no browser).
   bool connect(const std::string& host, uint16_t port, const std::string& resource, std::string* error,
-               int timeout_ms = 5000);
+               int timeout_ms = 5000, const std::vector<std::pair<std::string, std::string>>& headers = {});
   bool send(const std::vector<uint8_t>& message);
   bool send_text(const std::string& text);
   // The next received message; nullopt on timeout, or when closed and nothing is left.
   std::optional<std::vector<uint8_t>> receive(int timeout_ms);
   bool closed() const;
+  // Once closed: the server's close code and reason (websocketpp's 1005 or 1006 when it sent
+  // none; 0 before), and the HTTP status of a refused upgrade (0 when the upgrade got through).
+  uint16_t close_code() const;
+  std::string close_reason() const;
+  int http_status() const;
   void close();   // close handshake
   void abort();   // drops the TCP connection without a close handshake (a crashed client)
 

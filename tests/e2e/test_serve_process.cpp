@@ -13,7 +13,9 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cstdio>
 #include <cstring>
+#include <fstream>
 #include <optional>
 #include <string>
 #include <thread>
@@ -244,4 +246,65 @@ TEST_CASE("Boolean settings take =true and =false on the command line, and nothi
   CHECK(WEXITSTATUS(*status) != 0);
   INFO("stderr: " << bad.err());
   CHECK(bad.err().find("log-frames") != std::string::npos);
+}
+
+TEST_CASE("tessera token makes tokens that a node with the same token-key admits; the log holds no token or key",
+          "[e2e]") {
+  const std::string key_file = "/tmp/tessera-serve-key-" + std::to_string(getpid());
+  const std::string key = "serve-process-test-key-0123456789abcdef";
+  { std::ofstream(key_file) << key << "\n"; }
+  auto token_of = [&](std::vector<std::string> extra) {
+    std::vector<std::string> a{TESSERA_BINARY, "token", "--key", key_file};
+    a.insert(a.end(), extra.begin(), extra.end());
+    Process t(a);
+    auto status = t.wait(15000);
+    REQUIRE(status);
+    return std::make_pair(WIFEXITED(*status) ? WEXITSTATUS(*status) : -1, t.out() + t.err());
+  };
+  auto [rc, token] = token_of({"--ttl", "600", "--subject", "ops"});
+  REQUIRE(rc == 0);
+  token = token.substr(0, token.find('\n'));
+  CHECK(token.rfind("tsr1.", 0) == 0);
+  CHECK(token_of({"--ttl", "0"}).first != 0);
+  CHECK(token_of({}).first != 0);
+
+  Process p(serve({"--port", "0", "--tessera.token-key=" + key_file,
+                   "--tessera.allowed-origins=[\"https://app.example.com\"]"}));
+  auto line = p.first_line(30000);
+  INFO("stderr: " << p.err());
+  REQUIRE(line);
+  CHECK(line->find("\"admission\": {\"tokens\": \"signed\", \"allowed_origins\": [\"https://app.example.com:443\"]") !=
+        std::string::npos);
+  const uint16_t port = listening_port(*line);
+  ProtoClient admitted, browser;
+  std::string error;
+  REQUIRE(admitted.ws.connect("127.0.0.1", port, "/ws?access_token=" + token, &error));
+  CHECK(admitted.handshake(protocol::DisplayKind::jpeg, 64, 48));
+  REQUIRE(browser.ws.connect("127.0.0.1", port, "/ws?access_token=" + token, &error, 5000,
+                             {{"Origin", "https://app.example.com"}}));
+  CHECK(browser.handshake(protocol::DisplayKind::jpeg, 64, 48));
+  ProtoClient without, own_page;
+  CHECK_FALSE(without.ws.connect("127.0.0.1", port, "/ws", &error));
+  CHECK(without.ws.http_status() == 401);
+  // allowed-origins replaced the default: the node's own origin is no longer in it.
+  CHECK_FALSE(own_page.ws.connect("127.0.0.1", port, "/ws?access_token=" + token, &error, 5000,
+                                  {{"Origin", "http://127.0.0.1:" + std::to_string(port)}}));
+  CHECK(own_page.ws.http_status() == 403);
+  p.signal(SIGTERM);
+  REQUIRE(p.wait(15000));
+  CHECK(p.err_count("\"rejected\": \"access token required\"") == 1);
+  CHECK(p.err_count("\"rejected\": \"origin not allowed\"") == 1);
+  CHECK(p.err().find(token.substr(token.rfind('.') + 1)) == std::string::npos);
+  CHECK(p.err().find(key) == std::string::npos);
+  CHECK(p.out().find(key) == std::string::npos);
+
+  // A short key is refused at start-up, naming the file and not the key.
+  { std::ofstream(key_file) << "short-key\n"; }
+  Process bad(serve({"--port", "0", "--tessera.token-key=" + key_file}));
+  auto status = bad.wait(15000);
+  REQUIRE(status);
+  CHECK(WEXITSTATUS(*status) != 0);
+  CHECK(bad.err().find("tessera.token-key: the key in " + key_file) != std::string::npos);
+  CHECK(bad.err().find("short-key") == std::string::npos);
+  std::remove(key_file.c_str());
 }

@@ -59,7 +59,7 @@ function start() {
       }
       if (r.type === 'attributes' && r.target.localName === 'xml3d' && handlers.has(r.target)) reconfigure(r.target);
     }
-  }).observe(document.documentElement, { childList: true, subtree: true, attributes: true, attributeFilter: ['server', 'renderer', 'display', 'nodes'] });
+  }).observe(document.documentElement, { childList: true, subtree: true, attributes: true, attributeFilter: ['server', 'renderer', 'display', 'nodes', 'token'] });
 }
 
 if (typeof window !== 'undefined') installGlobal(window, { version, handlers: () => [...handlers.values()] });

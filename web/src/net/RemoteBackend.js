@@ -1,11 +1,13 @@
 // Server rendering backend: <xml3d server="host:port" renderer="raytracer" display="jpeg|s3tc|mjpeg"
-// nodes="N" sync-rate="30" jpeg-quality="85" ao-samples="0" max-depth="4"> (RenderSettings.js). The scene goes to
+// nodes="N" sync-rate="30" jpeg-quality="85" ao-samples="0" max-depth="4" token="..."> (RenderSettings.js;
+// the access token also from the page's #tessera-token=..., AccessToken.js). The scene goes to
 // the node over the sync channel; frames come back on the same WebSocket and are shown in a
 // display element behind a transparent input canvas (which takes the mouse).
 import { SyncChannel } from './SyncChannel.js';
 import { JpegDisplay, S3tcDisplay, MjpegDisplay } from './FrameDisplay.js';
 import { hasS3TC } from './Features.js';
 import { readRenderSettings } from './RenderSettings.js';
+import { accessToken, withToken, redact } from './AccessToken.js';
 
 function cssColor(doc, el) {
   const c = doc.defaultView.getComputedStyle(el).backgroundColor || '';
@@ -35,9 +37,12 @@ export class RemoteBackend {
     const host = server.replace(/^wss?:\/\//, '').replace(/\/.*$/, '');
     const session = Math.random().toString(36).slice(2) + Date.now().toString(36);
     const secure = doc.defaultView.location.protocol === 'https:';
-    this.url = `${secure ? 'wss' : 'ws'}://${host}/ws?session=${session}`;
+    const token = accessToken(x, doc.defaultView);
+    this.host = host;
+    this.url = withToken(`${secure ? 'wss' : 'ws'}://${host}/ws?session=${session}`, token);
     this.frameView = display === 's3tc' ? new S3tcDisplay(doc)
-      : display === 'mjpeg' ? new MjpegDisplay(doc, `${secure ? 'https' : 'http'}://${host}/mjpeg/${session}`) : new JpegDisplay(doc);
+      : display === 'mjpeg' ? new MjpegDisplay(doc, withToken(`${secure ? 'https' : 'http'}://${host}/mjpeg/${session}`, token))
+        : new JpegDisplay(doc);
     this.element = this.frameView.element;
     handler.container.appendChild(this.element);
     this.inputElement = doc.createElement('canvas');
@@ -79,13 +84,15 @@ export class RemoteBackend {
     const h = this.handler;
     h.container.dataset.connection = state;
     const text = {
-      connecting: `connecting to ${this.url}…`,
+      connecting: `connecting to ${redact(this.url)}…`,
       handshake: 'connected, waiting for the node…',
       ready: null,
       disconnected: `⚠ connection to the Tessera node lost: ${detail}`,
       failed: `⚠ the Tessera node refused the session: ${detail}`,
     }[state];
     h.setStatus('connection', text, state === 'disconnected' || state === 'failed');
+    // The end of this page's session: one console error that says why (the node's close reason).
+    if (state === 'failed') console.error(`Tessera: the node ${this.host} refused the session: ${detail}`);
     if (state === 'ready') {
       this.serverInfo = detail;
       if (this.frameView.start) this.frameView.start();

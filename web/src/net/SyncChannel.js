@@ -9,9 +9,14 @@ import { SceneSync } from './SceneSync.js';
 import { hasCompressionStream, deflate } from './Features.js';
 import { loadTexture } from './TextureEncoder.js';
 import { sameSettings } from './RenderSettings.js';
+import { redact } from './AccessToken.js';
 
 const DEFLATE_MIN_BYTES = 256;
 const MAX_OUTSTANDING_RENDERS = 2;
+// The node closes a WebSocket with 4401 when it refuses the page's access token (missing,
+// expired, invalid: the reason says which; docs/protocol.md). The same page cannot do better
+// by trying again, so the channel stops there.
+const CLOSE_BAD_TOKEN = 4401;
 
 export class SyncChannel {
   constructor({ url, handshake, settings = null, rate = 30, highWater = 4 << 20, messageBytes = 1 << 20,
@@ -32,16 +37,26 @@ export class SyncChannel {
     if (this.closed) return;
     this.setState('connecting');
     let ws;
-    try { ws = new WebSocket(this.url); } catch (e) { this.lost(`cannot open ${this.url}: ${e.message}`); return; }
+    try { ws = new WebSocket(this.url); } catch (e) { this.lost(`cannot open ${redact(this.url)}: ${e.message}`); return; }
     ws.binaryType = 'arraybuffer';
     this.ws = ws;
+    let opened = false;
     ws.onopen = () => {
+      opened = true;
       this.send(encodeClient([{ type: 'handshake', ...this.handshake }]));  // alone in its message
       this.setState('handshake');
     };
     ws.onmessage = (e) => this.receive(e.data);
-    ws.onclose = (e) => { if (this.ws === ws) this.lost(e.reason || `connection closed (code ${e.code})`); };
+    ws.onclose = (e) => { if (this.ws === ws) this.closedBy(e, opened); };
     ws.onerror = () => {};
+  }
+
+  // A browser tells a page nothing of an upgrade the node refused with an HTTP status (a foreign
+  // origin, too many connections, a full node): only that it never opened.
+  closedBy(e, opened) {
+    if (e.code === CLOSE_BAD_TOKEN) this.fatal = e.reason || 'access token refused';
+    this.lost(e.reason || (opened ? `connection closed (code ${e.code})`
+      : `the node refused the connection or cannot be reached (code ${e.code}; the browser's console shows the HTTP status)`));
   }
 
   setState(state, detail = '') {
