@@ -22,13 +22,6 @@ namespace {
 
 constexpr int32_t kWidth = 1280, kHeight = 720;
 
-// Every tiling is timed with both split-line searches (lb/tiler.h), the reference first.
-constexpr TilerOptions::Search kSearches[] = {TilerOptions::Search::bisection, TilerOptions::Search::interpolation};
-const TilerOptions bisection{0, TilerOptions::Search::bisection};
-const char* search_name(TilerOptions::Search s) {
-  return s == TilerOptions::Search::bisection ? "bisection" : "interpolation";
-}
-
 std::string cpu_model() {
   std::ifstream in("/proc/cpuinfo");
   std::string line;
@@ -172,36 +165,27 @@ int lbbench(const std::vector<std::string>& args) {
     SatArray array(m.packets);
     for (const Rect& r : last) array.add(Sat::from_cost_map(sub_map(m, r)));
     array.finalize();
-    for (auto search : kSearches) {
-      TilerOptions opt;
-      opt.search = search;
-      std::vector<Rect> tasks;
-      const Timing t = time_it(reps, [&] { tasks = tile(&array, m.packets, coef, opt); });
-      std::printf(
-          "{\"bench\": \"tiling\", \"search\": \"%s\", \"nodes\": %d, \"sats\": %zu, \"packet\": \"2x2\", \"threads\": 1, "
-          "\"reps\": %d, \"median_ms\": %.4f, \"min_ms\": %.4f, \"max_cost_over_ideal\": %.5f, \"same_as_bisection\": %s}\n",
-          search_name(search), nodes, array.size(), reps, t.median_ms, t.min_ms, imbalance(array, tasks, coef),
-          tasks == tile(&array, m.packets, coef, bisection) ? "true" : "false");
-    }
+    std::vector<Rect> tasks;
+    const Timing t = time_it(reps, [&] { tasks = tile(&array, m.packets, coef); });
+    std::printf(
+        "{\"bench\": \"tiling\", \"nodes\": %d, \"sats\": %zu, \"packet\": \"2x2\", \"threads\": 1, \"reps\": %d, "
+        "\"median_ms\": %.4f, \"min_ms\": %.4f, \"max_cost_over_ideal\": %.5f}\n",
+        nodes, array.size(), reps, t.median_ms, t.min_ms, imbalance(array, tasks, coef));
   }
 
   // 50,000 tasks on one SAT, serial and parallel.
   const std::vector<double> coef50k(50000, 1.0);
-  const std::vector<Rect> reference = tile(&whole, m.packets, coef50k, bisection);
-  for (int n : thread_counts)
-    for (auto search : kSearches) {
-      TilerOptions opt;
-      opt.parallel_min_nodes = n > 1 ? 256 : 0;
-      opt.search = search;
-      tbb::task_arena arena(n);
-      std::vector<Rect> tasks;
-      const Timing t = time_it(reps, [&] { arena.execute([&] { tasks = tile(&whole, m.packets, coef50k, opt); }); });
-      std::printf(
-          "{\"bench\": \"tiling\", \"search\": \"%s\", \"nodes\": 50000, \"sats\": 1, \"packet\": \"2x2\", \"threads\": %d, "
-          "\"reps\": %d, \"median_ms\": %.4f, \"min_ms\": %.4f, \"max_cost_over_ideal\": %.5f, \"same_as_bisection\": %s}\n",
-          search_name(search), n, reps, t.median_ms, t.min_ms, imbalance(whole, tasks, coef50k),
-          tasks == reference ? "true" : "false");
-    }
+  for (int n : thread_counts) {
+    TilerOptions opt;
+    opt.parallel_min_nodes = n > 1 ? 256 : 0;
+    tbb::task_arena arena(n);
+    std::vector<Rect> tasks;
+    const Timing t = time_it(reps, [&] { arena.execute([&] { tasks = tile(&whole, m.packets, coef50k, opt); }); });
+    std::printf(
+        "{\"bench\": \"tiling\", \"nodes\": 50000, \"sats\": 1, \"packet\": \"2x2\", \"threads\": %d, \"reps\": %d, "
+        "\"median_ms\": %.4f, \"min_ms\": %.4f, \"max_cost_over_ideal\": %.5f}\n",
+        n, reps, t.median_ms, t.min_ms, imbalance(whole, tasks, coef50k));
+  }
 
   std::printf(
       "{\"summary\": true, \"cpu\": \"%s\", \"hardware_threads\": %u, \"threads\": %d, \"reps\": %d, "

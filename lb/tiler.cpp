@@ -18,7 +18,6 @@ struct Tiler {
   std::vector<double> prefix;  // prefix[i] = sum of the coefficients of nodes [0, i)
   Rect* out;
   int32_t parallel_min_nodes;
-  TilerOptions::Search search;
 
   double weight(const Rect& r, bool by_area) const {
     if (by_area) return double(r.area());
@@ -43,18 +42,13 @@ struct Tiler {
       w_s = 0;
       return lo0;
     }
-    // Invariant: w(lo) < target <= w(hi).
+    // Bisection with the invariant w(lo) < target <= w(hi): when it ends, hi - lo = 1 and both
+    // weights the split needs are known, none asked twice. (Interpolating the guess from the
+    // bracket's weights was measured slower: docs/load-balancing.md.)
     int32_t lo = lo0, hi = hi0;
     double wlo = 0, whi = t_weight;
-    bool interpolate = search == TilerOptions::Search::interpolation;
     while (hi - lo > 1) {
-      int32_t mid = lo + (hi - lo) / 2;
-      if (interpolate && whi > wlo) {
-        const double f = (target - wlo) / (whi - wlo);  // in (0, 1]
-        mid = lo + int32_t(f * double(hi - lo));
-        mid = std::min(std::max(mid, lo + 1), hi - 1);
-      }
-      const int32_t before = hi - lo;
+      const int32_t mid = lo + (hi - lo) / 2;
       const double wm = weight(first_side(t, axis, mid), by_area);
       if (wm >= target) {
         hi = mid;
@@ -63,8 +57,6 @@ struct Tiler {
         lo = mid;
         wlo = wm;
       }
-      // A guess that did not halve the bracket is followed by a halving step.
-      if (search == TilerOptions::Search::interpolation) interpolate = 2 * (hi - lo) <= before;
     }
     w_s = whi;
     w_before = wlo;
@@ -184,7 +176,6 @@ std::vector<Rect> tile(const SatArray* sats, Rect packet_space, const std::vecto
   }
   t.out = out.data();
   t.parallel_min_nodes = options.parallel_min_nodes;
-  t.search = options.search;
   const bool by_area = sats == nullptr;
   const double w = by_area ? double(packet_space.area()) : sats->cost(packet_space);
   const Axis first = packet_space.height() > packet_space.width() ? Axis::y : Axis::x;

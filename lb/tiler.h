@@ -28,13 +28,6 @@ struct TilerOptions {
   // Recurse into the two halves of a split in parallel (TBB, calling thread's arena) while a
   // tile holds at least this many nodes; 0 disables parallel tiling.
   int32_t parallel_min_nodes = 1024;
-  // How the split line is searched. Both find the same line (the first one whose first side
-  // weighs at least the target), so they give identical tilings. interpolation guesses the line
-  // from the weights at the ends of the bracket (costs vary smoothly, so 2-4 SAT queries
-  // usually do), and halves the bracket instead whenever a guess did not halve it, so it never
-  // needs more than about twice the queries of bisection. bisection is the reference.
-  enum class Search { interpolation, bisection };
-  Search search = Search::interpolation;
 };
 
 // Splits packet_space into coefficients.size() tasks; result[i] is node i's task.

@@ -429,33 +429,6 @@ TEST_CASE("Parallel tiling of 50,000 tasks gives the same tasks as serial tiling
   require_exact_cover(a, space, coef.size());
 }
 
-TEST_CASE("Interpolation and bisection find the same split lines: identical tilings", "[tiler]") {
-  std::mt19937_64 rng(22);
-  tessera::TilerOptions bisection, interpolation;
-  bisection.search = tessera::TilerOptions::Search::bisection;
-  interpolation.search = tessera::TilerOptions::Search::interpolation;
-  for (Kind kind : {Kind::smooth, Kind::spiky, Kind::hot, Kind::zero}) {
-    for (const Rect space : {Rect{0, 0, 640, 360}, Rect{0, 0, 1, 97}, Rect{0, 0, 130, 41}}) {
-      SatArray one(space), many(space);
-      const CostMap truth = make_map(rng, space, kind);
-      make_frame(truth, {space}, {1.0}, {false}, one);
-      // Several SATs, one missing (its area gets the mean density), heterogeneous nodes.
-      const std::vector<double> split{1.0, 2.0, 1.0, 3.0, 1.0};
-      make_frame(truth, tile(nullptr, space, split), split, {false, false, true, false, false}, many);
-      for (const SatArray* sats : {&one, &many})
-        for (size_t nodes : {size_t(1), size_t(2), size_t(5), size_t(33), size_t(1000)}) {
-          std::vector<double> coef(nodes);
-          for (size_t i = 0; i < nodes; ++i) coef[i] = 1.0 + double(i % 3);
-          INFO("kind " << int(kind) << ", space " << space.width() << "x" << space.height() << ", nodes " << nodes);
-          REQUIRE(tile(sats, space, coef, bisection) == tile(sats, space, coef, interpolation));
-        }
-      // No cost data: by area.
-      const std::vector<double> coef(77, 1.0);
-      REQUIRE(tile(nullptr, space, coef, bisection) == tile(nullptr, space, coef, interpolation));
-    }
-  }
-}
-
 TEST_CASE("One SAT or many SATs of the same cost map give the same tiling", "[tiler]") {
   std::mt19937_64 rng(21);
   const Rect space{0, 0, 200, 120};
