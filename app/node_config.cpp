@@ -27,6 +27,18 @@ caf::config_option string_list_option(std::vector<std::string>& storage, caf::st
   return {category, name, description, &meta, &storage};
 }
 
+// A string option with our own meta state, for the same reason: under clang with TSan,
+// `--tessera.name=x` (any CAF std::string option on the command line) called a null function
+// pointer in config_option::parse (test_serve_process caught it with --tessera.token-key).
+caf::config_option string_option(std::string& storage, caf::string_view category, caf::string_view name,
+                                 caf::string_view description) {
+  using T = std::string;
+  static caf::config_option::meta_state meta{caf::detail::check_impl<T>, caf::detail::store_impl<T>,
+                                             caf::detail::get_impl<T>, caf::detail::parse_impl_delegate<T>,
+                                             caf::select_config_value_access_t<T>::type_name()};
+  return {category, name, description, &meta, &storage};
+}
+
 // A boolean setting that the command line can set either way. CAF 0.17 makes a bool option a
 // flag: `--tessera.log-frames=false` is a parser error there, and a bare flag is not a
 // `--tessera.NAME=VALUE` argument, so such settings could only be turned off in a config file.
@@ -46,10 +58,7 @@ NodeConfig::NodeConfig() {
   // The ray tracer and the DXT1 encoder run on TBB in this process: keep CAF's scheduler small.
   set("scheduler.max-threads", size_t{2});
   opt_group{custom_options_, "tessera"}
-      .add(host, "host", "listen address (default 127.0.0.1: local only)")
       .add(port, "port", "TCP port of HTTP + WebSocket (0: any free port)")
-      .add(web_root, "web-root", "folder served over HTTP (web client, demo pages)")
-      .add(scene, "scene", "glTF scene given to clients that connect with an empty scene")
       .add(max_clients, "max-clients", "simultaneous WebSocket clients")
       .add(render_threads, "render-threads", "TBB threads for rendering and encoding (0: all)")
       .add(logical_cores, "logical-cores", "renderer coefficient: logical cores (0: hardware threads)")
@@ -66,18 +75,22 @@ NodeConfig::NodeConfig() {
            "memory budget over all clients: scene bytes + queued frames (0: half the physical memory)")
       .add(max_mjpeg_per_session, "max-mjpeg-per-session", "MJPEG viewers of one session")
       .add(max_mjpeg_viewers, "max-mjpeg-viewers", "MJPEG viewers on the node")
-      .add(token_key, "token-key", "key file of signed access tokens (tessera token); a token is then required")
-      .add(token_file, "token-file", "static access tokens, one per line; a token is then required")
       .add(max_connections_per_ip, "max-connections-per-ip", "WebSocket connections per client address (0: no limit)")
       .add(cluster_port, "cluster-port", "publish this node to parent nodes on this port (-1: off, 0: any)")
-      .add(cluster_host, "cluster-host", "address of the cluster port (0.0.0.0: all interfaces)")
-      .add(name, "name", "this node's name in node lists and logs (default host:cluster-port)")
       .add(task_timeout_ms, "task-timeout-ms", "fail a sub-tree that has not returned its tiles after this long")
       .add(reconnect_ms, "reconnect-ms", "retry period for lost child nodes; keep-alive period to workers below")
       .add(max_workers, "max-workers", "live session workers on this node; more opens are refused (0: 2 x max-clients)")
       .add(max_update_bytes, "max-update-bytes", "the largest scene update a worker takes from its parent (chunks)")
       .add(keepalive_misses, "keepalive-misses",
            "a worker whose parent sent nothing for this many keep-alive periods ends itself");
+  // Strings through our own meta state, like the lists (string_option).
+  custom_options_.add(string_option(host, "tessera", "host", "listen address (default 127.0.0.1: local only)"));
+  custom_options_.add(string_option(web_root, "tessera", "web-root", "folder served over HTTP (web client, demo pages)"));
+  custom_options_.add(string_option(scene, "tessera", "scene", "glTF scene given to clients that connect with an empty scene"));
+  custom_options_.add(string_option(token_key, "tessera", "token-key", "key file of signed access tokens (tessera token); a token is then required"));
+  custom_options_.add(string_option(token_file, "tessera", "token-file", "static access tokens, one per line; a token is then required"));
+  custom_options_.add(string_option(cluster_host, "tessera", "cluster-host", "address of the cluster port (0.0.0.0: all interfaces)"));
+  custom_options_.add(string_option(name, "tessera", "name", "this node's name in node lists and logs (default host:cluster-port)"));
   custom_options_.add(string_list_option(
       web_public, "tessera", "web-public",
       "further folders of the web root to serve, as [\"dir/\", ...] (default: index.html, src/, demo/, three.js)"));
