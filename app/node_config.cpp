@@ -13,30 +13,28 @@ namespace tessera::app {
 
 namespace {
 
-// A list-of-strings option whose meta state is ours. CAF's make_config_option<T> keeps it in
-// a function-local static of a template that libcaf_core (built by g++) instantiates for
-// std::vector<std::string> as well; in a clang-built binary the two copies of that static and
-// its guard disagree, and parsing `--tessera.web-public=[...]` on the command line calls a
-// null function pointer (tests/e2e/test_serve_process.cpp caught it under ASan and TSan).
-caf::config_option string_list_option(std::vector<std::string>& storage, caf::string_view category,
-                                      caf::string_view name, caf::string_view description) {
-  using T = std::vector<std::string>;
+// An option whose meta state is ours. CAF's make_config_option<T> keeps it in a function-local
+// static of a template that libcaf_core (built by g++) instantiates too; in a clang-built binary
+// the two copies of that static and its guard disagree, and parsing `--tessera.NAME=VALUE` on
+// the command line called a null function pointer in config_option::parse for lists
+// (`--tessera.web-public=[...]`, under ASan and TSan) and strings (`--tessera.name=x`, under
+// TSan); tests/e2e/test_serve_process.cpp caught both. One static per T, in this binary only.
+template <class T>
+caf::config_option own_option(T& storage, caf::string_view category, caf::string_view name, caf::string_view description,
+                              std::string type_name = caf::select_config_value_access_t<T>::type_name()) {
   static caf::config_option::meta_state meta{caf::detail::check_impl<T>, caf::detail::store_impl<T>,
-                                             caf::detail::get_impl<T>, caf::detail::parse_impl_delegate<T>,
-                                             caf::select_config_value_access_t<T>::type_name()};
+                                             caf::detail::get_impl<T>, caf::detail::parse_impl_delegate<T>, type_name};
   return {category, name, description, &meta, &storage};
 }
 
-// A string option with our own meta state, for the same reason: under clang with TSan,
-// `--tessera.name=x` (any CAF std::string option on the command line) called a null function
-// pointer in config_option::parse (test_serve_process caught it with --tessera.token-key).
+caf::config_option string_list_option(std::vector<std::string>& storage, caf::string_view category,
+                                      caf::string_view name, caf::string_view description) {
+  return own_option(storage, category, name, description);
+}
+
 caf::config_option string_option(std::string& storage, caf::string_view category, caf::string_view name,
                                  caf::string_view description) {
-  using T = std::string;
-  static caf::config_option::meta_state meta{caf::detail::check_impl<T>, caf::detail::store_impl<T>,
-                                             caf::detail::get_impl<T>, caf::detail::parse_impl_delegate<T>,
-                                             caf::select_config_value_access_t<T>::type_name()};
-  return {category, name, description, &meta, &storage};
+  return own_option(storage, category, name, description);
 }
 
 // A boolean setting that the command line can set either way. CAF 0.17 makes a bool option a
@@ -45,10 +43,7 @@ caf::config_option string_option(std::string& storage, caf::string_view category
 // With this meta state (not named "boolean", so not a flag) `=true` and `=false` both parse.
 caf::config_option bool_option(bool& storage, caf::string_view category, caf::string_view name,
                                caf::string_view description) {
-  using T = bool;
-  static caf::config_option::meta_state meta{caf::detail::check_impl<T>, caf::detail::store_impl<T>,
-                                             caf::detail::get_impl<T>, caf::detail::parse_impl_delegate<T>, "bool"};
-  return {category, name, description, &meta, &storage};
+  return own_option(storage, category, name, description, "bool");
 }
 
 }  // namespace
