@@ -108,17 +108,16 @@ constexpr const char* kTokenParam = "access_token";
 // mirrors HTTP's 401, as other WebSocket protocols do).
 constexpr uint16_t kCloseBadToken = 4401;
 
-// The client's address, and the address it connected to, as text ("" when the socket is gone).
-std::string peer_address(const WsServer::connection_ptr& con) {
+// The client's address (remote) or the address it connected to, as text ("" when the socket
+// is gone).
+std::string socket_address(const WsServer::connection_ptr& con, bool remote) {
   asio::error_code ec;
-  auto ep = con->get_raw_socket().remote_endpoint(ec);
+  auto& socket = con->get_raw_socket();
+  auto ep = remote ? socket.remote_endpoint(ec) : socket.local_endpoint(ec);
   return ec ? "" : admission::plain_address(ep.address().to_string());
 }
-std::string local_address(const WsServer::connection_ptr& con) {
-  asio::error_code ec;
-  auto ep = con->get_raw_socket().local_endpoint(ec);
-  return ec ? "" : admission::plain_address(ep.address().to_string());
-}
+std::string peer_address(const WsServer::connection_ptr& con) { return socket_address(con, true); }
+std::string local_address(const WsServer::connection_ptr& con) { return socket_address(con, false); }
 
 }  // namespace
 

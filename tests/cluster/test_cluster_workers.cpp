@@ -349,4 +349,8 @@ TEST_CASE("Bad worker-bound settings end serve with a clear error", "[cluster]")
   refused("--tessera.max-workers=-1", "max-workers must be in 0..100000");
   refused("--tessera.keepalive-misses=1", "keepalive-misses must be in 2..1000");
   refused("--tessera.reconnect-ms=70000", "reconnect-ms must be in 10..60000");
+  // The admission settings (net/admission.h) are checked the same way.
+  refused("--tessera.max-connections-per-ip=-1", "max-connections-per-ip must be >= 0");
+  refused("--tessera.allowed-origins=[\"ftp://x/y\"]", "is not \"self\", \"loopback\", \"*\" or an origin");
+  refused("--tessera.token-key=/nonexistent/tessera.key", "token-key");
 }
