@@ -741,13 +741,13 @@ const char* kHelp =
     "tessera soak [--topology single|cluster] [--seconds S] [--clients N] [--scene S.gltf --camera-loop L.json]\n"
     "             [--size W H] [--frames-per-session F] [--alone-seconds A] [--drain-seconds D]\n"
     "             [--rss-tolerance-mb M] [--rss-tolerance-pct P] [--thread-tolerance T] [--threads T]\n"
-    "             [--malformed all|safe] [--reader-size W H] [--binary PATH] [--trim-probe]\n"
+    "             [--malformed all|safe] [--reader-size W H] [--binary PATH] [--trim-probe] [--samples FILE]\n"
     "Robustness soak: starts the nodes (a single node, or a dedicated master with two workers) as\n"
     "child processes, measures one client alone, then churns N clients (default 8) for S seconds\n"
     "(default 60): N-2 well-behaved (connect, upload the scene, render F frames, disconnect, repeat),\n"
     "one sending malformed messages, one never reading. Samples each node's RSS and threads every\n"
-    "second (JSON lines), then a summary line. Fails (exit 1) when a node died, or when a process's\n"
-    "RSS did not come back to within max(M MiB, P% of baseline) of its baseline (defaults 64 MiB,\n"
+    "second (JSON lines, to FILE with --samples FILE), then a summary line. Fails (exit 1) when a\n"
+    "node died, or when a process's RSS did not come back to within max(M MiB, P% of baseline) of its baseline (defaults 64 MiB,\n"
     "25%) or its threads to within T (default 2) after the churn, in D seconds (default 20).\n"
     "--malformed safe leaves out the kinds that abort a node without issue 16's validation.\n"
     "--trim-probe: at the end, gdb calls malloc_trim(0) in each node and the RSS after it is reported\n"
@@ -779,6 +779,7 @@ int run(const std::vector<std::string>& argv_in) {
   const int reader_w = int(args.integer("--reader-size", 640, 0)), reader_h = int(args.integer("--reader-size", 360, 1));
   std::string binary = args.str("--binary", "");
   const bool trim_probe = args.flag("--trim-probe");
+  const std::string samples_path = args.str("--samples", "");
   SceneSetup setup = load_scene(args, 320, 180, LoopOption::required);
   args.finish();
   if (topology != "single" && topology != "cluster") throw std::invalid_argument("--topology must be single or cluster");
@@ -791,6 +792,15 @@ int run(const std::vector<std::string>& argv_in) {
     ssize_t n = readlink("/proc/self/exe", buf, sizeof buf - 1);
     if (n <= 0) throw std::runtime_error("cannot find this executable (/proc/self/exe); give --binary");
     binary.assign(buf, size_t(n));
+  }
+  // The per-second samples: stdout, or a file (under ctest, so that the verdict at the end of
+  // the output is not lost among a hundred sample lines).
+  FILE* samples = stdout;
+  std::unique_ptr<FILE, int (*)(FILE*)> samples_file(nullptr, &std::fclose);
+  if (!samples_path.empty()) {
+    samples_file.reset(std::fopen(samples_path.c_str(), "w"));
+    if (!samples_file) throw std::runtime_error("cannot write --samples " + samples_path);
+    samples = samples_file.get();
   }
   const int W = setup.loaded.scene.width(), H = setup.loaded.scene.height();
   const std::string load_start = read_first_line("/proc/loadavg");
@@ -880,12 +890,12 @@ int run(const std::vector<std::string>& argv_in) {
                    nodes[i]->name().c_str(), int(nodes[i]->pid()), alive ? "true" : "false", s.rss_mb, s.threads);
     }
     if (print)
-      std::printf("{\"t\": %.1f, \"phase\": \"%s\", \"wb_frames\": %llu, \"sessions_served\": %llu, "
+      std::fprintf(samples, "{\"t\": %.1f, \"phase\": \"%s\", \"wb_frames\": %llu, \"sessions_served\": %llu, "
                   "\"malformed_sent\": %llu, \"malformed_answered\": %llu, \"reader_requests\": %llu, \"procs\": [%s]}\n",
                   since(t0), phase.c_str(), (unsigned long long)c.wb_frames, (unsigned long long)c.sessions_served,
                   (unsigned long long)c.malformed_sent, (unsigned long long)c.malformed_answered,
                   (unsigned long long)c.reader_requests, procs.c_str());
-    std::fflush(stdout);
+    std::fflush(samples);
   };
   auto set_phase = [&](const std::string& p) {
     std::lock_guard<std::mutex> l(sample_mu);

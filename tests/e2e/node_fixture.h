@@ -140,9 +140,9 @@ struct ProtoClient {
       if (!ws.send(m)) return false;
     return true;
   }
-  std::optional<protocol::Frame> render(const Camera& cam, uint32_t frame) {
+  std::optional<protocol::Frame> render(const Camera& cam, uint32_t frame, int timeout_ms = 20000) {
     if (!send({protocol::SetCamera{cam}, protocol::RenderRequest{frame}})) return std::nullopt;
-    return next<protocol::Frame>();
+    return next<protocol::Frame>(timeout_ms);
   }
 };
 
