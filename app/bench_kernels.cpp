@@ -2,6 +2,7 @@
 
 #include "core/validate.h"
 #include "renderer/raytracer_impl.h"
+#include "renderer/sampling.h"
 
 #include <embree3/rtcore.h>
 #include <tbb/blocked_range2d.h>

@@ -1,5 +1,6 @@
 #include "renderer/raytracer.h"
 #include "renderer/raytracer_impl.h"
+#include "renderer/sampling.h"
 
 #include "core/validate.h"
 

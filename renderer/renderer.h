@@ -19,6 +19,13 @@ struct RenderSettings {
   bool shadows = true;
   bool cost_map = true;       // time each packet with the TSC
   uint32_t frame = 0;         // seeds the AO sample pattern
+  // Progressive rendering (renderer/sampling.h): which of the frame's samples this render is.
+  // 0: pixel centres and the fixed AO pattern (what a non-progressive frame shows); s > 0: a
+  // jittered sub-pixel position and AO directions further along the pixel's sequence.
+  uint32_t sample = 0;
+  // Also write each pixel's linear colour (after exposure, before encoding) to
+  // TaskResult::radiance, for averaging samples (renderer/accumulation.h).
+  bool radiance = false;
 };
 
 struct RayCounts {
@@ -34,6 +41,7 @@ struct RayCounts {
 struct TaskResult {
   Rect pixels;            // the task, in pixels
   Image image;            // pixels.width() x pixels.height()
+  std::vector<float> radiance;  // with RenderSettings::radiance: RGB per pixel, row by row (else empty)
   CostMap cost;           // per-packet cost (cost_map.h for the unit); empty if not measured
   double kernel_ms = 0;   // sum of the cost map, in milliseconds of one core
   double rendering_ms = 0;  // wall time of the multi-threaded rendering

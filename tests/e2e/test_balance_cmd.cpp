@@ -263,3 +263,38 @@ TEST_CASE("tessera loadtest --frames: exactly the frames after the warm-up, numb
   // Bad values are refused.
   CHECK(run_tessera("loadtest --scene " + kScene + "/scene.gltf --camera-loop " + kScene + "/camera-loop.json --frames -1").rc != 0);
 }
+
+TEST_CASE("tessera quality: a refining still gains PSNR sample by sample, the reference is cached, fixed mode lists its AO rays",
+          "[quality]") {
+  const std::string cache = "/tmp/tessera_test_quality_" + std::to_string(getpid());
+  const std::string base = "quality --scene " + kScene + "/scene.gltf --camera-loop " + kScene +
+                           "/camera-loop.json --size 64 36 --threads 1 --reference-samples 64 --reference-ao 2 --cache " + cache;
+  Run p = run_tessera(base + " --mode progressive --max-samples 16 --seconds 60");
+  REQUIRE(p.rc == 0);
+  REQUIRE(p.lines.size() == 17);  // 16 steps and the summary
+  const json& sum = p.lines.back();
+  CHECK(sum["summary"].get<bool>());
+  CHECK(sum["reference"]["cached"].get<bool>() == false);
+  CHECK(sum["samples"].get<int>() == 16);
+  for (size_t i = 0; i < 16; ++i) CHECK(p.lines[i]["samples"].get<int>() == int(i + 1));
+  // Averaging samples converges on the reference (the pavilion frame has AO and edges).
+  const double first = p.lines[0]["psnr_db"].get<double>(), last = p.lines[15]["psnr_db"].get<double>();
+  INFO("1 sample " << first << " dB, 16 samples " << last << " dB");
+  CHECK(last > first + 3);
+  CHECK(p.lines[15]["elapsed_ms"].get<double>() >= p.lines[0]["elapsed_ms"].get<double>());
+  CHECK(sum["seconds_to_psnr"].contains("35"));
+  CHECK(sum.contains("isa"));
+  CHECK(sum.contains("load_start"));
+  // The second run finds the reference in the cache; fixed mode, one line per AO count.
+  Run f = run_tessera(base + " --mode fixed --ao-list 1,4");
+  REQUIRE(f.rc == 0);
+  REQUIRE(f.lines.size() == 3);
+  CHECK(f.lines[0]["ao"].get<int>() == 1);
+  CHECK(f.lines[1]["ao"].get<int>() == 4);
+  CHECK(f.lines.back()["reference"]["cached"].get<bool>());
+  for (const char* bad : {"--mode x", "--seconds 0", "--max-samples 0", "--reference-samples 70000", "--ao -1"}) {
+    INFO(bad);
+    CHECK(run_tessera(base + " " + bad).rc != 0);
+  }
+  std::system(("rm -rf " + cache).c_str());
+}

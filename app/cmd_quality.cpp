@@ -1,0 +1,234 @@
+// tessera quality: image quality against time, for a fixed frame and for a still that refines
+// (progressive samples averaged, renderer/sampling.h), against a converged reference.
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <sstream>
+#include <sys/stat.h>
+
+#include "app/command.h"
+#include "app/common.h"
+#include "renderer/accumulation.h"
+#include "renderer/raytracer.h"
+
+namespace tessera::app {
+namespace {
+
+const char* kHelp =
+    "tessera quality --scene S.gltf --camera-loop L.json [--frame K] [--size W H] [--threads T]\n"
+    "                [--mode fixed|progressive] [--seconds S] [--ao N] [--depth D]\n"
+    "                [--ao-list 1,2,4,8,16,32] [--max-samples M]\n"
+    "                [--reference-samples R] [--reference-ao A] [--cache DIR]\n"
+    "Image quality against render time, as PSNR against a converged reference: the average of R\n"
+    "progressive samples (default 1024; jittered anti-aliasing, A AO rays each, default 4), made\n"
+    "once and cached in DIR (default $XDG_CACHE_HOME/tessera or ~/.cache/tessera) by scene file,\n"
+    "size, frame and settings.\n"
+    "  fixed: today's frame (one sample per pixel, N AO rays per hit) for each N of --ao-list.\n"
+    "  progressive: a still that refines: sample after sample (--ao N rays each, default 1)\n"
+    "  averaged, until --seconds (default 5) of rendering or --max-samples (default 65536).\n"
+    "One JSON line per step (samples, elapsed_ms, psnr_db), then a summary line with\n"
+    "seconds_to_psnr for 30, 35 and 40 dB (null: not reached), the load and the ISA.\n";
+
+std::string load_now() {
+  std::ifstream f("/proc/loadavg");
+  std::string a;
+  f >> a;
+  return a.empty() ? "?" : a;
+}
+
+std::string cache_dir(const std::string& given) {
+  if (!given.empty()) return given;
+  if (const char* x = std::getenv("XDG_CACHE_HOME"); x && *x) return std::string(x) + "/tessera";
+  if (const char* h = std::getenv("HOME"); h && *h) return std::string(h) + "/.cache/tessera";
+  return ".cache/tessera";
+}
+
+void make_dirs(const std::string& path) {
+  for (size_t at = 1; at != std::string::npos; at = path.find('/', at + 1)) ::mkdir(path.substr(0, at).c_str(), 0755);
+  ::mkdir(path.c_str(), 0755);
+}
+
+uint64_t fnv1a(const std::string& s, uint64_t h = 1469598103934665603ull) {
+  for (unsigned char c : s) h = (h ^ c) * 1099511628211ull;
+  return h;
+}
+
+// What makes a reference: the scene file's bytes, the view and the settings.
+std::string reference_key(const SceneSetup& setup, long frame, const RenderSettings& s, uint32_t samples) {
+  std::ifstream f(setup.scene_path, std::ios::binary);
+  std::stringstream bytes;
+  bytes << f.rdbuf();
+  std::ostringstream k;
+  k << std::hex << fnv1a(bytes.str()) << std::dec << "-" << setup.loaded.scene.width() << "x"
+    << setup.loaded.scene.height() << "-f" << frame << "-ao" << s.ao_samples << "-d" << s.max_depth << "-s"
+    << samples << "-v3";
+  return k.str();
+}
+
+// Renders samples [first, first + n) of the still and adds them to `acc`.
+void refine(RayTracer& rt, const Rect& full, RenderSettings s, uint32_t first, uint32_t n, Accumulation& acc) {
+  TaskResult r;
+  s.cost_map = false;
+  s.radiance = true;
+  for (uint32_t i = 0; i < n; ++i) {
+    s.sample = first + i;
+    rt.render(full, s, r);
+    acc.add(r.radiance, full.width(), full.height(), 0, 0);
+    acc.end_sample();
+  }
+}
+
+struct Levels {
+  double at[3] = {-1, -1, -1};  // seconds to 30, 35, 40 dB; -1: not reached
+  void see(double psnr, double seconds) {
+    const double level[3] = {30, 35, 40};
+    for (int i = 0; i < 3; ++i)
+      if (psnr >= level[i] && (at[i] < 0 || seconds < at[i])) at[i] = seconds;
+  }
+  std::string json() const {
+    std::string out = "{";
+    const char* names[3] = {"30", "35", "40"};
+    for (int i = 0; i < 3; ++i) {
+      char buf[64];
+      if (at[i] < 0) std::snprintf(buf, sizeof buf, "%s\"%s\": null", i ? ", " : "", names[i]);
+      else std::snprintf(buf, sizeof buf, "%s\"%s\": %.3f", i ? ", " : "", names[i], at[i]);
+      out += buf;
+    }
+    return out + "}";
+  }
+};
+
+double finite_db(double psnr) { return std::isinf(psnr) ? 99.0 : psnr; }
+
+int run(const std::vector<std::string>& argv) {
+  Args args(argv);
+  if (args.flag("--help")) {
+    std::fputs(kHelp, stdout);
+    return 0;
+  }
+  int threads = 0;
+  auto limit = limit_threads(args, &threads);
+  SceneSetup setup = load_scene(args, 1280, 720);
+  const long frame = read_frame(args, setup);
+  const std::string mode = args.str("--mode", "progressive");
+  const double seconds = args.number("--seconds", 5);
+  const int ao = int(args.integer("--ao", 1));
+  const int depth = int(args.integer("--depth", 4));
+  std::vector<int> ao_list;
+  for (double v : parse_number_list("--ao-list", args.str("--ao-list", "1,2,4,8,16,32"))) ao_list.push_back(int(v));
+  const long max_samples = args.integer("--max-samples", 65536);
+  const long ref_samples = args.integer("--reference-samples", 1024);
+  const int ref_ao = int(args.integer("--reference-ao", 4));
+  const std::string dir = cache_dir(args.str("--cache", ""));
+  args.finish();
+  if (mode != "fixed" && mode != "progressive") throw std::invalid_argument("--mode must be fixed or progressive");
+  if (!(seconds > 0)) throw std::invalid_argument("--seconds must be > 0");
+  if (ao < 0 || ao > 4096 || ref_ao < 1 || ref_ao > 4096) throw std::invalid_argument("--ao 0..4096, --reference-ao 1..4096");
+  if (depth < 1 || depth > 64) throw std::invalid_argument("--depth must be in 1..64");
+  if (max_samples < 1 || max_samples > 65536) throw std::invalid_argument("--max-samples must be in 1..65536");
+  if (ref_samples < 1 || ref_samples > 65536) throw std::invalid_argument("--reference-samples must be in 1..65536");
+  for (int n : ao_list)
+    if (n < 0 || n > 4096) throw std::invalid_argument("--ao-list values must be in 0..4096");
+  setup.set_frame(size_t(frame));
+
+  RayTracer rt;
+  std::vector<std::string> warnings;
+  rt.sync(setup.loaded.scene, warnings);
+  for (auto& w : warnings) std::fprintf(stderr, "quality: %s\n", w.c_str());
+  const int W = setup.loaded.scene.width(), H = setup.loaded.scene.height();
+  const Rect full{0, 0, W, H};
+  const bool srgb = setup.loaded.scene.environment().linear;
+  RenderSettings base;
+  base.max_depth = depth;
+  base.frame = uint32_t(frame);
+
+  // The reference, from the cache or made now.
+  RenderSettings ref_settings = base;
+  ref_settings.ao_samples = ref_ao;
+  // Its own scrambling of the sequences: the same seeds would put the first samples of the
+  // measured run exactly where the reference's are, and its PSNR would read high.
+  ref_settings.frame = base.frame ^ 0x5EED5EEDu;
+  const std::string path =
+      dir + "/quality-" + reference_key(setup, frame, ref_settings, uint32_t(ref_samples)) + ".png";
+  Image ref;
+  double ref_s = 0;
+  bool cached = false;
+  try {
+    ref = read_image(path);
+    cached = ref.width == W && ref.height == H;
+  } catch (const std::exception&) {
+  }
+  if (!cached) {
+    std::fprintf(stderr, "quality: making the reference (%ld samples, %d AO rays each) into %s\n", ref_samples, ref_ao,
+                 path.c_str());
+    const auto t0 = std::chrono::steady_clock::now();
+    Accumulation acc;
+    acc.reset(W, H, srgb);
+    refine(rt, full, ref_settings, 0, uint32_t(ref_samples), acc);
+    ref = acc.average();
+    ref_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    make_dirs(dir);
+    write_png(path, ref);
+  }
+
+  const std::string load0 = load_now();
+  Levels levels;
+  double last_db = 0, elapsed_s = 0;
+  uint32_t samples = 0;
+  if (mode == "fixed") {
+    TaskResult r;
+    for (int n : ao_list) {
+      RenderSettings s = base;
+      s.ao_samples = n;
+      s.cost_map = false;
+      const auto t0 = std::chrono::steady_clock::now();
+      rt.render(full, s, r);
+      const double t = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      const double db = finite_db(compare(r.image, ref).psnr);
+      levels.see(db, t);
+      last_db = db;
+      elapsed_s = t;
+      samples = 1;
+      std::printf("{\"mode\": \"fixed\", \"ao\": %d, \"samples\": 1, \"elapsed_ms\": %.1f, \"psnr_db\": %.3f}\n", n,
+                  t * 1e3, db);
+      std::fflush(stdout);
+    }
+  } else {
+    // Sample after sample; only rendering and accumulating count as time (not the PSNR).
+    Accumulation acc;
+    acc.reset(W, H, srgb);
+    RenderSettings s = base;
+    s.ao_samples = ao;
+    while (elapsed_s < seconds && acc.samples() < uint32_t(max_samples)) {
+      const auto t0 = std::chrono::steady_clock::now();
+      refine(rt, full, s, acc.samples(), 1, acc);
+      Image avg = acc.average();
+      elapsed_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      const double db = finite_db(compare(avg, ref).psnr);
+      levels.see(db, elapsed_s);
+      last_db = db;
+      samples = acc.samples();
+      std::printf("{\"mode\": \"progressive\", \"ao\": %d, \"samples\": %u, \"elapsed_ms\": %.1f, \"psnr_db\": %.3f}\n",
+                  ao, samples, elapsed_s * 1e3, db);
+      std::fflush(stdout);
+    }
+  }
+  const PacketLayout pl = rt.packet_layout();
+  std::printf(
+      "{\"summary\": true, \"mode\": \"%s\", \"scene\": %s, \"frame\": %ld, \"width\": %d, \"height\": %d, "
+      "\"depth\": %d, \"samples\": %u, \"elapsed_s\": %.3f, \"psnr_db\": %.3f, \"seconds_to_psnr\": %s, "
+      "\"reference\": {\"samples\": %ld, \"ao\": %d, \"cached\": %s, \"made_s\": %.1f, \"path\": %s}, "
+      "\"cpu\": %s, \"isa\": %s, \"packet\": \"%dx%d\", \"threads\": %d, \"load_start\": \"%s\", \"load_end\": \"%s\"}\n",
+      mode.c_str(), json_str(setup.scene_path).c_str(), frame, W, H, depth, samples, elapsed_s, last_db,
+      levels.json().c_str(), ref_samples, ref_ao, cached ? "true" : "false", ref_s, json_str(path).c_str(),
+      json_str(cpu_model()).c_str(), json_str(isa_name(pl)).c_str(), pl.w, pl.h, threads, load0.c_str(),
+      load_now().c_str());
+  return 0;
+}
+
+const Command reg("quality", "image quality (PSNR) against time: a fixed frame and a refining still", run);
+
+}  // namespace
+}  // namespace tessera::app

@@ -1,0 +1,36 @@
+#pragma once
+// The average of a still's progressive samples (renderer/sampling.h). Samples are averaged as
+// linear radiance (TaskResult::radiance, asked for with RenderSettings::radiance) and encoded
+// once, as the renderer encodes a frame: averaging the 8-bit encoded values instead would
+// converge to the mean of the sRGB curve over the noise, which depends on how noisy each
+// sample is (one AO ray or four), not to the image.
+#include <cstdint>
+#include <vector>
+
+#include "core/image.h"
+
+namespace tessera {
+
+class Accumulation {
+ public:
+  // An empty average of width x height pixels; `srgb`: encode on the sRGB curve
+  // (Environment::linear), else plainly, as the renderer does.
+  void reset(int32_t width, int32_t height, bool srgb);
+  // A tile of the current sample at (x, y): width * height RGB triples, row by row. It must fit.
+  void add(const std::vector<float>& radiance, int32_t width, int32_t height, int32_t x, int32_t y);
+  void end_sample() { ++samples_; }
+  uint32_t samples() const { return samples_; }
+  int32_t width() const { return width_; }
+  int32_t height() const { return height_; }
+  // The average, encoded (opaque alpha); an empty image before the first sample. With one
+  // sample it is exactly the frame the renderer encoded.
+  Image average() const;
+
+ private:
+  int32_t width_ = 0, height_ = 0;
+  bool srgb_ = true;
+  uint32_t samples_ = 0;
+  std::vector<double> sum_;  // RGB per pixel
+};
+
+}  // namespace tessera
