@@ -29,7 +29,9 @@ const char* kHelp =
     "  progressive: a still that refines: sample after sample (--ao N rays each, default 1)\n"
     "  averaged, until --seconds (default 5) of rendering or --max-samples (default 65536).\n"
     "One JSON line per step (samples, elapsed_ms, psnr_db), then a summary line with\n"
-    "seconds_to_psnr for 30, 35 and 40 dB (null: not reached), the load and the ISA.\n";
+    "seconds_to_psnr for 30, 35 and 40 dB (null: not reached), the step that reached each level\n"
+    "(samples_to_psnr, or ao_to_psnr for fixed: exact, unlike the seconds on a shared machine),\n"
+    "the median time of a sample, the load and the ISA.\n";
 
 std::string load_now() {
   std::ifstream f("/proc/loadavg");
@@ -80,19 +82,23 @@ void refine(RayTracer& rt, const Rect& full, RenderSettings s, uint32_t first, u
   }
 }
 
+// When each level was first reached: seconds (noisy on a shared machine) and the step that
+// reached it (exact: samples of a refining still, AO rays per hit of a fixed frame).
 struct Levels {
   double at[3] = {-1, -1, -1};  // seconds to 30, 35, 40 dB; -1: not reached
-  void see(double psnr, double seconds) {
+  long step[3] = {-1, -1, -1};
+  void see(double psnr, double seconds, long at_step) {
     const double level[3] = {30, 35, 40};
     for (int i = 0; i < 3; ++i)
-      if (psnr >= level[i] && (at[i] < 0 || seconds < at[i])) at[i] = seconds;
+      if (psnr >= level[i] && (at[i] < 0 || seconds < at[i])) at[i] = seconds, step[i] = at_step;
   }
-  std::string json() const {
+  std::string json(bool steps) const {
     std::string out = "{";
     const char* names[3] = {"30", "35", "40"};
     for (int i = 0; i < 3; ++i) {
       char buf[64];
       if (at[i] < 0) std::snprintf(buf, sizeof buf, "%s\"%s\": null", i ? ", " : "", names[i]);
+      else if (steps) std::snprintf(buf, sizeof buf, "%s\"%s\": %ld", i ? ", " : "", names[i], step[i]);
       else std::snprintf(buf, sizeof buf, "%s\"%s\": %.3f", i ? ", " : "", names[i], at[i]);
       out += buf;
     }
@@ -173,10 +179,20 @@ int run(const std::vector<std::string>& argv) {
     write_png(path, ref);
   }
 
+  // One untimed render first: the first one after a sync pays for page faults and the
+  // threads' start (about 25% more on the living room), which would be charged to step 1.
+  {
+    RenderSettings warm = base;
+    warm.ao_samples = 1;
+    warm.cost_map = false;
+    TaskResult r;
+    rt.render(full, warm, r);
+  }
   const std::string load0 = load_now();
   Levels levels;
   double last_db = 0, elapsed_s = 0;
   uint32_t samples = 0;
+  std::vector<double> step_ms;  // progressive: each sample's time
   if (mode == "fixed") {
     TaskResult r;
     for (int n : ao_list) {
@@ -187,7 +203,7 @@ int run(const std::vector<std::string>& argv) {
       rt.render(full, s, r);
       const double t = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
       const double db = finite_db(compare(r.image, ref).psnr);
-      levels.see(db, t);
+      levels.see(db, t, n);
       last_db = db;
       elapsed_s = t;
       samples = 1;
@@ -205,9 +221,11 @@ int run(const std::vector<std::string>& argv) {
       const auto t0 = std::chrono::steady_clock::now();
       refine(rt, full, s, acc.samples(), 1, acc);
       Image avg = acc.average();
-      elapsed_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      const double dt = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      elapsed_s += dt;
+      step_ms.push_back(dt * 1e3);
       const double db = finite_db(compare(avg, ref).psnr);
-      levels.see(db, elapsed_s);
+      levels.see(db, elapsed_s, long(acc.samples()));
       last_db = db;
       samples = acc.samples();
       std::printf("{\"mode\": \"progressive\", \"ao\": %d, \"samples\": %u, \"elapsed_ms\": %.1f, \"psnr_db\": %.3f}\n",
@@ -219,10 +237,12 @@ int run(const std::vector<std::string>& argv) {
   std::printf(
       "{\"summary\": true, \"mode\": \"%s\", \"scene\": %s, \"frame\": %ld, \"width\": %d, \"height\": %d, "
       "\"depth\": %d, \"samples\": %u, \"elapsed_s\": %.3f, \"psnr_db\": %.3f, \"seconds_to_psnr\": %s, "
+      "\"%s\": %s, \"ms_per_sample_median\": %s, "
       "\"reference\": {\"samples\": %ld, \"ao\": %d, \"cached\": %s, \"made_s\": %.1f, \"path\": %s}, "
       "\"cpu\": %s, \"isa\": %s, \"packet\": \"%dx%d\", \"threads\": %d, \"load_start\": \"%s\", \"load_end\": \"%s\"}\n",
       mode.c_str(), json_str(setup.scene_path).c_str(), frame, W, H, depth, samples, elapsed_s, last_db,
-      levels.json().c_str(), ref_samples, ref_ao, cached ? "true" : "false", ref_s, json_str(path).c_str(),
+      levels.json(false).c_str(), mode == "fixed" ? "ao_to_psnr" : "samples_to_psnr", levels.json(true).c_str(),
+      step_ms.empty() ? "null" : std::to_string(median(step_ms)).c_str(), ref_samples, ref_ao, cached ? "true" : "false", ref_s, json_str(path).c_str(),
       json_str(cpu_model()).c_str(), json_str(isa_name(pl)).c_str(), pl.w, pl.h, threads, load0.c_str(),
       load_now().c_str());
   return 0;
