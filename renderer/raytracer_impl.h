@@ -6,6 +6,7 @@
 // Not part of the renderer API: nothing else includes it.
 #include "renderer/embree_device.h"
 #include "renderer/raytracer.h"
+#include "renderer/sampling.h"
 
 #include <embree3/rtcore.h>
 
@@ -79,19 +80,10 @@ inline int encode_srgb(float c) {
   return int(e * 255.0f + 0.5f);
 }
 
-// Integer hash for per-pixel sample rotations (deterministic per frame).
-inline uint32_t hash32(uint32_t x) {
-  x ^= x >> 16; x *= 0x7feb352dU; x ^= x >> 15; x *= 0x846ca68bU; x ^= x >> 16;
-  return x;
-}
-inline float radical_inverse2(uint32_t i) {  // van der Corput sequence in base 2
-  i = (i << 16) | (i >> 16);
-  i = ((i & 0x55555555u) << 1) | ((i & 0xAAAAAAAAu) >> 1);
-  i = ((i & 0x33333333u) << 2) | ((i & 0xCCCCCCCCu) >> 2);
-  i = ((i & 0x0F0F0F0Fu) << 4) | ((i & 0xF0F0F0F0u) >> 4);
-  i = ((i & 0x00FF00FFu) << 8) | ((i & 0xFF00FF00u) >> 8);
-  return float(i) * 2.3283064365386963e-10f;
-}
+// Integer hash for per-pixel sample rotations (deterministic per frame), and the van der
+// Corput sequence in base 2: the progressive sampler's (sampling.h), as floats here.
+inline uint32_t hash32(uint32_t x) { return sampling::mix(x); }
+inline float radical_inverse2(uint32_t i) { return float(sampling::sobol0(i)) * 2.3283064365386963e-10f; }
 
 // Orthonormal basis around n (Duff et al. 2017).
 inline void basis(const Vec3& n, Vec3& t, Vec3& b) {

@@ -46,8 +46,6 @@ inline uint32_t pixel_seed(int x, int y, uint32_t frame) {
   return mix(uint32_t(x) * 0x8DA6B343u ^ mix(uint32_t(y) * 0xD8163841u ^ mix(frame * 0x9E3779B9u + 0x632BE5ABu)));
 }
 
-inline uint32_t reverse_bits(uint32_t i) { return sobol0(i); }
-
 // A random permutation of the bits of x in which bit j of the result depends only on bits
 // 0..j of x (Laine and Karras 2011; the multipliers of Burley 2020).
 inline uint32_t lk_permutation(uint32_t x, uint32_t seed) {
@@ -61,7 +59,8 @@ inline uint32_t lk_permutation(uint32_t x, uint32_t seed) {
 
 // Nested uniform (Owen) scrambling of a 32-bit fraction: bit j (from the top) is flipped
 // depending on the bits above it only.
-inline uint32_t owen(uint32_t bits, uint32_t seed) { return reverse_bits(lk_permutation(reverse_bits(bits), seed)); }
+// (sobol0 reverses the bits.)
+inline uint32_t owen(uint32_t bits, uint32_t seed) { return sobol0(lk_permutation(sobol0(bits), seed)); }
 
 // Point i of the sequence of one pixel (`seed`) and one use (`salt`), in [0, 1)^2.
 struct Point { float u, v; };
