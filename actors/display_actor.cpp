@@ -2,6 +2,7 @@
 #include <chrono>
 #include <cstdio>
 #include <cstring>
+#include <optional>
 
 #include <caf/all.hpp>
 
@@ -24,6 +25,15 @@ struct display_state {
   int64_t window_start_ns = 0;  // 0: no frame sent yet
   uint32_t window_frames = 0;
   double window_pipeline_ms = 0;
+  // At most one frame at the encoder and one waiting for it: rendering runs ahead of encoding
+  // (the next frame renders while this one encodes), and a client that asks faster than its
+  // frames encode (a 640x360 DXT1 frame takes longer to encode than a small scene takes to
+  // render) must not queue rendered frames without bound. A newer frame replaces the waiting
+  // one, which is counted as dropped, as the connection does with frames the client has not
+  // read (net/server.cpp).
+  bool encoding = false;
+  std::optional<EncodeJob> waiting;
+  uint64_t replaced = 0;
   static inline const char* name = "tessera.display";
 };
 
@@ -43,7 +53,7 @@ void maybe_send_stats(display_state& st, const FrameMeta& m, int64_t sent_ns, do
   if (span < kStatsPeriodNs) return;
   protocol::Stats s;
   s.frames = uint32_t(st.frames);
-  s.dropped = m.dropped + st.sink->frames_dropped();
+  s.dropped = uint32_t(m.dropped + st.sink->frames_dropped() + st.replaced);
   s.bytes_sent = st.bytes;
   s.scene_bytes = m.scene_bytes;
   s.triangles = m.triangles;
@@ -73,8 +83,90 @@ std::vector<uint8_t> compose(FrameTiles& ft) {
   return std::move(img.rgba);
 }
 
-display_actor::behavior_type display_impl(display_actor::stateful_pointer<display_state> self,
-                                          std::shared_ptr<ClientSink> sink, encoder_actor encoder,
+using display_ptr = display_actor::stateful_pointer<display_state>;
+
+// Sends one encoded frame (or its error) to the client, with its stats and log line.
+void send_encoded(display_state& st, EncodedFrame& ef) {
+  const auto& m = ef.meta;
+  if (!ef.error.empty()) {
+    protocol::ErrorReply e{protocol::ErrorCode::internal, false, protocol::kNoRecord,
+                           "frame " + std::to_string(m.client_frame) + ": " + ef.error};
+    st.sink->send(protocol::encode(protocol::ServerRecord{e}));
+    Event ev(Ev::error, "encode");
+    ev.scope = {{"session", st.session}};
+    node_log(*st.settings, std::move(ev));
+    return;
+  }
+  const bool mjpeg = DisplayKind(m.display) == DisplayKind::mjpeg;
+  protocol::Frame f;
+  f.frame = m.client_frame;
+  f.width = m.width;
+  f.height = m.height;
+  f.encoding = DisplayKind(m.display) == DisplayKind::s3tc ? protocol::FrameEncoding::dxt1
+                                                           : protocol::FrameEncoding::jpeg;
+  f.timings.kernel_ms = float(m.kernel_ms);
+  f.timings.rendering_ms = float(m.rendering_ms);
+  f.timings.sat_ms = float(m.sat_ms);
+  f.timings.tiling_ms = float(m.tiling_ms);
+  f.timings.encode_ms = float(ef.encode_ms);
+  const size_t payload = ef.message.size() - ef.header_bytes;
+  const int64_t sent_ns = steady_ns();
+  f.timings.pipeline_ms = float(double(sent_ns - m.render_end_ns) / 1e6);
+  std::vector<uint8_t> header;
+  header.reserve(ef.header_bytes);
+  size_t bytes = 0;
+  if (mjpeg) {
+    // The JPEG goes to the MJPEG stream; the WebSocket gets the Frame record
+    // with its timings and an empty payload.
+    auto jpeg = std::make_shared<std::vector<uint8_t>>(ef.message.begin() + ef.header_bytes, ef.message.end());
+    bytes = jpeg->size();
+    st.sink->send_mjpeg(std::move(jpeg));
+    protocol::encode_frame_header(f, 0, header);
+    st.sink->send_frame(std::move(header));
+  } else {
+    protocol::encode_frame_header(f, payload, header);
+    std::memcpy(ef.message.data(), header.data(), ef.header_bytes);
+    bytes = ef.message.size();
+    st.sink->send_frame(std::move(ef.message));
+  }
+  st.frames++;
+  st.bytes += bytes;
+  maybe_send_stats(st, m, sent_ns, f.timings.pipeline_ms);
+  auto rel = [&](int64_t ns) { return double(ns - st.t0_ns) / 1e6; };
+  Event e(Ev::frame, m.client_frame);
+  e.scope = {{"session", st.session}};
+  e.with("seq", m.seq).with("width", m.width).with("height", m.height);
+  e.with("display", mjpeg ? "mjpeg" : (f.encoding == protocol::FrameEncoding::dxt1 ? "s3tc" : "jpeg"));
+  e.with("kernel_ms", Json::number(m.kernel_ms)).with("rendering_ms", Json::number(m.rendering_ms));
+  e.with("sat_ms", Json::number(m.sat_ms)).with("tiling_ms", Json::number(m.tiling_ms));
+  e.with("encode_ms", Json::number(ef.encode_ms)).with("pipeline_ms", Json::number(f.timings.pipeline_ms));
+  e.with("bytes", bytes);
+  e.with("render_start_ms", Json::number(rel(m.render_start_ns)));
+  e.with("render_end_ms", Json::number(rel(m.render_end_ns)));
+  e.with("encode_start_ms", Json::number(rel(ef.encode_start_ns)));
+  e.with("encode_end_ms", Json::number(rel(ef.encode_end_ns)));
+  e.with("sent_ms", Json::number(rel(sent_ns)));
+  node_log(*st.settings, std::move(e));
+}
+
+// Hands `job` to the encoder; when it is back, the waiting frame (if any) goes next.
+void encode(display_ptr self, EncodeJob job) {
+  self->state.encoding = true;
+  // Replies arrive in request order (one encoder, one requester), so frames go out in order.
+  self->request(self->state.encoder, caf::infinite, encode_atom::value, std::move(job))
+      .then([=](EncodedFrame& ef) {
+        auto& st = self->state;
+        st.encoding = false;
+        send_encoded(st, ef);
+        if (st.waiting) {
+          EncodeJob next = std::move(*st.waiting);
+          st.waiting.reset();
+          encode(self, std::move(next));
+        }
+      });
+}
+
+display_actor::behavior_type display_impl(display_ptr self, std::shared_ptr<ClientSink> sink, encoder_actor encoder,
                                           std::shared_ptr<const NodeSettings> settings, uint64_t session) {
   auto& st = self->state;
   st.sink = std::move(sink);
@@ -84,74 +176,13 @@ display_actor::behavior_type display_impl(display_actor::stateful_pointer<displa
   st.t0_ns = steady_ns();
   return {
       [=](display_atom, FrameTiles& ft) {
+        auto& st = self->state;
         EncodeJob job;
         job.meta = ft.meta;
         job.rgba = compose(ft);
-        // Replies arrive in request order (one encoder, one requester), so frames go out in order.
-        self->request(self->state.encoder, caf::infinite, encode_atom::value, std::move(job))
-            .then([=](EncodedFrame& ef) {
-              auto& st = self->state;
-              const auto& m = ef.meta;
-              if (!ef.error.empty()) {
-                protocol::ErrorReply e{protocol::ErrorCode::internal, false, protocol::kNoRecord,
-                                       "frame " + std::to_string(m.client_frame) + ": " + ef.error};
-                st.sink->send(protocol::encode(protocol::ServerRecord{e}));
-                Event ev(Ev::error, "encode");
-                ev.scope = {{"session", st.session}};
-                node_log(*st.settings, std::move(ev));
-                return;
-              }
-              const bool mjpeg = DisplayKind(m.display) == DisplayKind::mjpeg;
-              protocol::Frame f;
-              f.frame = m.client_frame;
-              f.width = m.width;
-              f.height = m.height;
-              f.encoding = DisplayKind(m.display) == DisplayKind::s3tc ? protocol::FrameEncoding::dxt1
-                                                                       : protocol::FrameEncoding::jpeg;
-              f.timings.kernel_ms = float(m.kernel_ms);
-              f.timings.rendering_ms = float(m.rendering_ms);
-              f.timings.sat_ms = float(m.sat_ms);
-              f.timings.tiling_ms = float(m.tiling_ms);
-              f.timings.encode_ms = float(ef.encode_ms);
-              const size_t payload = ef.message.size() - ef.header_bytes;
-              const int64_t sent_ns = steady_ns();
-              f.timings.pipeline_ms = float(double(sent_ns - m.render_end_ns) / 1e6);
-              std::vector<uint8_t> header;
-              header.reserve(ef.header_bytes);
-              size_t bytes = 0;
-              if (mjpeg) {
-                // The JPEG goes to the MJPEG stream; the WebSocket gets the Frame record
-                // with its timings and an empty payload.
-                auto jpeg = std::make_shared<std::vector<uint8_t>>(ef.message.begin() + ef.header_bytes, ef.message.end());
-                bytes = jpeg->size();
-                st.sink->send_mjpeg(std::move(jpeg));
-                protocol::encode_frame_header(f, 0, header);
-                st.sink->send_frame(std::move(header));
-              } else {
-                protocol::encode_frame_header(f, payload, header);
-                std::memcpy(ef.message.data(), header.data(), ef.header_bytes);
-                bytes = ef.message.size();
-                st.sink->send_frame(std::move(ef.message));
-              }
-              st.frames++;
-              st.bytes += bytes;
-              maybe_send_stats(st, m, sent_ns, f.timings.pipeline_ms);
-              auto rel = [&](int64_t ns) { return double(ns - st.t0_ns) / 1e6; };
-              Event e(Ev::frame, m.client_frame);
-              e.scope = {{"session", st.session}};
-              e.with("seq", m.seq).with("width", m.width).with("height", m.height);
-              e.with("display", mjpeg ? "mjpeg" : (f.encoding == protocol::FrameEncoding::dxt1 ? "s3tc" : "jpeg"));
-              e.with("kernel_ms", Json::number(m.kernel_ms)).with("rendering_ms", Json::number(m.rendering_ms));
-              e.with("sat_ms", Json::number(m.sat_ms)).with("tiling_ms", Json::number(m.tiling_ms));
-              e.with("encode_ms", Json::number(ef.encode_ms)).with("pipeline_ms", Json::number(f.timings.pipeline_ms));
-              e.with("bytes", bytes);
-              e.with("render_start_ms", Json::number(rel(m.render_start_ns)));
-              e.with("render_end_ms", Json::number(rel(m.render_end_ns)));
-              e.with("encode_start_ms", Json::number(rel(ef.encode_start_ns)));
-              e.with("encode_end_ms", Json::number(rel(ef.encode_end_ns)));
-              e.with("sent_ms", Json::number(rel(sent_ns)));
-              node_log(*st.settings, std::move(e));
-            });
+        if (!st.encoding) return encode(self, std::move(job));
+        if (st.waiting) st.replaced++;
+        st.waiting = std::move(job);
       },
   };
 }

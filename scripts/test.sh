@@ -77,6 +77,7 @@ suite() {
   fi
   record "$name" "$t0" "$rc"
   line=$(grep -E '^[0-9]+% tests passed, [0-9]+ tests? failed out of [0-9]+' "$log" | tail -1)
+  [[ $rc == 0 ]] || digest "$name" "$log"
   rm -f "$log"
   if [[ -n "$line" ]]; then
     f=$(sed -E 's/.* ([0-9]+) tests? failed out of ([0-9]+).*/\1/' <<< "$line")
@@ -88,6 +89,24 @@ suite() {
     suites+=("$(printf '%-12s %s' "$name:" "ctest failed without a summary (exit $rc)")")
   fi
   [[ $rc == 0 ]] || status=1
+}
+# digest NAME LOG: for each failed test, its telling lines (Catch2 and CAF failures with their
+# expansions, sanitizer reports, exceptions, the soak's verdict, timeouts), at most 30 each,
+# printed again after the summary: the end of a long run is what survives a cut-down excerpt.
+digests=()
+digest() {
+  local out
+  out=$(awk -v suite="$1" '
+    /^ *[0-9]+\/[0-9]+ Test +#[0-9]+: / {
+      cur = ""; n = 0
+      if ($0 ~ /\*\*\*|Failed|Timeout|Exception/) { cur = $0; sub(/^ *[0-9]+\/[0-9]+ Test +#[0-9]+: /, "", cur); sub(/ .*/, "", cur); print "--- " suite ": " $0 }
+      next
+    }
+    /^ +Start +[0-9]+: / { next }
+    cur != "" && n < 30 && /FAILED|REQUIRE|CHECK|with expansion|ERROR|SUMMARY|soak: FAIL|Assertion|what\(\)|unexpected exception|Timeout|error:|failed|#[0-9]+ 0x/ {
+      print "    " substr($0, 1, 300); n++
+    }' "$2")
+  [[ -n "$out" ]] && digests+=("$out")
 }
 build_failed() {
   status=1; total=$(( total + 1 )); failed=$(( failed + 1 ))
@@ -138,6 +157,10 @@ printf '%s\n' "${timings[@]}"
 printf '%-12s %5d s\n' total $(( $(date +%s) - t_all ))
 echo "=== suites"
 printf '%s\n' "${suites[@]}"
+if (( ${#digests[@]} )); then
+  echo "=== failed tests, their telling lines (the whole output is above)"
+  printf '%s\n' "${digests[@]}"
+fi
 echo
 if (( total > 0 )); then
   pct=$(( 100 * passed / total ))

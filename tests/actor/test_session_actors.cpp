@@ -219,6 +219,46 @@ CAF_TEST(the encoder encodes frame f while the renderer renders frame f plus 1) 
   CAF_CHECK(!frames[1].payload.empty());
 }
 
+CAF_TEST(frames rendered faster than they encode wait one at a time and the newest wins) {
+  // The encoder is held on frame 1 while frames 2, 3 and 4 render: the display keeps one of
+  // them waiting (a newer one replaces it), so a client that asks faster than its frames
+  // encode costs the node two frames, not a queue.
+  auto rendered_to_display = [&] {
+    expect_frame_start();
+    expect_render(false);
+    expect((TileResult), from(renderer).to(subtree));
+    expect((BatchReply), from(subtree).to(frame));
+    expect((sats_atom, SatReport), from(frame).to(tiler));
+    expect((display_atom, FrameTiles), from(frame).to(display));
+    expect((uint32_t), from(frame).to(session));
+  };
+  client({SetCamera{camera_at(3)}, RenderRequest{1}, RenderRequest{2}});
+  deliver_client();
+  expect_frame_start();
+  expect_render(true);
+  expect((TileResult), from(renderer).to(subtree));
+  expect((BatchReply), from(subtree).to(frame));
+  expect((sats_atom, SatReport), from(frame).to(tiler));
+  expect((display_atom, FrameTiles), from(frame).to(display));
+  expect((uint32_t), from(frame).to(session));
+  // Frame 1's job is in the encoder's mailbox, left there: the encoder is busy.
+  rendered_to_display();  // frame 2 waits
+  for (uint32_t f : {3u, 4u}) {
+    client({RenderRequest{f}});
+    deliver_client();
+    rendered_to_display();  // replaces the waiting frame
+  }
+  // The encoder's mailbox holds frame 1's job only: nothing else was handed to it.
+  CAF_CHECK_EQUAL(frames_sent(), std::vector<uint32_t>{});
+  run();
+  CAF_CHECK_EQUAL(frames_sent(), (std::vector<uint32_t>{1, 4}));
+  CAF_CHECK_EQUAL(sink->all<ErrorReply>().size(), 0u);
+  // Idle again: the next frame goes straight to the encoder.
+  client({RenderRequest{5}});
+  run();
+  CAF_CHECK_EQUAL(frames_sent(), (std::vector<uint32_t>{1, 4, 5}));
+}
+
 CAF_TEST(a session that ends mid frame takes all its actors with it) {
   client({SetCamera{camera_at(3)}, RenderRequest{1}});
   deliver_client();
