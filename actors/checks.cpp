@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 
 #include "lb/sat.h"
 #include "update/scene_update.h"
@@ -18,11 +19,14 @@ RenderTask task_of(const RenderBatch& b, const Rect& pixels) {
   t.ao_samples = b.ao_samples;
   t.max_depth = b.max_depth;
   t.renderer = b.renderer;
+  t.sample = b.sample;
+  t.seed = b.seed;
+  t.radiance = b.radiance;
   return t;
 }
 
 std::string check_tile(const TileResult& t, uint32_t frame, const Rect& expected, PacketLayout layout, int32_t width,
-                       int32_t height) {
+                       int32_t height, bool radiance) {
   auto str = [](const Rect& r) {
     return "[" + std::to_string(r.x0) + "," + std::to_string(r.y0) + "," + std::to_string(r.x1) + "," +
            std::to_string(r.y1) + "]";
@@ -32,6 +36,15 @@ std::string check_tile(const TileResult& t, uint32_t frame, const Rect& expected
   if (t.rgba.size() != size_t(expected.area()) * 4)
     return "tile " + str(expected) + " with " + std::to_string(t.rgba.size()) + " bytes of pixels, expected " +
            std::to_string(size_t(expected.area()) * 4);
+  const size_t want_radiance = radiance ? size_t(expected.area()) * 12 : 0;
+  if (t.radiance.size() != want_radiance)
+    return "tile " + str(expected) + " with " + std::to_string(t.radiance.size()) + " bytes of radiance, expected " +
+           std::to_string(want_radiance);
+  for (size_t i = 0; i + 4 <= t.radiance.size(); i += 4) {  // finite and not negative, as a renderer writes it
+    float v;
+    std::memcpy(&v, t.radiance.data() + i, 4);
+    if (!(v >= 0 && v <= 3.0e38f)) return "tile " + str(expected) + " with radiance that is negative or not finite";
+  }
   if (!std::isfinite(t.kernel_ms) || t.kernel_ms < 0 || !std::isfinite(t.rendering_ms) || t.rendering_ms < 0 ||
       !std::isfinite(t.sat_ms) || t.sat_ms < 0)
     return "impossible timings";
@@ -100,6 +113,8 @@ std::string check_batch(const RenderBatch& b, const protocol::Limits& lim) {
   if (b.max_depth < 0 || uint32_t(b.max_depth) > lim.max_depth)
     return "max_depth " + std::to_string(b.max_depth) + " outside 0.." + std::to_string(lim.max_depth);
   if (b.renderer > uint8_t(protocol::RendererKind::rasterizer)) return "renderer kind " + std::to_string(int(b.renderer));
+  if (b.radiance && b.renderer != uint8_t(protocol::RendererKind::raytracer))
+    return "radiance asked of the rasterizer (progressive stills are ray traced)";
   if (b.timeout_ms < 1 || b.timeout_ms > 3'600'000) return "timeout of " + std::to_string(b.timeout_ms) + " ms";
   if (b.tasks.size() > 65536) return std::to_string(b.tasks.size()) + " tasks";
   const Rect frame{0, 0, b.width, b.height};

@@ -1,4 +1,5 @@
 // Display channel actor: composes tiles, has the encoder encode the frame, sends it.
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <cstring>
@@ -104,6 +105,8 @@ void send_encoded(display_state& st, EncodedFrame& ef) {
   f.height = m.height;
   f.encoding = DisplayKind(m.display) == DisplayKind::s3tc ? protocol::FrameEncoding::dxt1
                                                            : protocol::FrameEncoding::jpeg;
+  f.refined = m.refined;
+  f.samples = uint16_t(std::min<uint32_t>(m.samples, 65535));
   f.timings.kernel_ms = float(m.kernel_ms);
   f.timings.rendering_ms = float(m.rendering_ms);
   f.timings.sat_ms = float(m.sat_ms);
@@ -141,6 +144,7 @@ void send_encoded(display_state& st, EncodedFrame& ef) {
   e.with("sat_ms", Json::number(m.sat_ms)).with("tiling_ms", Json::number(m.tiling_ms));
   e.with("encode_ms", Json::number(ef.encode_ms)).with("pipeline_ms", Json::number(f.timings.pipeline_ms));
   e.with("bytes", bytes);
+  if (m.samples > 1 || m.refined) e.with("samples", m.samples).with("refined", m.refined);
   e.with("render_start_ms", Json::number(rel(m.render_start_ns)));
   e.with("render_end_ms", Json::number(rel(m.render_end_ns)));
   e.with("encode_start_ms", Json::number(rel(ef.encode_start_ns)));

@@ -33,6 +33,8 @@ enum class Ev : uint8_t {
   child_connected, child_unreachable, child_lost, worker_opened, worker_closed, open_refused, heap_trimmed,
   // The server (net/server.cpp): no scope.
   closed_slow_client, rejected, network_thread_error,
+  // A session: its still reached its refine target and rendering stopped.
+  converged,
 };
 // The kind's key in a JSON line ("node_lost").
 const char* event_name(Ev kind);

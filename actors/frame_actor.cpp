@@ -1,12 +1,14 @@
 // Frame actor (frame_protocol.h): tiler -> root subtree -> recovery -> display, one frame at a time.
 #include <algorithm>
 #include <chrono>
+#include <stdexcept>
 
 #include <caf/all.hpp>
 
 #include "actors/checks.h"
 #include "actors/errors.h"
 #include "actors/node.h"
+#include "renderer/accumulation.h"
 
 namespace tessera {
 namespace {
@@ -31,6 +33,9 @@ struct frame_state {
   caf::typed_response_promise<uint32_t> done;
   uint32_t recovered = 0;       // tasks of lost nodes rendered here
   double last_rendering_ms = 0;
+  // The progressive still's average (FrameStart::refine): the tiles' radiance of every sample
+  // since its sample 0, composed here, where the tiles of all nodes meet.
+  Accumulation acc;
   static inline const char* name = "tessera.frame";
 };
 using self_ptr = frame_actor::stateful_pointer<frame_state>;
@@ -117,6 +122,30 @@ void finish_frame(self_ptr self, std::vector<TileResult>&& tiles, std::vector<do
                   .with("recovered", st.recovered)
                   .with("per_node", Json::array(std::move(per_node))));
   }
+  if (error.empty() && st.cur.refine) {
+    // The still's average replaces the sample's own pixels.
+    try {
+      if (st.cur.sample == 0)
+        st.acc.reset(meta.width, meta.height, st.cur.scene.scene->environment().linear);
+      else if (st.acc.samples() != st.cur.sample || st.acc.width() != meta.width || st.acc.height() != meta.height)
+        throw std::logic_error("sample " + std::to_string(st.cur.sample) + " of a still that has " +
+                               std::to_string(st.acc.samples()));
+      for (const TileResult& t : shown)
+        st.acc.add_bytes(t.radiance, t.pixels.width(), t.pixels.height(), t.pixels.x0, t.pixels.y0);
+      st.acc.end_sample();
+      Image avg = st.acc.average();
+      TileResult whole;
+      whole.frame = meta.seq;
+      whole.pixels = Rect{0, 0, meta.width, meta.height};
+      whole.rgba = std::move(avg.rgba);
+      shown.clear();
+      shown.push_back(std::move(whole));
+      meta.samples = st.acc.samples();
+    } catch (const std::exception& e) {
+      error = std::string("refine: ") + e.what();
+      st.acc.reset(0, 0, true);
+    }
+  }
   auto done = std::move(st.done);
   st.cur.scene = {};  // the sync actor may change its scene once it has the answer
   if (!error.empty()) {
@@ -170,6 +199,9 @@ void render_batch(self_ptr self) {
   batch.ao_samples = st.cur.ao_samples;
   batch.max_depth = st.cur.max_depth;
   batch.renderer = st.cur.renderer;
+  batch.sample = st.cur.sample;
+  batch.seed = st.cur.seed;
+  batch.radiance = st.cur.refine;
   // Bounded delay for lost nodes: the configured timeout, or 3x the last frame if longer.
   batch.timeout_ms = std::max<uint32_t>(st.settings->task_timeout_ms, uint32_t(3 * st.last_rendering_ms + 200));
   batch.tasks.assign(st.nodes.size(), Rect{});

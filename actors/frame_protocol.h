@@ -34,10 +34,16 @@ struct FrameStart {
   SceneSnapshot scene;
   int32_t ao_samples = 0, max_depth = 4;
   uint8_t renderer = 0;  // protocol::RendererKind
+  // A progressive still (renderer/accumulation.h): `refine` renders with radiance and averages
+  // it in the frame actor; `sample` 0 starts a new average, k > 0 adds the k-th sample.
+  // `seed`: the frame number that seeds the still's sample pattern (its first frame).
+  bool refine = false;
+  uint32_t sample = 0, seed = 0;
 };
 template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, FrameStart& x) {
-  return f(caf::meta::type_name("tessera::frame_start"), x.meta, x.scene, x.ao_samples, x.max_depth, x.renderer);
+  return f(caf::meta::type_name("tessera::frame_start"), x.meta, x.scene, x.ao_samples, x.max_depth, x.renderer, x.refine,
+           x.sample, x.seed);
 }
 
 using frame_actor = caf::typed_actor<caf::replies_to<nodes_atom, uint32_t>::with<uint32_t>,

@@ -130,12 +130,16 @@ struct FrameMeta {
   uint32_t dropped = 0;       // render requests merged into a later frame so far
   uint64_t scene_bytes = 0;   // buffers + textures held for the client
   uint64_t triangles = 0;     // scene triangles (instances counted each time)
+  // A progressive still: the samples averaged in this frame's image (1: a plain frame) and
+  // whether it refines the last requested frame (sent unasked, with that frame's number).
+  uint32_t samples = 1;
+  bool refined = false;
 };
 template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, FrameMeta& x) {
   return f(caf::meta::type_name("tessera::frame_meta"), x.seq, x.client_frame, x.width, x.height, x.display,
            x.quality, x.kernel_ms, x.rendering_ms, x.sat_ms, x.tiling_ms, x.render_start_ns, x.render_end_ns, x.nodes,
-           x.dropped, x.scene_bytes, x.triangles);
+           x.dropped, x.scene_bytes, x.triangles, x.samples, x.refined);
 }
 
 }  // namespace tessera

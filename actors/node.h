@@ -60,6 +60,13 @@ struct NodeSettings {
                                               // its scene until a reset update replaces it
   caf::weak_actor_ptr node;           // this process's node actor (none: a single node)
   // --- Resource bounds (docs/operations.md, "Resource bounds") ---
+  // Samples per pixel a still refines to after each requested frame, for a client that does
+  // not say (protocol record refine); 0 or 1: no refinement.
+  uint32_t refine_samples = 0;
+  // Interactive frames (requested while the view changes) are rendered at a scale that keeps
+  // them within this many ms (lb/frame_budget.h); the still after them at full resolution.
+  // 0: every frame at the client's resolution.
+  uint32_t frame_budget_ms = 0;
   uint32_t handshake_timeout_ms = 5000;  // a session without a valid handshake by then is closed
                                          // with a fatal bad_handshake (0: no timeout)
   std::shared_ptr<MemoryBudget> budget;  // node-wide: every session's scene bytes and the frames

@@ -4,6 +4,7 @@
 // tiler). The rasterizer's GL context is created on its first task, in this actor's thread;
 // when it cannot be created the task fails with the reason and the actor keeps serving.
 #include <chrono>
+#include <cstring>
 #include <exception>
 
 #include <caf/all.hpp>
@@ -38,6 +39,8 @@ renderer_actor::behavior_type renderer_impl(renderer_actor::stateful_pointer<ren
       [=](render_atom, const SceneSnapshot& snap, const RenderTask& task) -> caf::result<TileResult> {
         using protocol::ErrorCode;
         if (task.renderer > 1) return make_error(ErrorCode::bad_task, "unknown renderer " + std::to_string(int(task.renderer)));
+        if (task.radiance && task.renderer != 0)
+          return make_error(ErrorCode::bad_task, "radiance asked of the rasterizer (progressive stills are ray traced)");
         if (!snap.scene) return make_error(ErrorCode::bad_task, "render task without a scene");
         if (snap.scene->width() != task.width || snap.scene->height() != task.height)
           return make_error(ErrorCode::bad_task, "scene resolution does not match the task");
@@ -59,7 +62,9 @@ renderer_actor::behavior_type renderer_impl(renderer_actor::stateful_pointer<ren
           RenderSettings s;
           s.ao_samples = task.ao_samples;
           s.max_depth = task.max_depth;
-          s.frame = task.frame;
+          s.frame = task.seed ? task.seed : task.frame;
+          s.sample = task.sample;
+          s.radiance = task.radiance;
           s.cost_map = true;
           TaskResult r;
           renderer->render(task.pixels, s, r);
@@ -68,6 +73,10 @@ renderer_actor::behavior_type renderer_impl(renderer_actor::stateful_pointer<ren
           out.rendering_ms = r.rendering_ms;
           out.rays = r.rays.total();
           out.rgba = std::move(r.image.rgba);
+          if (task.radiance) {
+            out.radiance.resize(r.radiance.size() * sizeof(float));
+            if (!r.radiance.empty()) std::memcpy(out.radiance.data(), r.radiance.data(), out.radiance.size());
+          }
           if (!r.cost.cost.empty()) {
             auto t0 = std::chrono::steady_clock::now();
             Sat sat = Sat::from_cost_map(r.cost);

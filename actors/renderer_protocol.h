@@ -20,11 +20,18 @@ struct RenderTask {
   int32_t ao_samples = 0;
   int32_t max_depth = 4;
   uint8_t renderer = 0;  // protocol::RendererKind: 0 ray tracer, 1 rasterizer
+  // Progressive stills (renderer/sampling.h): which sample of the still this is (0: the plain
+  // frame) and the frame number that seeds its sample pattern (the still's first frame, so
+  // every sample continues the same low-discrepancy sequences; 0: `frame` seeds it). `radiance`: also return the
+  // linear colour, for averaging (TileResult::radiance).
+  uint32_t sample = 0;
+  uint32_t seed = 0;
+  bool radiance = false;
 };
 template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, RenderTask& x) {
   return f(caf::meta::type_name("tessera::render_task"), x.frame, x.width, x.height, x.pixels, x.ao_samples,
-           x.max_depth, x.renderer);
+           x.max_depth, x.renderer, x.sample, x.seed, x.radiance);
 }
 
 // What a rendering node returns for a task: RGBA pixels of the rectangle and the serialised
@@ -34,6 +41,9 @@ struct TileResult {
   Rect pixels;
   std::vector<uint8_t> rgba;  // pixels.width() * pixels.height() * 4
   std::vector<uint8_t> sat;   // Sat::serialize(); empty when no cost map was measured
+  // With RenderTask::radiance: each pixel's linear RGB as float32 (pixels.area() x 12 bytes,
+  // row by row, the byte order of x86 peers); else empty.
+  std::vector<uint8_t> radiance;
   double kernel_ms = 0, rendering_ms = 0, sat_ms = 0;
   uint64_t rays = 0;
   protocol::ErrorCode code = protocol::ErrorCode::ok;  // not ok: the task failed (pixels are not valid)
@@ -42,7 +52,8 @@ struct TileResult {
 };
 template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, TileResult& x) {
-  return f(caf::meta::type_name("tessera::tile_result"), x.frame, x.pixels, BytesField{x.rgba}, BytesField{x.sat}, x.kernel_ms,
+  return f(caf::meta::type_name("tessera::tile_result"), x.frame, x.pixels, BytesField{x.rgba}, BytesField{x.sat},
+           BytesField{x.radiance}, x.kernel_ms,
            x.rendering_ms, x.sat_ms, x.rays, x.code, x.error);
 }
 

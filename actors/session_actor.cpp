@@ -45,10 +45,15 @@ void frame_done(self_ptr self) {
     uint32_t f = *st.pending;
     st.pending.reset();
     start_frame(self, f);
+  } else if (st.still.active && (st.still.after_scaled || st.still.samples < st.still.target)) {
+    start_frame(self, st.still.client_frame, true);  // nothing changed: the next sample
+  } else if (st.still.active) {
+    st.still.active = false;  // converged: idle until the client asks again
+    log(self, Event(Ev::converged, st.still.client_frame).with("samples", st.still.samples));
   }
 }
 
-void start_frame(self_ptr self, uint32_t client_frame) {
+void start_frame(self_ptr self, uint32_t client_frame, bool refine) {
   auto& st = self->state;
   apply_cached(self);
   if (st.closed) return;
@@ -59,6 +64,37 @@ void start_frame(self_ptr self, uint32_t client_frame) {
   FrameMeta& m = fs.meta;
   m.seq = st.seq;
   m.client_frame = client_frame;
+  const bool can_refine = st.hs.renderer == RendererKind::raytracer;
+  st.frame_scale = 1;
+  if (!refine) {
+    // A requested frame starts a new still; it refines when the client wants more than one
+    // sample and the ray tracer renders it (the rasterizer has nothing to add). Within a frame
+    // budget it is rendered at the scale that keeps it there, and the still follows it at full
+    // resolution unasked.
+    st.still = {};
+    st.still.target = st.refine.value_or(st.settings->refine_samples);
+    if (st.budget) st.frame_scale = st.budget->scale();
+    st.still.after_scaled = st.frame_scale < 1;
+    st.still.active = st.still.after_scaled || (st.still.target > 1 && can_refine);
+    st.still.client_frame = client_frame;
+    st.still.seed = st.seq;
+  } else if (st.still.after_scaled) {
+    st.still.after_scaled = false;  // the still's sample 0, at full resolution, seeds it
+    st.still.seed = st.seq;
+  }
+  st.frame_is_sample = st.frame_scale == 1;
+  if (st.budget || st.scene->width() != st.full_w || st.scene->height() != st.full_h) {
+    int32_t w = st.full_w, h = st.full_h;
+    if (st.frame_scale < 1) FrameBudget::scaled(st.full_w, st.full_h, st.frame_scale, w, h);
+    set_resolution(self, w, h);
+    if (st.closed) return;
+  }
+  fs.refine = st.frame_is_sample && st.still.target > 1 && can_refine;
+  fs.sample = refine ? st.still.samples : 0;
+  fs.seed = st.still.seed;
+  m.refined = refine;
+  st.frame_requested = !refine;
+  st.frame_t0_ns = steady_ns();
   m.width = st.scene->width();
   m.height = st.scene->height();
   m.display = uint8_t(st.hs.display);
@@ -81,11 +117,19 @@ void start_frame(self_ptr self, uint32_t client_frame) {
   fs.max_depth = int32_t(st.render.max_depth);
   fs.renderer = uint8_t(st.hs.renderer);
   self->request(st.frame, caf::infinite, render_atom::value, std::move(fs))
-      .then([self](uint32_t) { frame_done(self); },
-            [self](caf::error& e) {
-              fail(self, Error{ErrorCode::internal, error_message(e), kNoRecord});
-              frame_done(self);
-            });
+      .then(
+          [self](uint32_t) {
+            auto& st = self->state;
+            if (st.frame_is_sample) st.still.samples++;
+            if (st.budget && st.frame_requested)  // an interactive frame: its time steers the next scale
+              st.budget->observe(st.frame_scale, double(steady_ns() - st.frame_t0_ns) / 1e6);
+            frame_done(self);
+          },
+          [self](caf::error& e) {
+            self->state.still.active = false;  // a failed sample ends the still
+            fail(self, Error{ErrorCode::internal, error_message(e), kNoRecord});
+            frame_done(self);
+          });
 }
 
 void on_handshake(self_ptr self, const Handshake& h) {
@@ -98,6 +142,9 @@ void on_handshake(self_ptr self, const Handshake& h) {
     return;
   }
   st.hs = h;
+  st.full_w = h.width;
+  st.full_h = h.height;
+  if (st.settings->frame_budget_ms > 0) st.budget.emplace(double(st.settings->frame_budget_ms));
   if (st.settings->renderer >= 0) st.hs.renderer = RendererKind(st.settings->renderer);  // tessera serve --renderer
   st.handshake_done = true;
   st.scene->set_resolution(h.width, h.height);

@@ -51,6 +51,13 @@ static void flush_forward(self_ptr self) {
   st.forward.clear();
 }
 
+void set_resolution(self_ptr self, int32_t w, int32_t h) {
+  auto& st = self->state;
+  if (st.scene->width() == w && st.scene->height() == h) return;
+  apply_update(self, Resolution{w, h}, kNoRecord);
+  flush_forward(self);
+}
+
 void apply_cached(self_ptr self) {
   auto& st = self->state;
   auto cached = std::move(st.cached);
@@ -123,12 +130,16 @@ static void on_client_records(self_ptr self, std::vector<uint8_t>& bytes, const 
   }
   auto& recs = res.value();
   if (Status order = check_session_order(st.handshake_done, recs); !order) return fail(self, order.error());
+  st.still.active = false;  // the client has spoken: the still it saw is no longer refined
   for (uint32_t i = 0; i < recs.size() && !st.closed; ++i) {
     ClientRecord& rec = recs[i];
+    if (auto* res = std::get_if<Resolution>(&rec)) st.full_w = res->width, st.full_h = res->height;
     if (auto* h = std::get_if<Handshake>(&rec)) {
       on_handshake(self, *h);
     } else if (auto* s = std::get_if<protocol::Settings>(&rec)) {
       st.render = *s;  // read when the next frame starts
+    } else if (auto* rf = std::get_if<protocol::Refine>(&rec)) {
+      st.refine = rf->samples;  // from the next requested frame on
     } else if (auto* rr = std::get_if<RenderRequest>(&rec)) {
       if (!st.in_flight) {
         start_frame(self, rr->frame);

@@ -12,6 +12,7 @@
 #include <caf/all.hpp>
 
 #include "actors/node.h"
+#include "lb/frame_budget.h"
 #include "protocol/protocol.h"
 #include "update/scene_update.h"
 
@@ -48,6 +49,27 @@ struct session_state {
   uint32_t seq = 0, dropped = 0, errors = 0;
   std::vector<uint8_t> forward;      // accepted scene records not yet sent down the tree
   std::set<std::string> noted;       // the no_effect notices sent (each goes to the client once)
+  // The progressive still (docs/protocol.md, "Refinement"): after a requested frame, while no
+  // client message arrives, the session renders the still's next sample as soon as the last
+  // one is rendered, up to its target; any client message ends it.
+  std::optional<uint32_t> refine;    // the client's refine record (else NodeSettings::refine_samples)
+  struct Still {
+    bool active = false;             // more samples are wanted
+    uint32_t target = 0;             // samples per pixel it refines to
+    uint32_t client_frame = 0;       // the requested frame it refines
+    uint32_t seed = 0;               // that frame's sequence number: seeds every sample
+    uint32_t samples = 0;            // samples rendered so far
+    bool after_scaled = false;       // it follows a scaled interactive frame: sample 0 is still to come
+  } still;
+  // Interactive frames within NodeSettings::frame_budget_ms: the scale controller, the
+  // client's own resolution (the scene's is the scaled one while an interactive frame renders),
+  // and what the frame in flight is.
+  std::optional<FrameBudget> budget;
+  int32_t full_w = 0, full_h = 0;
+  double frame_scale = 1;            // of the frame in flight
+  bool frame_is_sample = false;      // the frame in flight is a sample of the still
+  bool frame_requested = false;      // the frame in flight answers a render request
+  int64_t frame_t0_ns = 0;
   std::pair<uint32_t, uint64_t> checked{0, 0};  // AO samples and environment version last checked for them
   static inline const char* name = "tessera.session";
 };
@@ -67,6 +89,9 @@ void apply_cached(self_ptr self);
 void on_client(self_ptr self, std::vector<uint8_t>& bytes);
 // session_actor.cpp: the handshake (its reply waits for the tree's first commit) and frames.
 void on_handshake(self_ptr self, const Handshake& h);
-void start_frame(self_ptr self, uint32_t client_frame);
+// Renders the next frames at w x h (a Resolution record applied here and sent down the tree).
+void set_resolution(self_ptr self, int32_t w, int32_t h);
+// A frame: the answer to a render request (a new still), or with `refine` the still's next sample.
+void start_frame(self_ptr self, uint32_t client_frame, bool refine = false);
 
 }  // namespace tessera::session

@@ -65,6 +65,10 @@ NodeConfig::NodeConfig() {
       .add(max_client_bytes, "max-client-bytes", "buffers + textures held per client")
       .add(max_triangles, "max-triangles", "triangles per client scene")
       .add(max_texture_size, "max-texture-size", "largest texture width/height")
+      .add(refine_samples, "refine-samples",
+           "samples per pixel a still refines to after a requested frame, for clients that do not say (0: none)")
+      .add(frame_budget_ms, "frame-budget-ms",
+           "interactive frames are rendered at a lower resolution to take about this long (0: never)")
       .add(handshake_timeout_ms, "handshake-timeout-ms", "close a WebSocket without a valid handshake after this long")
       .add(max_node_bytes, "max-node-bytes",
            "memory budget over all clients: scene bytes + queued frames (0: half the physical memory)")
@@ -129,6 +133,11 @@ std::shared_ptr<NodeSettings> NodeConfig::node_settings() const {
   if (handshake_timeout_ms < 10) throw std::invalid_argument("tessera.handshake-timeout-ms must be >= 10");
   if (max_node_bytes < 0) throw std::invalid_argument("tessera.max-node-bytes must be >= 0 (0: half the physical memory)");
   s->handshake_timeout_ms = uint32_t(handshake_timeout_ms);
+  if (refine_samples < 0 || uint32_t(refine_samples) > s->limits.max_refine_samples)
+    throw std::invalid_argument("tessera.refine-samples must be in 0.." + std::to_string(s->limits.max_refine_samples));
+  s->refine_samples = uint32_t(refine_samples);
+  if (frame_budget_ms < 0 || frame_budget_ms > 60000) throw std::invalid_argument("tessera.frame-budget-ms must be in 0..60000");
+  s->frame_budget_ms = uint32_t(frame_budget_ms);
   s->budget = std::make_shared<MemoryBudget>(max_node_bytes > 0 ? uint64_t(max_node_bytes) : MemoryBudget::default_limit());
   s->render = renders;
   s->children = children;

@@ -1,5 +1,6 @@
 #include "protocol/protocol.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <type_traits>
@@ -55,6 +56,7 @@ const char* to_string(RecordType t) {
   switch (t) {
     case RecordType::handshake: return "handshake";
     case RecordType::settings: return "settings";
+    case RecordType::refine: return "refine";
     case RecordType::resolution: return "resolution";
     case RecordType::camera: return "camera";
     case RecordType::environment: return "environment";
@@ -156,6 +158,11 @@ struct ClientEncoder {
     size_t at = w.begin_record(RecordType::settings, Op::set);
     w.u32(s.ao_samples);
     w.u32(s.max_depth);
+    w.end_record(at);
+  }
+  void operator()(const Refine& r) {
+    size_t at = w.begin_record(RecordType::refine, Op::set);
+    w.u32(r.samples);
     w.end_record(at);
   }
   void operator()(const Resolution& r) {
@@ -286,7 +293,8 @@ void frame_fixed(Writer& w, const Frame& f) {
   w.u32(uint32_t(f.width));
   w.u32(uint32_t(f.height));
   w.u8(uint8_t(f.encoding));
-  w.u8(0), w.u8(0), w.u8(0);
+  w.u8(f.refined ? 1 : 0);
+  w.u16(std::max<uint16_t>(1, f.samples));
   w.f32(f.timings.kernel_ms);
   w.f32(f.timings.rendering_ms);
   w.f32(f.timings.sat_ms);
@@ -557,6 +565,15 @@ class ClientDecoder {
           return c.fail(ErrorCode::limit_exceeded, "max_depth " + std::to_string(s.max_depth) + " exceeds the limit " +
                                                        std::to_string(lim_.max_depth));
         out = s;
+        return true;
+      }
+      case RecordType::refine: {
+        if (!c.length(r.left(), wire::refine::kFixed)) return false;
+        Refine rf{r.u32()};
+        if (rf.samples > lim_.max_refine_samples)
+          return c.fail(ErrorCode::limit_exceeded, "refine samples " + std::to_string(rf.samples) +
+                                                       " exceeds the limit " + std::to_string(lim_.max_refine_samples));
+        out = rf;
         return true;
       }
       case RecordType::resolution: {
@@ -886,8 +903,8 @@ bool server_record(Check& c, Reader& r, const Limits& lim, ServerRecord& out) {
       Frame f;
       f.frame = r.u32();
       uint32_t w = r.u32(), h = r.u32();
-      uint8_t enc = r.u8();
-      uint32_t res = r.u8() | (r.u8() << 8) | (r.u8() << 16);
+      uint8_t enc = r.u8(), refined = r.u8();
+      f.samples = r.u16();
       FrameTimings& t = f.timings;
       t.kernel_ms = r.f32();
       t.rendering_ms = r.f32();
@@ -895,10 +912,11 @@ bool server_record(Check& c, Reader& r, const Limits& lim, ServerRecord& out) {
       t.tiling_ms = r.f32();
       t.pipeline_ms = r.f32();
       t.encode_ms = r.f32();
-      if (!c.enumeration(enc, wire::enum_max::frame_encoding, "encoding") || !c.reserved(res) ||
+      if (!c.enumeration(enc, wire::enum_max::frame_encoding, "encoding") || !c.flag(refined, "refined") ||
           !c.resolution(w, h, wire::frame::width, wire::frame::height, lim))
         return false;
       f.encoding = FrameEncoding(enc);
+      f.refined = refined != 0;
       f.width = int32_t(w);
       f.height = int32_t(h);
       if (f.encoding == FrameEncoding::dxt1 &&

@@ -110,6 +110,7 @@ struct Limits {
   int32_t max_texture_size = wire::limits::max_texture_size;     // texture width and height each
   uint32_t max_nodes = wire::limits::max_nodes;                  // handshake max_nodes
   uint32_t max_ao_samples = wire::limits::max_ao_samples;
+  uint32_t max_refine_samples = wire::limits::max_refine_samples;
   uint32_t max_depth = wire::limits::max_depth;
 };
 
@@ -138,6 +139,12 @@ struct Settings {
 
 struct Resolution {
   int32_t width = 640, height = 480;
+};
+
+// The samples per pixel a still refines to after each requested frame (docs/protocol.md,
+// "Refinement"); 0 or 1: none.
+struct Refine {
+  uint32_t samples = 0;
 };
 
 struct SetCamera {
@@ -183,7 +190,7 @@ struct RenderRequest {
 };
 
 using ClientRecord = std::variant<Handshake, Settings, Resolution, SetCamera, SetEnvironment, SetBuffer, SetTexture,
-                                  SetMaterial, SetMesh, SetLight, Remove, RenderRequest>;
+                                  SetMaterial, SetMesh, SetLight, Remove, RenderRequest, Refine>;
 
 // ---------------------------------------------------------------------------------------
 // Server -> client records.
@@ -207,6 +214,8 @@ struct Frame {
   uint32_t frame = 0;  // the client's frame number from the render request
   int32_t width = 0, height = 0;
   FrameEncoding encoding = FrameEncoding::jpeg;
+  bool refined = false;   // sent unasked: a refinement of the last requested frame
+  uint16_t samples = 1;   // samples per pixel averaged in the image
   FrameTimings timings;
   std::vector<uint8_t> payload;  // JPEG file, or DXT1 blocks (dxt1_size(width, height) bytes)
 };

@@ -1,5 +1,6 @@
 #include "renderer/accumulation.h"
 
+#include <cstring>
 #include <stdexcept>
 
 #include "renderer/raytracer_impl.h"
@@ -22,6 +23,21 @@ void Accumulation::add(const std::vector<float>& radiance, int32_t width, int32_
     const float* src = &radiance[size_t(ty) * size_t(width) * 3];
     double* dst = &sum_[(size_t(y + ty) * size_t(width_) + size_t(x)) * 3];
     for (size_t i = 0; i < size_t(width) * 3; ++i) dst[i] += double(src[i]);
+  }
+}
+
+void Accumulation::add_bytes(const std::vector<uint8_t>& radiance, int32_t width, int32_t height, int32_t x, int32_t y) {
+  if (x < 0 || y < 0 || width < 0 || height < 0 || x + width > width_ || y + height > height_ ||
+      radiance.size() != size_t(width) * size_t(height) * 3 * sizeof(float))
+    throw std::invalid_argument("Accumulation::add_bytes: a tile outside the frame, or not its size");
+  for (int32_t ty = 0; ty < height; ++ty) {
+    const uint8_t* src = &radiance[size_t(ty) * size_t(width) * 3 * sizeof(float)];
+    double* dst = &sum_[(size_t(y + ty) * size_t(width_) + size_t(x)) * 3];
+    for (size_t i = 0; i < size_t(width) * 3; ++i) {
+      float v;
+      std::memcpy(&v, src + i * sizeof(float), sizeof(float));
+      dst[i] += double(v);
+    }
   }
 }
 

@@ -18,6 +18,8 @@ class Accumulation {
   void reset(int32_t width, int32_t height, bool srgb);
   // A tile of the current sample at (x, y): width * height RGB triples, row by row. It must fit.
   void add(const std::vector<float>& radiance, int32_t width, int32_t height, int32_t x, int32_t y);
+  // The same from the float32 bytes a tile carries between nodes (TileResult::radiance).
+  void add_bytes(const std::vector<uint8_t>& radiance, int32_t width, int32_t height, int32_t x, int32_t y);
   void end_sample() { ++samples_; }
   uint32_t samples() const { return samples_; }
   int32_t width() const { return width_; }

@@ -13,6 +13,8 @@
 #include <thread>
 
 #include <cmath>
+#include <cstring>
+#include <limits>
 
 #include "actors/node.h"
 #include "actors/checks.h"
@@ -829,6 +831,31 @@ CAF_TEST(check_tile and check_nodes reject impossible tiles and node lists) {
     other.cost.assign(9, 1);
     Sat::from_cost_map(other).serialize_into(t.sat);  // a SAT of other packets
   }));
+  // A progressive still's tiles carry their radiance: 12 bytes a pixel, finite, not negative.
+  CAF_CHECK(!check_tile(ok, 7, task, pl, kSize, kSize, true).empty());  // asked for and missing
+  TileResult lit = ok;
+  lit.radiance.assign(size_t(task.area()) * 12, 0);
+  CAF_CHECK_EQUAL(check_tile(lit, 7, task, pl, kSize, kSize, true), "");
+  CAF_CHECK(!check_tile(lit, 7, task, pl, kSize, kSize, false).empty());  // not asked for
+  auto bad_radiance = [&](float v) {
+    TileResult t = lit;
+    std::memcpy(t.radiance.data() + 12 * 5 + 4, &v, 4);
+    return !check_tile(t, 7, task, pl, kSize, kSize, true).empty();
+  };
+  CAF_CHECK(!bad_radiance(0.25f));
+  CAF_CHECK(bad_radiance(std::nanf("")));
+  CAF_CHECK(bad_radiance(-1.0f));
+  CAF_CHECK(bad_radiance(std::numeric_limits<float>::infinity()));
+  lit.radiance.pop_back();
+  CAF_CHECK(!check_tile(lit, 7, task, pl, kSize, kSize, true).empty());
+  // Radiance is asked of the ray tracer only.
+  RenderBatch b;
+  b.width = b.height = 16;
+  b.tasks = {Rect{0, 0, 16, 16}};
+  b.radiance = true;
+  CAF_CHECK_EQUAL(check_batch(b, Limits{}), "");
+  b.renderer = uint8_t(RendererKind::rasterizer);
+  CAF_CHECK(!check_batch(b, Limits{}).empty());
   CAF_CHECK_EQUAL(check_nodes({NodeInfo{"a:1", 4, 1.5}}), "");
   CAF_CHECK(!check_nodes({NodeInfo{"a:1", 0, 1}}).empty());
   CAF_CHECK(!check_nodes({NodeInfo{"a:1", 1, std::nan("")}}).empty());

@@ -8,8 +8,12 @@
 
 #include <mutex>
 
+#include "actors/checks.h"
 #include "actors/node.h"
+#include "codecs/jpeg.h"
 #include "protocol/protocol.h"
+#include "renderer/accumulation.h"
+#include "renderer/raytracer.h"
 #include "tests/actor/actor_helpers.h"
 
 using namespace tessera;
@@ -257,6 +261,150 @@ CAF_TEST(frames rendered faster than they encode wait one at a time and the newe
   client({RenderRequest{5}});
   run();
   CAF_CHECK_EQUAL(frames_sent(), (std::vector<uint32_t>{1, 4, 5}));
+}
+
+// The still the session refines, rendered and averaged here without actors: `samples` samples
+// of tiny_scene() seen from camera_at(z) at 16x16, seeded by frame `seed`, JPEG at quality 85.
+std::vector<uint8_t> refined_still(float z, uint32_t seed, uint32_t samples) {
+  Scene scene;
+  std::vector<ClientRecord> recs = tiny_scene();
+  recs.push_back(SetCamera{camera_at(z)});
+  CAF_REQUIRE_EQUAL(apply_records(scene, encode(recs), Limits{}), "");
+  scene.set_resolution(16, 16);
+  RayTracer rt({4, 4});
+  std::vector<std::string> warnings;
+  rt.sync(scene, warnings);
+  Accumulation acc;
+  acc.reset(16, 16, scene.environment().linear);
+  for (uint32_t k = 0; k < samples; ++k) {
+    RenderSettings s;
+    s.ao_samples = 0;
+    s.max_depth = 4;
+    s.frame = seed;
+    s.sample = k;
+    s.radiance = true;
+    TaskResult r;
+    rt.render(Rect{0, 0, 16, 16}, s, r);
+    acc.add(r.radiance, 16, 16, 0, 0);
+    acc.end_sample();
+  }
+  Image avg = acc.average();
+  JpegEncoder jpeg;
+  std::vector<uint8_t> out;
+  std::string err;
+  CAF_REQUIRE(jpeg.encode(avg.rgba.data(), 16, 16, 85, out, err, 0));
+  return out;
+}
+
+CAF_TEST(after a requested frame the still refines to its target and the session goes idle) {
+  settings->refine_samples = 4;  // the node's default: this client sends no refine record
+  client({SetCamera{camera_at(3)}, RenderRequest{1}});
+  run();
+  auto frames = sink->all<Frame>();
+  CAF_REQUIRE_GREATER_OR_EQUAL(frames.size(), 2u);
+  for (auto& f : frames) CAF_CHECK_EQUAL(f.frame, 1u);  // refinements carry the requested frame's number
+  CAF_CHECK(!frames.front().refined);
+  CAF_CHECK_EQUAL(frames.front().samples, 1u);
+  CAF_CHECK(frames.back().refined);
+  CAF_CHECK_EQUAL(frames.back().samples, 4u);
+  for (size_t i = 1; i < frames.size(); ++i) CAF_CHECK_GREATER(frames[i].samples, frames[i - 1].samples);
+  // The average of the four samples, exactly as the renderer and an Accumulation give it.
+  CAF_CHECK(frames.back().payload == refined_still(3, 1, 4));
+  CAF_CHECK(frames.front().payload == refined_still(3, 1, 1));  // sample 0 is the plain frame
+  // Converged: nothing more is rendered.
+  CAF_CHECK_EQUAL(status().frames_started, 4u);
+  run();
+  CAF_CHECK_EQUAL(status().frames_started, 4u);
+  CAF_CHECK_EQUAL(sink->all<Frame>().size(), frames.size());
+  CAF_CHECK_EQUAL(sink->all<ErrorReply>().size(), 0u);
+}
+
+CAF_TEST(any client message ends the refinement and a render request starts a new still) {
+  settings->refine_samples = 6;
+  client({SetCamera{camera_at(3)}, RenderRequest{1}});
+  // Queued behind the first: it arrives while frame 1 renders, so frame 1 is never refined.
+  client({SetCamera{camera_at(4)}, RenderRequest{2}});
+  run();
+  auto frames = sink->all<Frame>();
+  CAF_REQUIRE_GREATER_OR_EQUAL(frames.size(), 2u);
+  CAF_CHECK_EQUAL(frames.front().frame, 1u);
+  CAF_CHECK_EQUAL(frames.front().samples, 1u);
+  for (auto& f : frames)
+    if (f.frame == 1) CAF_CHECK(!f.refined);
+  CAF_CHECK_EQUAL(frames.back().frame, 2u);
+  CAF_CHECK_EQUAL(frames.back().samples, 6u);
+  CAF_CHECK(frames.back().payload == refined_still(4, 2, 6));  // seeded by its own first frame (seq 2)
+  CAF_CHECK_EQUAL(status().frames_started, 1u + 6u);
+  // A message without a render request (a light change) stops a still midway; the next
+  // request starts over at sample 0.
+  const size_t before = sink->all<Frame>().size();
+  client({SetCamera{camera_at(3)}, RenderRequest{3}});
+  deliver_client();
+  SetLight dim;
+  dim.id = 4;
+  dim.light.intensity = 0.5f;
+  client({dim});
+  run();
+  auto later = sink->all<Frame>();
+  CAF_REQUIRE_GREATER(later.size(), before);
+  CAF_CHECK_EQUAL(later.back().frame, 3u);
+  CAF_CHECK_EQUAL(later.back().samples, 1u);  // the light change arrived while sample 0 rendered
+  CAF_CHECK_EQUAL(status().frames_started, 1u + 6u + 1u);
+}
+
+CAF_TEST(every kind of client record ends a still that is refining) {
+  settings->refine_samples = 64;
+  SetLight light;
+  light.id = 4;
+  light.light.type = Light::Type::directional;
+  light.light.direction = {0, 0, -1};
+  SetEnvironment env;
+  env.environment.ambient = {0.1f, 0.1f, 0.1f};
+  SetMaterial mat;
+  mat.id = 20;
+  SetMesh mesh;
+  mesh.id = 3;
+  mesh.mesh.positions = 1;
+  mesh.mesh.indices = 2;
+  Remove gone;
+  gone.what = RecordType::material;
+  gone.id = 20;
+  const std::vector<std::pair<std::string, ClientRecord>> changes = {
+      {"settings", Settings{0, 3}}, {"resolution", Resolution{16, 16}}, {"camera", SetCamera{camera_at(4)}},
+      {"environment", env},         {"light", light},                   {"material", mat},
+      {"mesh", mesh},               {"remove", gone},                   {"refine", Refine{64}},
+      {"buffer", floats(40, 4)}};
+  uint32_t frame = 0;
+  for (auto& [name, rec] : changes) {
+    CAF_MESSAGE("change: " << name);
+    const uint32_t before = status().frames_started;
+    client({SetCamera{camera_at(3)}, RenderRequest{++frame}});
+    deliver_client();  // sample 0 renders
+    for (int i = 0; i < 40; ++i) sched.run_once();  // a few samples further
+    const uint32_t started = status().frames_started;
+    CAF_CHECK_GREATER(started, before + 2);  // it was refining
+    client({rec});
+    run();
+    const uint32_t after = status().frames_started;
+    CAF_CHECK_LESS_OR_EQUAL(after, started + 1);  // at most the sample in flight finishes
+    CAF_CHECK_LESS(sink->all<Frame>().back().samples, 64u);
+    run();
+    CAF_CHECK_EQUAL(status().frames_started, after);  // and then nothing
+  }
+  CAF_CHECK_EQUAL(sink->all<ErrorReply>().size(), 0u);
+}
+
+CAF_TEST(a refine record from the client sets its target and 0 turns refinement off) {
+  settings->refine_samples = 8;
+  client({Refine{3}, SetCamera{camera_at(3)}, RenderRequest{1}});
+  run();
+  CAF_CHECK_EQUAL(sink->all<Frame>().back().samples, 3u);
+  CAF_CHECK_EQUAL(status().frames_started, 3u);
+  client({Refine{0}, RenderRequest{2}});
+  run();
+  CAF_CHECK_EQUAL(sink->all<Frame>().back().frame, 2u);
+  CAF_CHECK_EQUAL(sink->all<Frame>().back().samples, 1u);
+  CAF_CHECK_EQUAL(status().frames_started, 4u);
 }
 
 CAF_TEST(a session that ends mid frame takes all its actors with it) {

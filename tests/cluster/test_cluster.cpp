@@ -80,6 +80,58 @@ TEST_CASE("Two worker processes render for a master; a killed worker's tiles are
   CHECK(m.p->err_count("\"error\"") == 0);  // the client never got an error
 }
 
+TEST_CASE("Within a frame budget a tree renders small interactive frames and refines the still at full size",
+          "[cluster][budget]") {
+  // The resolution changes between the interactive frames and the still go down the tree as
+  // records; the tiles of both workers are averaged by the master.
+  Node w1 = worker("w1"), w2 = worker("w2");
+  Node m({"--port", "0", "--no-render", "--tessera.frame-budget-ms=1", "--children", w1.addr() + "," + w2.addr()});
+  REQUIRE(wait_for([&] { return m.p->err_count("\"child_connected\"") == 2; }, 20000));
+  ProtoClient c;
+  REQUIRE(c.connect(m.http));
+  auto hs = c.handshake(DisplayKind::jpeg, W, H, 95);
+  REQUIRE(hs);
+  REQUIRE(hs->nodes == 2);
+  REQUIRE(c.upload(pavilion().scene));
+  REQUIRE(c.send({protocol::Refine{4}}));
+  INFO("master stderr tail: " << m.p->err().substr(m.p->err().size() > 3000 ? m.p->err().size() - 3000 : 0));
+  auto first = c.render(pavilion_loop().camera(0), 1, 90000);  // the workers build the scene first
+  REQUIRE(first);
+  CHECK(first->width == W);
+  // Frame 1 refines to 4 samples at full size (nothing was measured before it).
+  uint16_t samples = first->samples;
+  while (samples < 4) {
+    auto f = c.next<protocol::Frame>();
+    REQUIRE(f);
+    REQUIRE(f->frame == 1);
+    samples = f->samples;
+  }
+  for (uint32_t n = 2; n <= 3; ++n) {
+    auto small = c.render(pavilion_loop().camera(20 * n), n);
+    REQUIRE(small);
+    CHECK(small->width == W / 4);
+    CHECK(small->height == H / 4);
+    uint16_t got = 0;
+    protocol::Frame last;
+    while (got < 4) {
+      auto f = c.next<protocol::Frame>();
+      REQUIRE(f);
+      REQUIRE(f->frame == n);
+      CHECK(f->refined);
+      CHECK(f->width == W);
+      got = f->samples;
+      last = std::move(*f);
+    }
+    // The still is the camera's image: the refined average is close to a direct render.
+    const double psnr =
+        compare(decode_jpeg(last.payload), render_direct(pavilion().scene, pavilion_loop().camera(20 * n), W, H, 0, 0)).psnr;
+    INFO("frame " << n << " PSNR " << psnr);
+    CHECK(psnr >= 28.0);
+  }
+  CHECK(m.p->err_count("\"error\"") == 0);
+  CHECK(m.p->err_count("\"node_lost\"") == 0);
+}
+
 TEST_CASE("A hub relays a sub-tree; when it dies its sub-tree leaves and the rest keeps rendering", "[cluster][fault]") {
   Node w3 = worker("w3"), w4 = worker("w4"), w5 = worker("w5");
   Node hub({"--no-http", "--no-render", "--cluster-port", "0", "--tessera.name=hub", "--children",

@@ -376,3 +376,49 @@ TEST_CASE("A client streaming frames for more than a second receives Stats recor
   }
   CHECK(stats[1].first.frames > stats[0].first.frames);
 }
+
+TEST_CASE("Within a frame budget, interactive frames shrink and the still after them comes at full resolution",
+          "[e2e][budget]") {
+  // A 1 ms budget no pavilion frame can meet: after the first frame (full resolution, nothing
+  // measured yet) requested frames come at the smallest scale, 1/4 of each side, and each is
+  // followed, unasked, by the still at the client's resolution, refined to its target.
+  TestNode node(8, [](NodeSettings& s, ServerOptions&) { s.frame_budget_ms = 1; });
+  ProtoClient c;
+  REQUIRE(c.connect(node.port()));
+  REQUIRE(c.handshake(protocol::DisplayKind::jpeg, 320, 180, 80));
+  REQUIRE(c.upload(pavilion().scene));
+  auto first = c.render(pavilion_loop().camera(0), 1);
+  REQUIRE(first);
+  CHECK(first->width == 320);
+  CHECK(first->height == 180);
+  CHECK_FALSE(first->refined);
+  for (uint32_t f = 2; f <= 3; ++f) {
+    auto small = c.render(pavilion_loop().camera(f), f);
+    REQUIRE(small);
+    CHECK(small->width == 80);
+    CHECK(small->height == 45);
+    CHECK_FALSE(small->refined);
+    auto still = c.next<protocol::Frame>();
+    REQUIRE(still);
+    CHECK(still->frame == f);
+    CHECK(still->refined);
+    CHECK(still->width == 320);
+    CHECK(still->height == 180);
+    CHECK(still->samples == 1);  // this node refines no further by default
+  }
+  // With refinement asked for, the still goes on from there to its target.
+  REQUIRE(c.send({protocol::Refine{3}}));
+  auto small = c.render(pavilion_loop().camera(5), 5);
+  REQUIRE(small);
+  CHECK(small->width == 80);
+  uint16_t samples = 0;
+  while (samples < 3) {
+    auto f = c.next<protocol::Frame>();
+    REQUIRE(f);
+    CHECK(f->refined);
+    CHECK(f->width == 320);
+    CHECK(f->samples > samples);
+    samples = f->samples;
+  }
+  CHECK_FALSE(c.next<protocol::Frame>(500));  // converged: nothing more
+}

@@ -43,7 +43,8 @@ bool scene_from_message(const uint8_t* data, size_t size, Scene& scene) {
   if (!msg.ok()) return false;
   for (auto& r : msg.value()) {
     if (std::holds_alternative<Handshake>(r) || std::holds_alternative<Settings>(r) ||
-        std::holds_alternative<Resolution>(r) || std::holds_alternative<RenderRequest>(r))
+        std::holds_alternative<Resolution>(r) || std::holds_alternative<RenderRequest>(r) ||
+        std::holds_alternative<Refine>(r))
       continue;  // session-level records; the render below uses its own settings
     (void)apply(scene, std::move(r), lim);
   }

@@ -116,6 +116,7 @@ void protocol_corpus() {
   h.max_nodes = 4;
   put("protocol", "handshake", encode(ClientRecord{h}));
   put("protocol", "settings", encode(ClientRecord{Settings{4, 3}}));
+  put("protocol", "refine", encode(ClientRecord{Refine{64}}));
   put("protocol", "resolution", encode(ClientRecord{Resolution{1280, 720}}));
   SetCamera cam = camera_at({0, 1, 5});
   put("protocol", "camera", encode(ClientRecord{cam}));
@@ -164,6 +165,9 @@ void protocol_corpus() {
   frame.encoding = FrameEncoding::dxt1;
   frame.payload.assign(32, 0x55);
   put("protocol", "server_frame", encode(ServerRecord{frame}));
+  frame.refined = true;
+  frame.samples = 16;
+  put("protocol", "server_frame_refined", encode(ServerRecord{frame}));
   put("protocol", "server_error", encode(ServerRecord{ErrorReply{ErrorCode::bad_mesh, false, 2, "mesh 8: bad"}}));
   put("protocol", "server_stats", encode(ServerRecord{Stats{}}));
 }

@@ -184,6 +184,7 @@ std::vector<ClientRecord> every_client_record() {
   v.push_back(sample_light(20));
   v.push_back(Remove{RecordType::light, 21});
   v.push_back(RenderRequest{42});
+  v.push_back(Refine{256});
   return v;
 }
 
@@ -242,6 +243,7 @@ TEST_CASE("Every client record survives an encode/decode round trip", "[protocol
     CHECK(std::get<Remove>(v[11]).what == RecordType::light);
     CHECK(std::get<Remove>(v[11]).id == 21);
     CHECK(std::get<RenderRequest>(v[12]).frame == 42);
+    CHECK(std::get<Refine>(v[13]).samples == 256);
   }
   SECTION("removes of every entry kind") {
     for (RecordType t : {RecordType::buffer, RecordType::texture, RecordType::material, RecordType::mesh,
@@ -315,15 +317,21 @@ TEST_CASE("Every server record survives an encode/decode round trip", "[protocol
   f.width = 5;
   f.height = 3;
   f.encoding = FrameEncoding::dxt1;
+  f.refined = true;
+  f.samples = 300;
   f.timings = {1, 2, 3, 4, 5, 6};
   f.payload.assign(dxt1_size(5, 3), 0xab);
   ErrorReply e{ErrorCode::bad_mesh, false, 3, "mesh 4: index 9 out of range"};
   Stats s{100, 2, 1ull << 40, 12345, 1000000, 4, 29.5f, 12.25f};
-  std::vector<ServerRecord> recs{h, f, e, s};
+  Frame plain;  // a requested frame: not refined, 1 sample
+  plain.frame = 8;
+  plain.width = plain.height = 1;
+  plain.payload = {1, 2};
+  std::vector<ServerRecord> recs{h, f, e, s, plain};
   auto bytes = encode(recs);
   auto r = decode_server(bytes.data(), bytes.size(), Limits{});
   REQUIRE(r.ok());
-  REQUIRE(r.value().size() == 4);
+  REQUIRE(r.value().size() == 5);
   CHECK(encode(r.value()) == bytes);
   auto& h2 = std::get<HandshakeReply>(r.value()[0]);
   CHECK(h2.display == DisplayKind::mjpeg);
@@ -333,6 +341,12 @@ TEST_CASE("Every server record survives an encode/decode round trip", "[protocol
   CHECK(f2.payload == f.payload);
   CHECK(f2.timings.encode_ms == 6);
   CHECK(f2.encoding == FrameEncoding::dxt1);
+  CHECK(f2.refined);
+  CHECK(f2.samples == 300);
+  auto& p2 = std::get<Frame>(r.value()[4]);
+  CHECK_FALSE(p2.refined);
+  CHECK(p2.samples == 1);
+  CHECK(p2.payload == plain.payload);
   auto& e2 = std::get<ErrorReply>(r.value()[2]);
   CHECK(e2.code == ErrorCode::bad_mesh);
   CHECK(e2.record == 3);
@@ -358,6 +372,22 @@ TEST_CASE("A frame header written before a JPEG matches encode(Frame)", "[protoc
   size_t header = out.size();
   REQUIRE(enc.encode(img, 80, out, err, header));
   CHECK(out == encode(ServerRecord{f}));
+  // A refined frame's fields are in the header too; 0 samples are written as 1.
+  f.refined = true;
+  f.samples = 65535;
+  out.clear();
+  encode_frame_header(f, f.payload.size(), out);
+  REQUIRE(enc.encode(img, 80, out, err, out.size()));
+  CHECK(out == encode(ServerRecord{f}));
+  auto back = decode_server(out.data(), out.size(), Limits{});
+  REQUIRE(back.ok());
+  CHECK(std::get<Frame>(back.value()[0]).refined);
+  CHECK(std::get<Frame>(back.value()[0]).samples == 65535);
+  f.samples = 0;
+  out.clear();
+  encode_frame_header(f, 0, out);
+  CHECK(out[kBody + wire::frame::at::samples] == 1);
+  CHECK(out[kBody + wire::frame::at::samples + 1] == 0);
 }
 
 // ---------------------------------------------------------------------------------------
@@ -520,6 +550,33 @@ TEST_CASE("Settings and resolution rules", "[protocol]") {
   CHECK(mentions(fails(encode(ClientRecord{Settings{17, 8}}), ErrorCode::limit_exceeded, lim), "ao_samples"));
   CHECK(mentions(fails(encode(ClientRecord{Settings{1, 9}}), ErrorCode::limit_exceeded, lim), "max_depth"));
   fails(encode(ClientRecord{Resolution{0, 10}}), ErrorCode::out_of_range);
+  // Refine: samples up to max_refine_samples (4096 by default); 0 and 1 mean no refinement.
+  for (uint32_t n : {0u, 1u, 64u, Limits{}.max_refine_samples})
+    CHECK(one<Refine>(encode(ClientRecord{Refine{n}})).samples == n);
+  CHECK(mentions(fails(encode(ClientRecord{Refine{Limits{}.max_refine_samples + 1}}), ErrorCode::limit_exceeded),
+                 "refine samples 4097"));
+  lim.max_refine_samples = 16;
+  CHECK(one<Refine>(encode(ClientRecord{Refine{16}}), lim).samples == 16);
+  fails(encode(ClientRecord{Refine{17}}), ErrorCode::limit_exceeded, lim);
+  fails(encode(ClientRecord{Refine{0xffffffffu}}), ErrorCode::limit_exceeded);
+  {
+    auto m = encode(ClientRecord{Refine{8}});
+    CHECK(m.size() == kBody + 4);
+    CHECK(m[8] == 0x06);
+    m.push_back(0);
+    patch<uint32_t>(m, 12, 5);
+    fails(m, ErrorCode::bad_length);
+    m = encode(ClientRecord{Refine{8}});
+    m.pop_back();
+    patch<uint32_t>(m, 12, 3);
+    fails(m, ErrorCode::bad_length);
+    m = encode(ClientRecord{Refine{8}});
+    m[9] = 1;  // remove is not defined for refine
+    fails(m, ErrorCode::bad_op);
+    Scene scene;  // a session record, not a scene update
+    CHECK_FALSE(is_scene_update(ClientRecord{Refine{8}}));
+    CHECK(apply(scene, Refine{8}, Limits{}).code() == ErrorCode::not_scene_update);
+  }
   fails(encode(ClientRecord{Resolution{10, 0}}), ErrorCode::out_of_range);
   fails(encode(ClientRecord{Resolution{-1, 10}}), ErrorCode::limit_exceeded);  // 0xffffffff on the wire
   fails(encode(ClientRecord{Resolution{7680, 4321}}), ErrorCode::limit_exceeded);
@@ -785,7 +842,7 @@ TEST_CASE("Applying decoded updates changes the scene", "[protocol]") {
   REQUIRE(r.ok());
   std::vector<ErrorCode> codes;
   for (auto& rec : r.value()) codes.push_back(apply(scene, std::move(rec), lim).code());
-  // Settings and render requests are for the session; removing light 21 (absent) fails.
+  // Settings, render requests and refine are for the session; removing light 21 (absent) fails.
   CHECK(codes.front() == ErrorCode::not_scene_update);
   CHECK(codes.back() == ErrorCode::not_scene_update);
   CHECK(codes[11] == ErrorCode::unknown_id);
@@ -1000,8 +1057,17 @@ TEST_CASE("Server-side rules: handshake reply, frame and stats fields", "[protoc
   m[kBody + 12] = 2;
   server_fails(m, ErrorCode::bad_enum);
   m = good;
+  m[kBody + 13] = 2;  // refined is a flag
+  server_fails(m, ErrorCode::bad_enum);
+  m = good;
   m[kBody + 13] = 1;
-  server_fails(m, ErrorCode::bad_reserved);
+  m[kBody + 14] = m[kBody + 15] = 0;  // 0 samples decode as they are
+  {
+    auto ok = decode_server(m.data(), m.size(), Limits{});
+    REQUIRE(ok.ok());
+    CHECK(std::get<Frame>(ok.value()[0]).refined);
+    CHECK(std::get<Frame>(ok.value()[0]).samples == 0);
+  }
   m = good;
   m[9] = 1;  // server records have op 0
   server_fails(m, ErrorCode::bad_op);

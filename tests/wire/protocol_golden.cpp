@@ -190,6 +190,7 @@ struct ClientJs {
     return Obj{}.f("type", q("remove")).f("what", q(to_string(r.what))).f("id", num(r.id)).str();
   }
   std::string operator()(const RenderRequest& r) { return Obj{}.f("type", q("render")).f("frame", num(r.frame)).str(); }
+  std::string operator()(const Refine& r) { return Obj{}.f("type", q("refine")).f("samples", num(r.samples)).str(); }
 };
 
 struct ServerJs {
@@ -205,7 +206,8 @@ struct ServerJs {
                               .f("tiling", num(t.tiling_ms)).f("pipeline", num(t.pipeline_ms)).f("encode", num(t.encode_ms))
                               .str();
     return Obj{}.f("type", q("frame")).f("frame", num(f.frame)).f("width", num(f.width)).f("height", num(f.height))
-        .f("encoding", q(f.encoding == FrameEncoding::jpeg ? "jpeg" : "dxt1")).f("timings", timings)
+        .f("encoding", q(f.encoding == FrameEncoding::jpeg ? "jpeg" : "dxt1")).f("refined", boolean(f.refined))
+        .f("samples", num(uint32_t(f.samples))).f("timings", timings)
         .f("payload", bytes(f.payload)).str();
   }
   std::string operator()(const ErrorReply& e) {
@@ -228,7 +230,7 @@ std::string limits_json(const Limits& l) {
   TESSERA_LIMIT(max_message_bytes) TESSERA_LIMIT(max_records) TESSERA_LIMIT(max_width) TESSERA_LIMIT(max_height)
   TESSERA_LIMIT(max_message_payload_bytes) TESSERA_LIMIT(max_buffer_bytes) TESSERA_LIMIT(max_client_bytes)
   TESSERA_LIMIT(max_triangles) TESSERA_LIMIT(max_vertices) TESSERA_LIMIT(max_texture_size) TESSERA_LIMIT(max_nodes)
-  TESSERA_LIMIT(max_ao_samples) TESSERA_LIMIT(max_depth)
+  TESSERA_LIMIT(max_ao_samples) TESSERA_LIMIT(max_depth) TESSERA_LIMIT(max_refine_samples)
 #undef TESSERA_LIMIT
   return o.str();
 }
@@ -240,7 +242,7 @@ std::string all_limits() {
       .f("max_client_bytes", num(l.max_client_bytes)).f("max_triangles", num(l.max_triangles))
       .f("max_vertices", num(l.max_vertices)).f("max_texture_size", num(l.max_texture_size))
       .f("max_nodes", num(l.max_nodes)).f("max_ao_samples", num(l.max_ao_samples)).f("max_depth", num(l.max_depth))
-      .str();
+      .f("max_refine_samples", num(l.max_refine_samples)).str();
 }
 
 // ---------------------------------------------------------------------------------------
@@ -554,10 +556,11 @@ void valid_messages() {
                                    Remove{RecordType::material, 3}, Remove{RecordType::mesh, 4},
                                    Remove{RecordType::light, kMaxU32}});
   client("render requests", {RenderRequest{0}, RenderRequest{42}, RenderRequest{kMaxU32}});
+  client("refine: off, one sample, a target, the limit", {Refine{0}, Refine{1}, Refine{64}, Refine{Limits{}.max_refine_samples}});
   client("every client record in one message",
-         {Settings{16, 5}, Resolution{640, 360}, camera(), environment(), f32_buffer(7, {0, 0, 0, 1, 0, 0, 0, 1, 0}, 3),
-          u32_buffer(8, {0, 1, 2}, 1), rgba_texture(9, 1, 2), material(), mesh(), light(Light::Type::spot),
-          Remove{RecordType::mesh, 5}, RenderRequest{42}});
+         {Settings{16, 5}, Refine{32}, Resolution{640, 360}, camera(), environment(),
+          f32_buffer(7, {0, 0, 0, 1, 0, 0, 0, 1, 0}, 3), u32_buffer(8, {0, 1, 2}, 1), rgba_texture(9, 1, 2), material(),
+          mesh(), light(Light::Type::spot), Remove{RecordType::mesh, 5}, RenderRequest{42}});
 
   // Server channel.
   server("handshake reply", {handshake_reply()});
@@ -581,6 +584,14 @@ void valid_messages() {
     big.payload.clear();
     server("frames: DXT1 and JPEG, odd sizes, every kind of float",
            {frame(FrameEncoding::dxt1, 5, 3), frame(FrameEncoding::dxt1, 1, 1), odd, big});
+    Frame refined = frame(FrameEncoding::jpeg, 7, 5), top = frame(FrameEncoding::dxt1, 5, 3), two = refined;
+    refined.refined = true, refined.samples = 17;
+    top.refined = true, top.samples = 0xffff;
+    two.samples = 2;
+    server("frames: refined, the most samples, a requested frame of 2 samples", {refined, top, two});
+    Frame none = frame(FrameEncoding::jpeg, 7, 5);
+    none.samples = 0;
+    server("frame: 0 samples are written as 1", {none}, true);
   }
   {
     std::vector<ServerRecord> every;
@@ -702,7 +713,7 @@ void client_records() {
       {"handshake", handshake()}, {"settings", Settings{16, 5}}, {"resolution", Resolution{640, 360}},
       {"camera", camera()},       {"environment", environment()}, {"material", material()},
       {"mesh", mesh()},           {"light", light(Light::Type::spot)}, {"render", RenderRequest{1}},
-      {"remove", Remove{RecordType::mesh, 5}}};
+      {"remove", Remove{RecordType::mesh, 5}}, {"refine", Refine{64}}};
   for (const auto& [n, r] : fixed) {
     const Bytes m = one(r);
     const size_t len = m.size() - kB;
@@ -712,7 +723,7 @@ void client_records() {
   // Op remove where it is not defined.
   for (const auto& [n, r] : std::vector<std::pair<std::string, ClientRecord>>{
            {"handshake", handshake()}, {"settings", Settings{}}, {"resolution", Resolution{}}, {"camera", camera()},
-           {"environment", environment()}, {"render", RenderRequest{1}}})
+           {"environment", environment()}, {"render", RenderRequest{1}}, {"refine", Refine{64}}})
     bad_client(n + ": op remove", put<uint8_t>(one(r), 9, 1), ErrorCode::bad_op);
   for (auto t : {RecordType::buffer, RecordType::texture, RecordType::material, RecordType::mesh, RecordType::light})
     bad_client(std::string("remove ") + to_string(t) + ": id 0", one(Remove{t, 0}), ErrorCode::bad_id);
@@ -749,6 +760,14 @@ void client_records() {
                put<uint32_t>(s, kB + wire::settings::at::ao_samples, d.max_ao_samples + 1), ErrorCode::limit_exceeded);
     bad_client("settings: max_depth beyond the limit",
                put<uint32_t>(s, kB + wire::settings::at::max_depth, d.max_depth + 1), ErrorCode::limit_exceeded);
+    const Bytes f = one(Refine{64});
+    bad_client("refine: samples beyond the limit",
+               put<uint32_t>(f, kB + wire::refine::at::samples, d.max_refine_samples + 1), ErrorCode::limit_exceeded);
+    bad_client("refine: samples 0xffffffff", put<uint32_t>(f, kB + wire::refine::at::samples, kMaxU32),
+               ErrorCode::limit_exceeded);
+    Limits few;
+    few.max_refine_samples = 63;
+    bad_client("refine: samples beyond a node's lower limit", f, ErrorCode::limit_exceeded, few);
     bad_client("resolution: width 0", put<uint32_t>(r, kB + wire::resolution::at::width, 0), ErrorCode::out_of_range);
     bad_client("resolution: height 0", put<uint32_t>(r, kB + wire::resolution::at::height, 0), ErrorCode::out_of_range);
     bad_client("resolution: width beyond the limit", put<uint32_t>(r, kB + wire::resolution::at::width, kMaxU32),
@@ -983,7 +1002,10 @@ void server_records() {
     using namespace wire::frame;
     bad_server("frame: body shorter than its fixed part", body_length(j, kFixed - 1), ErrorCode::bad_length);
     bad_server("frame: encoding 2", put<uint8_t>(f, kB + at::encoding, 2), ErrorCode::bad_enum);
-    bad_server("frame: reserved", put<uint8_t>(f, kB + at::reserved + 1, 1), ErrorCode::bad_reserved);
+    bad_server("frame: refined 2", put<uint8_t>(f, kB + at::refined, 2), ErrorCode::bad_enum);
+    bad_server("frame: refined 255", put<uint8_t>(j, kB + at::refined, 255), ErrorCode::bad_enum);
+    bad_server("frame: refined 2 and width 0 (the flag first)",
+               put<uint32_t>(put<uint8_t>(j, kB + at::refined, 2), kB + at::width, 0), ErrorCode::bad_enum);
     bad_server("frame: width 0", put<uint32_t>(j, kB + at::width, 0), ErrorCode::out_of_range);
     bad_server("frame: height 0", put<uint32_t>(j, kB + at::height, 0), ErrorCode::out_of_range);
     bad_server("frame: width beyond the limit", put<uint32_t>(j, kB + at::width, uint32_t(d.max_width) + 1),

@@ -9,14 +9,17 @@ export class JpegDisplay {
     this.element = doc.createElement('canvas');
     this.element.className = 'tessera-display';
     this.ctx = this.element.getContext('bitmaprenderer');
+    this.received = 0;
     this.shown = 0;
   }
-  // Resolves true when the frame is on screen (false when a newer frame overtook it).
+  // Resolves true when the frame is on screen (false when a newer frame overtook it). Frames
+  // are ordered by arrival: the refinements of a still share its frame number.
   async show(frame) {
     if (frame.encoding !== 'jpeg') throw new Error(`expected a JPEG frame, got ${frame.encoding}`);
+    const order = ++this.received;
     const bitmap = await createImageBitmap(new Blob([frame.payload], { type: 'image/jpeg' }));
-    if (frame.frame < this.shown) { bitmap.close(); return false; }
-    this.shown = frame.frame;
+    if (order < this.shown) { bitmap.close(); return false; }
+    this.shown = order;
     this.element.width = bitmap.width;
     this.element.height = bitmap.height;
     this.ctx.transferFromImageBitmap(bitmap);

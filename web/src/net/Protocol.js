@@ -91,6 +91,8 @@ function encodeClientRecord(w, r) {
       break;
     case 'settings':
       at = w.begin(RecordType.settings); w.u32(r.aoSamples ?? 0); w.u32(r.maxDepth ?? 4); break;
+    case 'refine':
+      at = w.begin(RecordType.refine); w.u32(r.samples ?? 0); break;
     case 'resolution':
       at = w.begin(RecordType.resolution); w.u32(r.width); w.u32(r.height); break;
     case 'camera':
@@ -159,7 +161,7 @@ function encodeServerRecord(w, r) {
       at = w.begin(RecordType.frame);
       const t = r.timings || {};
       w.u32(r.frame); w.u32(r.width); w.u32(r.height); w.u8(index(FrameEncoding, r.encoding ?? 'jpeg', 'encoding'));
-      w.u8(0); w.u8(0); w.u8(0);
+      w.u8(r.refined ? 1 : 0); w.u16(Math.max(1, Math.min(0xffff, r.samples ?? 1)));
       for (const k of ['kernel', 'rendering', 'sat', 'tiling', 'pipeline', 'encode']) w.f32(t[k] ?? 0);
       w.bytes(r.payload ?? new Uint8Array(0));
       break;
@@ -361,6 +363,12 @@ function decodeClientRecord(c, op, r, state) {
       c.limit(maxDepth, 'max_depth', 'max_depth');
       return { type: name, aoSamples, maxDepth };
     }
+    case 'refine': {
+      c.length(r.left(), spec.fixed);
+      const samples = r.u32();
+      c.limit(samples, 'max_refine_samples', 'samples');
+      return { type: name, samples };
+    }
     case 'resolution': {
       c.length(r.left(), spec.fixed);
       const width = r.u32(), height = r.u32();
@@ -514,11 +522,12 @@ function decodeServerRecord(c, op, r) {
       const body = r.left();
       c.minLength(body, spec.fixed);
       const rec = { type: name, frame: r.u32(), width: r.u32(), height: r.u32(), encoding: null };
-      const encoding = r.u8(), res = r.reserved3();
+      const encoding = r.u8(), refined = r.u8();
+      rec.samples = r.u16();
       rec.timings = {};
       for (const k of ['kernel', 'rendering', 'sat', 'tiling', 'pipeline', 'encode']) rec.timings[k] = r.f32();
       rec.encoding = c.enumeration(encoding, 'encoding');
-      c.reserved(res);
+      rec.refined = c.flag(refined, 'refined');
       c.resolution(rec.width, rec.height);
       if (rec.encoding === 'dxt1') c.length(body, spec.fixed + dxt1Size(rec.width, rec.height));
       rec.payload = r.rest();

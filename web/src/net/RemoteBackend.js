@@ -1,12 +1,14 @@
 // Server rendering backend: <xml3d server="host:port" renderer="raytracer" display="jpeg|s3tc|mjpeg"
-// nodes="N" sync-rate="30" jpeg-quality="85" ao-samples="0" max-depth="4" token="..."> (RenderSettings.js;
-// the access token also from the page's #tessera-token=..., AccessToken.js). The scene goes to
-// the node over the sync channel; frames come back on the same WebSocket and are shown in a
-// display element behind a transparent input canvas (which takes the mouse).
+// nodes="N" sync-rate="30" jpeg-quality="85" ao-samples="0" max-depth="4" refine-samples="64" token="...">
+// (RenderSettings.js; the access token also from the page's #tessera-token=..., AccessToken.js).
+// The scene goes to the node over the sync channel; frames come back on the same WebSocket and
+// are shown in a display element behind a transparent input canvas (which takes the mouse).
+// While the node refines a still, the status line says "refining k/N", then "converged N", and
+// "interactive" after a requested frame.
 import { SyncChannel } from './SyncChannel.js';
 import { JpegDisplay, S3tcDisplay, MjpegDisplay } from './FrameDisplay.js';
 import { hasS3TC } from './Features.js';
-import { readRenderSettings } from './RenderSettings.js';
+import { readRenderSettings, refineStatus } from './RenderSettings.js';
 import { accessToken, withToken, redact } from './AccessToken.js';
 
 function cssColor(doc, el) {
@@ -67,8 +69,8 @@ export class RemoteBackend {
     this.channel.connect();
   }
 
-  // ao-samples / max-depth from the element; bad values are warned about once and replaced by
-  // the default (also on the status line).
+  // ao-samples / max-depth / refine-samples from the element; bad values are warned about once
+  // and replaced by the default or clamped (also on the status line).
   readSettings() {
     const { settings, problems } = readRenderSettings(this.handler.xml3d);
     const key = problems.join('\n');
@@ -110,12 +112,22 @@ export class RemoteBackend {
         this.display = 'jpeg';
       }
       if (!(await this.frameView.show(f))) return;
-      if (this.display === 'mjpeg') this.flushMjpeg(f.frame);
+      if (this.display === 'mjpeg') this.flushMjpeg(f);
+      this.showRefinement(f);
       this.handler.frameDrawn({ frame: f.frame, timeEnd: performance.now(), renderTimeInMilliseconds: f.timings.rendering,
-        timings: f.timings, encoding: f.encoding, width: f.width, height: f.height, remote: true });
+        timings: f.timings, encoding: f.encoding, width: f.width, height: f.height, remote: true,
+        refined: !!f.refined, samples: f.samples ?? 1 });
     } catch (e) {
       this.handler.setStatus('frame', `⚠ cannot show frame ${f.frame}: ${e.message}`, true);
     }
+  }
+
+  // Whether the node refines stills for this page: a target above 1 and the ray tracer.
+  get refining() { return this.channel.settings?.refineSamples > 1 && this.channel.reply?.renderer === 'raytracer'; }
+
+  // The refinement status line ("interactive", "refining k/N", "converged N"), while refinement is on.
+  showRefinement(f) {
+    this.handler.setStatus('refine', this.refining ? refineStatus(f, this.channel.settings.refineSamples) : null);
   }
 
   // Chromium shows a part of a multipart/x-mixed-replace stream only when the next part
@@ -123,16 +135,25 @@ export class RemoteBackend {
   // show it (tried), so the newest frame would stay hidden until another one comes. After
   // the last frame of a change the client therefore asks for one more (identical) frame,
   // which pushes the previous one out; and while the stream has shown nothing (it connected
-  // after the first frames went out) it asks again, at most 20 times.
-  flushMjpeg(frame) {
+  // after the first frames went out) it asks again, at most 20 times. A node that refines
+  // stills sends refined frames after a requested one, which push it out: then the client asks
+  // only when none has come within half a second, and never after a refined frame (a request
+  // would start the still again), so the last refinement shows when the next frame comes.
+  flushMjpeg(f) {
     const ch = this.channel;
+    clearTimeout(this.flushTimer);
+    if (f.refined) return;
     if (!this.frameView.showing && (this.mjpegRetries = (this.mjpegRetries || 0) + 1) <= 20) {
       setTimeout(() => { if (!this.frameView.showing) ch.requestRender(); }, 150);
       return;
     }
-    if (frame === this.flushFrame || ch.outstanding > 0 || ch.renderWanted || ch.dirty || ch.queue.length) return;
-    ch.requestRender();
-    this.flushFrame = ch.frameNumber;
+    const flush = () => {
+      if (f.frame === this.flushFrame || ch.outstanding > 0 || ch.renderWanted || ch.dirty || ch.queue.length) return;
+      ch.requestRender();
+      this.flushFrame = ch.frameNumber;
+    };
+    if (this.refining) this.flushTimer = setTimeout(flush, 500);
+    else flush();
   }
 
   update(scene) {
@@ -147,6 +168,7 @@ export class RemoteBackend {
   draw() { return null; }  // frames arrive asynchronously
 
   dispose() {
+    clearTimeout(this.flushTimer);
     this.channel.close();
     this.frameView.dispose();
     this.inputElement.remove();

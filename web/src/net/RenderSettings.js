@@ -1,27 +1,46 @@
-// The page's render settings for the node: <xml3d ao-samples="N" max-depth="D">, sent as the
-// protocol's settings record (protocol/protocol.h Settings) after the handshake and whenever the
-// attributes change. Bad values are reported (console warning, status line) and the default
-// is used instead, so a typo never makes the node refuse the session.
+// The page's render settings for the node: <xml3d ao-samples="N" max-depth="D" refine-samples="R">,
+// sent as the protocol's settings record (protocol/protocol.h Settings) and refine record
+// (Refine) after the handshake and whenever the attributes change. Bad values are reported
+// (console warning, status line) and the default is used instead (a refine-samples beyond its
+// range is clamped to it), so a typo never makes the node refuse the session.
 
 // Same ranges as `tessera render --ao/--depth` and the node's default limits
-// (protocol::Limits::max_ao_samples = 256; a depth of 1 means primary rays only).
+// (protocol::Limits::max_ao_samples = 256, max_refine_samples = 4096; a depth of 1 means
+// primary rays only; 0 or 1 refine samples: no refinement).
 export const RENDER_SETTINGS = {
   aoSamples: { attribute: 'ao-samples', min: 0, max: 256, default: 0, what: 'ambient occlusion rays per hit' },
   maxDepth: { attribute: 'max-depth', min: 1, max: 64, default: 4, what: 'ray depth (1 = primary rays only)' },
+  refineSamples: { attribute: 'refine-samples', min: 0, max: 4096, default: 64, clamp: true,
+    what: 'samples per pixel a still image refines to; 0 or 1 = off' },
 };
 
-// Reads the settings from an <xml3d> element: {settings: {aoSamples, maxDepth}, problems: [text]}.
+// Reads the settings from an <xml3d> element: {settings: {aoSamples, maxDepth, refineSamples},
+// problems: [text]}.
 export function readRenderSettings(xml3d) {
   const settings = {}, problems = [];
   for (const [key, spec] of Object.entries(RENDER_SETTINGS)) {
     settings[key] = spec.default;
     if (!xml3d.hasAttribute(spec.attribute)) continue;
     const text = xml3d.getAttribute(spec.attribute);
-    const v = /^\s*\+?\d+\s*$/.test(text) ? Number(text) : NaN;
+    const v = (spec.clamp ? /^\s*[+-]?\d+\s*$/ : /^\s*\+?\d+\s*$/).test(text) ? Number(text) : NaN;
+    const range = `${spec.min}..${spec.max}`;
     if (Number.isSafeInteger(v) && v >= spec.min && v <= spec.max) settings[key] = v;
-    else problems.push(`<xml3d ${spec.attribute}="${text}">: not a whole number in ${spec.min}..${spec.max} (${spec.what}); using ${spec.default}`);
+    else if (spec.clamp && !Number.isNaN(v)) {
+      settings[key] = Math.min(spec.max, Math.max(spec.min, v));
+      problems.push(`<xml3d ${spec.attribute}="${text}">: not in ${range} (${spec.what}); using ${settings[key]}`);
+    } else problems.push(`<xml3d ${spec.attribute}="${text}">: not a whole number in ${range} (${spec.what}); using ${spec.default}`);
   }
   return { settings, problems };
 }
 
-export const sameSettings = (a, b) => !!a && !!b && a.aoSamples === b.aoSamples && a.maxDepth === b.maxDepth;
+export const sameSettings = (a, b) => !!a && !!b && a.aoSamples === b.aoSamples && a.maxDepth === b.maxDepth
+  && a.refineSamples === b.refineSamples;
+
+// The refinement status of a still after `frame` was shown, for a target of `target` samples per
+// pixel: null when refinement is off (target 0 or 1), 'interactive' after a requested frame,
+// 'refining k/N' while the node's unsolicited refinements come, 'converged N' at the target.
+export function refineStatus(frame, target) {
+  if (!(target > 1)) return null;
+  if (!frame.refined) return 'interactive';
+  return frame.samples >= target ? `converged ${frame.samples}` : `refining ${frame.samples}/${target}`;
+}

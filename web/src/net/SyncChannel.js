@@ -2,8 +2,10 @@
 // handshake, a run loop (rate Hz) collects scene changes, sends them progressively (buffers
 // deflated when CompressionStream exists, rate-controlled on ws.bufferedAmount) and asks for
 // a frame after every iteration that changed something. The render settings (AO samples, ray
-// depth) go as a settings record after the handshake and again whenever they change. On
-// connection loss it reconnects with back-off and re-sends the whole scene and the settings.
+// depth) go as a settings record after the handshake and again whenever they change, the
+// refinement target (samples per pixel of a still) likewise as a refine record. Frames the node
+// sends unasked while it refines a still (`refined`) answer no render request. On connection
+// loss it reconnects with back-off and re-sends the whole scene and the settings.
 import { encodeClient, decodeServer, clientRecordSize, ProtocolError } from './Protocol.js';
 import { SceneSync } from './SceneSync.js';
 import { hasCompressionStream, deflate } from './Features.js';
@@ -89,12 +91,15 @@ export class SyncChannel {
     this.dirty = true;
   }
 
-  // New render settings {aoSamples, maxDepth}; sent (with a render request) by the next
-  // run-loop iteration when they differ from the last ones.
+  // New render settings {aoSamples, maxDepth, refineSamples}; the next run-loop iteration sends
+  // a settings record when the first two differ from the last ones, a refine record when the
+  // refinement target does, and a render request.
   setSettings(settings) {
     if (sameSettings(settings, this.settings)) return;
+    const old = this.settings;
     this.settings = settings;
-    this.settingsDirty = true;
+    if (!old || old.aoSamples !== settings.aoSamples || old.maxDepth !== settings.maxDepth) this.settingsDirty = true;
+    if (settings.refineSamples !== undefined && (!old || old.refineSamples !== settings.refineSamples)) this.refineDirty = true;
   }
 
   receive(data) {
@@ -114,10 +119,14 @@ export class SyncChannel {
         this.dirty = true;
         this.setState('ready', `${r.serverVersion || 'Tessera'}, ${r.nodes} node${r.nodes > 1 ? 's' : ''}, ${r.renderer}, ${r.display}`);
         this.settingsDirty = !!this.settings;
+        this.refineDirty = !!this.settings && this.settings.refineSamples !== undefined;
+        clearInterval(this.timer);
         this.timer = setInterval(() => this.tick(), 1000 / this.rate);
         this.tick();
       } else if (r.type === 'frame') {
-        this.outstanding = Math.max(0, this.outstanding - 1);
+        // A refined frame is the node's unasked refinement of the last requested one (same
+        // frame number): it answers no request, but is shown like any other.
+        if (!r.refined) this.outstanding = Math.max(0, this.outstanding - 1);
         this.onFrame(r);
         if (this.renderWanted && this.outstanding < MAX_OUTSTANDING_RENDERS) this.requestRender();
       } else if (r.type === 'error') {
@@ -153,6 +162,12 @@ export class SyncChannel {
     if (this.settingsDirty && this.settings) {
       this.settingsDirty = false;
       const r = { type: 'settings', aoSamples: this.settings.aoSamples, maxDepth: this.settings.maxDepth };
+      this.queue.push({ size: clientRecordSize(r), record: r });
+      this.changed = true;
+    }
+    if (this.refineDirty && this.settings) {
+      this.refineDirty = false;
+      const r = { type: 'refine', samples: this.settings.refineSamples };
       this.queue.push({ size: clientRecordSize(r), record: r });
       this.changed = true;
     }

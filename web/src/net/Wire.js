@@ -25,6 +25,7 @@ export const LIMITS = Object.freeze({
   max_nodes: 1024,  // handshake max_nodes
   max_ao_samples: 256,  // settings ao_samples
   max_depth: 64,  // settings max_depth
+  max_refine_samples: 4096,  // refine samples
 });
 
 // Enums: the value on the wire is the index of the name.
@@ -78,6 +79,12 @@ export const RECORDS = Object.freeze({
     fields: Object.freeze([
       { name: 'ao_samples', type: 'u32', offset: 0, js: 'aoSamples', limit: 'max_ao_samples' },
       { name: 'max_depth', type: 'u32', offset: 4, js: 'maxDepth', limit: 'max_depth' },
+    ]),
+  }),
+  refine: Object.freeze({
+    code: 0x06, channel: 'client', fixed: 4, tail: false, removable: false,
+    fields: Object.freeze([
+      { name: 'samples', type: 'u32', offset: 0, js: 'samples', limit: 'max_refine_samples' },
     ]),
   }),
   resolution: Object.freeze({
@@ -211,7 +218,8 @@ export const RECORDS = Object.freeze({
       { name: 'width', type: 'u32', offset: 4, js: 'width', limit: 'max_width', min: 1 },
       { name: 'height', type: 'u32', offset: 8, js: 'height', limit: 'max_height', min: 1 },
       { name: 'encoding', type: 'u8', offset: 12, js: 'encoding', enum: 'frame_encoding' },
-      { name: 'reserved', type: 'u8x3', offset: 13, js: 'reserved', reserved: true },
+      { name: 'refined', type: 'u8', offset: 13, js: 'refined', flag: true },
+      { name: 'samples', type: 'u16', offset: 14, js: 'samples' },
       { name: 'kernel_ms', type: 'f32', offset: 16, js: 'timings.kernel' },
       { name: 'rendering_ms', type: 'f32', offset: 20, js: 'timings.rendering' },
       { name: 'sat_ms', type: 'f32', offset: 24, js: 'timings.sat' },

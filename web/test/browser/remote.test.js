@@ -1,7 +1,8 @@
 // The server path against a mock Tessera node: a WebSocket server in Node that checks the
 // handshake and every record the page sends against the protocol (decoded with our own
 // decoder, byte-checked against protocol/protocol.cpp in the unit tests) and answers render
-// requests with a JPEG (or DXT1) frame.
+// requests with a JPEG (or DXT1) frame (and, with `refine`, refines it as a node does: frames
+// with the same number, refined, 2..target samples, the target from the page's refine record).
 // TODO(e2e): the same checks against a real node belong in web/test/browser/node-e2e.test.js
 // (start app/tessera-node serving web/ and ../shared/scenes, open /demo/pavilion.html?server=...).
 import { test, before, after } from 'node:test';
@@ -31,8 +32,9 @@ before(async () => {
 after(async () => { await env.close(); });
 
 class MockNode {
-  constructor({ encoding = 'jpeg' } = {}) {
+  constructor({ encoding = 'jpeg', refine = false } = {}) {
     this.encoding = encoding;
+    this.refine = refine;
     this.sessions = [];
     this.wss = new WebSocketServer({ host: '127.0.0.1', port: 0, path: '/ws' });
     this.wss.on('connection', (ws, req) => this.session(ws, req));
@@ -71,6 +73,14 @@ class MockNode {
           }
           ws.send(encodeServer([{ type: 'frame', frame: r.frame, width: 64, height: 48, encoding: dxt ? 'dxt1' : 'jpeg',
             timings: { rendering: 5, pipeline: 7 }, payload }]));
+          for (let k = 2; this.refine && k <= (s.refineSamples ?? 0); k++) {
+            ws.send(encodeServer([{ type: 'frame', frame: r.frame, width: 64, height: 48, encoding: dxt ? 'dxt1' : 'jpeg',
+              refined: true, samples: k, timings: { rendering: 5, pipeline: 7 }, payload }]));
+          }
+        }
+        if (r.type === 'refine') {
+          s.refineSamples = r.samples;
+          s.refineAt = s.records.length - 1;
         }
       }
       for (const w of this.waiters.splice(0)) w();
@@ -172,6 +182,50 @@ test('display="s3tc" asks for DXT1 frames and draws them with WEBGL_compressed_t
     return [...out];
   });
   assert.deepEqual(px, [255, 0, 0, 255]);
+  await page.close();
+  node.close();
+});
+
+test('refine-samples reaches the node as a refine record; refined frames are shown with "refining k/N", then "converged N"', async () => {
+  const node = new MockNode({ refine: true });
+  await new Promise((r) => node.wss.on('listening', r));
+  const page = await open(env, `/test/browser/pages/remote.html?server=127.0.0.1:${node.port}&refine-samples=5`);
+  const s = node.sessions[0];
+  await node.until(() => s.renders.length >= 1);
+  assert.deepEqual(s.problems, []);
+  assert.deepEqual(s.records[s.refineAt], { type: 'refine', samples: 5 });
+  assert.ok(s.refineAt < s.records.findIndex((r) => r.type === 'render'), 'before the first render request');
+  const status = () => page.evaluate(() => document.querySelector('.tessera-status').textContent);
+  await page.waitForFunction(() => /converged 5/.test(document.querySelector('.tessera-status').textContent), null, { timeout: 5000 });
+  // The refined frames answered no request: no more requests than changes.
+  const renders = s.renders.length;
+  await new Promise((r) => setTimeout(r, 300));
+  assert.equal(s.renders.length, renders, 'refined frames ask for nothing');
+
+  // A change: "interactive" after the requested frame, then the refinements again.
+  await page.evaluate(() => {
+    window.__refine = [];
+    document.getElementById('x').addEventListener('framedrawn', (e) => window.__refine.push([e.detail.refined, e.detail.samples,
+      document.querySelector('.tessera-status').textContent]));
+    document.getElementById('t').setAttribute('translation', '1 0 -5');
+  });
+  await page.waitForFunction(() => window.__refine.some(([, samples]) => samples === 5), null, { timeout: 5000 })
+    .catch(async (e) => assert.fail(`${e.message}: ${JSON.stringify(await page.evaluate(() => window.__refine))}`));
+  // Each frame shown with its status (a frame that decodes after a newer one is not shown).
+  const seen = (await page.evaluate(() => window.__refine))
+    .map(([refined, samples, text]) => [refined, samples, /interactive|refining \d+\/\d+|converged \d+/.exec(text)?.[0]]);
+  const expect = [[false, 1, 'interactive'], [true, 2, 'refining 2/5'], [true, 3, 'refining 3/5'], [true, 4, 'refining 4/5'], [true, 5, 'converged 5']];
+  console.log(`# refinement shown: ${seen.map((x) => x[2]).join(', ')}`);
+  assert.deepEqual(seen.at(-1), expect.at(-1), JSON.stringify(seen));
+  for (const x of seen) assert.ok(expect.some((y) => JSON.stringify(y) === JSON.stringify(x)), JSON.stringify(seen));
+
+  // refine-samples="0": a refine record of 0, and no refinement status.
+  const before = s.records.length;
+  await page.evaluate(() => document.getElementById('x').setAttribute('refine-samples', '0'));
+  await node.until(() => s.records.slice(before).some((r) => r.type === 'render'));
+  assert.deepEqual(s.records.slice(before).map((r) => r.type), ['refine', 'render']);
+  await page.waitForFunction(() => !/interactive|refining|converged/.test(document.querySelector('.tessera-status').textContent), null, { timeout: 5000 });
+  assert.doesNotMatch(await status(), /refin|converged|interactive/);
   await page.close();
   node.close();
 });

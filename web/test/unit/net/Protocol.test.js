@@ -25,7 +25,11 @@ const CLIENT = [
     attenuation: [1, 0, 0.1], cutoff: 0.4, softness: 0.5 },
   { type: 'remove', what: 'mesh', id: 5 },
   { type: 'render', frame: 42 },
+  { type: 'refine', samples: 64 },
 ];
+
+// Each refusal carries the C++ decoder's error class and the offending record's index.
+const refuses = (fn, code, record) => assert.throws(fn, (e) => e instanceof ProtocolError && e.code === code && e.record === record);
 
 test('a handshake decodes back to what was encoded', () => {
   const h = { type: 'handshake', renderer: 'raytracer', display: 's3tc', jpegQuality: 80, maxNodes: 3, width: 320, height: 240 };
@@ -45,6 +49,25 @@ test('client records decode back to what was encoded', () => {
   assert.equal(recs[9].lightType, 'spot');
   assert.deepEqual(recs[10], { type: 'remove', what: 'mesh', id: 5 });
   assert.deepEqual(recs[11], { type: 'render', frame: 42 });
+  assert.deepEqual(recs[12], { type: 'refine', samples: 64 });
+});
+
+test('a refine record: code 0x06, a u32 body, up to max_refine_samples, no remove', () => {
+  const m = encodeClient([{ type: 'refine', samples: 4096 }]);
+  assert.deepEqual([...m.slice(8)], [0x06, 0, 0, 0, 4, 0, 0, 0, 0x00, 0x10, 0, 0]);
+  assert.equal(LIMITS.max_refine_samples, 4096);
+  for (const samples of [0, 1, 2, LIMITS.max_refine_samples])
+    assert.deepEqual(decodeClient(encodeClient([{ type: 'refine', samples }])), [{ type: 'refine', samples }]);
+  assert.deepEqual(decodeClient(encodeClient([{ type: 'refine' }])), [{ type: 'refine', samples: 0 }]);
+  refuses(() => decodeClient(encodeClient([{ type: 'render', frame: 1 }, { type: 'refine', samples: LIMITS.max_refine_samples + 1 }])),
+    'limit_exceeded', 1);
+  refuses(() => decodeClient(encodeClient([{ type: 'refine', samples: 0xffffffff }])), 'limit_exceeded', 0);
+  const lower = encodeClient([{ type: 'refine', samples: 17 }]);
+  refuses(() => decodeClient(lower, { limits: { max_refine_samples: 16 } }), 'limit_exceeded', 0);
+  const remove = m.slice(); remove[9] = 1;
+  refuses(() => decodeClient(remove), 'bad_op', 0);
+  const long = new Uint8Array(m.length + 1); long.set(m); long[12] = 5;
+  refuses(() => decodeClient(long), 'bad_length', 0);
 });
 
 test('record sizes match the encoder', () => {
@@ -57,6 +80,7 @@ test('server records round-trip', () => {
       maxMessageBytes: 1000000, maxBufferBytes: 5000000000, serverVersion: 'tessera 0.1.0' },
     { type: 'frame', frame: 42, width: 4, height: 4, encoding: 'dxt1', timings: { kernel: 1, rendering: 2, sat: 3, tiling: 4, pipeline: 5, encode: 6 },
       payload: new Uint8Array([1, 2, 3, 4, 5, 6, 7, 8]) },
+    { type: 'frame', frame: 42, width: 4, height: 4, encoding: 'jpeg', refined: true, samples: 17, timings: {}, payload: new Uint8Array(0) },
     { type: 'error', code: 'bad_mesh', fatal: false, record: 3, message: 'mesh 11: bad' },
     { type: 'stats', frames: 10, dropped: 1, bytesSent: 12345, sceneBytes: 678, triangles: 1, nodes: 2, fps: 30, meanPipelineMs: 12.5 },
   ];
@@ -66,9 +90,27 @@ test('server records round-trip', () => {
   assert.equal(recs[1].encoding, 'dxt1');
   assert.deepEqual([...recs[1].payload], [1, 2, 3, 4, 5, 6, 7, 8]);
   assert.equal(recs[1].timings.encode, 6);
-  assert.equal(recs[2].codeName, 'bad_mesh');
-  assert.equal(recs[2].message, 'mesh 11: bad');
-  assert.equal(recs[3].meanPipelineMs, 12.5);
+  assert.equal(recs[1].refined, false, 'the answer to a render request');
+  assert.equal(recs[1].samples, 1, 'one sample when the record names none');
+  assert.equal(recs[2].refined, true);
+  assert.equal(recs[2].samples, 17);
+  assert.equal(recs[3].codeName, 'bad_mesh');
+  assert.equal(recs[3].message, 'mesh 11: bad');
+  assert.equal(recs[4].meanPipelineMs, 12.5);
+});
+
+test('a frame\'s refined flag and samples sit where the reserved bytes were; samples are written as 1..65535', () => {
+  const frame = (f) => encodeServer([{ type: 'frame', frame: 3, width: 1, height: 1, encoding: 'jpeg', timings: {}, payload: new Uint8Array(0), ...f }]);
+  const body = 16;  // message header + record header
+  const m = frame({ refined: true, samples: 300 });
+  assert.equal(m.length, body + RECORDS.frame.fixed, 'the body size is unchanged');
+  assert.deepEqual([...m.slice(body + 12, body + 16)], [0, 1, 300 & 0xff, 300 >> 8]);
+  assert.equal(decodeServer(frame({ samples: 0 }))[0].samples, 1);
+  assert.equal(decodeServer(frame({ samples: 70000 }))[0].samples, 65535);
+  const zero = frame({}); zero[body + 14] = 0;
+  assert.equal(decodeServer(zero)[0].samples, 0, 'a decoder takes 0 samples as they are');
+  const two = frame({}); two[body + 13] = 2;
+  refuses(() => decodeServer(two), 'bad_enum', 0);
 });
 
 test('malformed messages are rejected with a reason', () => {
@@ -81,9 +123,6 @@ test('malformed messages are rejected with a reason', () => {
   const v = good.slice(); v[2] = 9;
   assert.throws(() => decodeServer(v), /version/);
 });
-
-// Each refusal carries the C++ decoder's error class and the offending record's index.
-const refuses = (fn, code, record) => assert.throws(fn, (e) => e instanceof ProtocolError && e.code === code && e.record === record);
 
 test('refusals name the error class and the record', () => {
   const ok = encodeClient([{ type: 'settings', aoSamples: 1, maxDepth: 2 }, { type: 'render', frame: 1 }]);

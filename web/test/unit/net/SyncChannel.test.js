@@ -1,22 +1,47 @@
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import { page } from '../dom.js';
-import { readRenderSettings } from '../../../src/net/RenderSettings.js';
+import { readRenderSettings, refineStatus } from '../../../src/net/RenderSettings.js';
 import { SyncChannel } from '../../../src/net/SyncChannel.js';
 import { MarkupReader } from '../../../src/reader/MarkupReader.js';
 import { encodeServer, decodeClient } from '../../../src/net/Protocol.js';
 
 const read = (attrs) => readRenderSettings(page(`<xml3d ${attrs}></xml3d>`).querySelector('xml3d'));
 
-test('ao-samples and max-depth are read from <xml3d>, with the node\'s defaults when absent', () => {
-  assert.deepEqual(read(''), { settings: { aoSamples: 0, maxDepth: 4 }, problems: [] });
-  assert.deepEqual(read('ao-samples="8" max-depth="6"'), { settings: { aoSamples: 8, maxDepth: 6 }, problems: [] });
-  assert.deepEqual(read('ao-samples=" 256 " max-depth="1"').settings, { aoSamples: 256, maxDepth: 1 });
-  assert.deepEqual(read('ao-samples="0" max-depth="64"').settings, { aoSamples: 0, maxDepth: 64 });
+test('ao-samples, max-depth and refine-samples are read from <xml3d>, with the defaults when absent', () => {
+  assert.deepEqual(read(''), { settings: { aoSamples: 0, maxDepth: 4, refineSamples: 64 }, problems: [] });
+  assert.deepEqual(read('ao-samples="8" max-depth="6"'), { settings: { aoSamples: 8, maxDepth: 6, refineSamples: 64 }, problems: [] });
+  assert.deepEqual(read('ao-samples=" 256 " max-depth="1" refine-samples="4096"').settings, { aoSamples: 256, maxDepth: 1, refineSamples: 4096 });
+  assert.deepEqual(read('ao-samples="0" max-depth="64" refine-samples="0"').settings, { aoSamples: 0, maxDepth: 64, refineSamples: 0 });
+  assert.deepEqual(read('refine-samples=" +1 "'), { settings: { aoSamples: 0, maxDepth: 4, refineSamples: 1 }, problems: [] });
+});
+
+test('refine-samples beyond 0..4096 is clamped with a warning; what is not a whole number gives the default', () => {
+  for (const [attrs, refineSamples, pattern] of [
+    ['refine-samples="5000"', 4096, /<xml3d refine-samples="5000">: not in 0\.\.4096 .*using 4096/],
+    ['refine-samples="99999999999999999999"', 4096, /using 4096/],
+    ['refine-samples="-3"', 0, /<xml3d refine-samples="-3">: not in 0\.\.4096 .*using 0/],
+    ['refine-samples="many"', 64, /<xml3d refine-samples="many">: not a whole number in 0\.\.4096 .*using 64/],
+    ['refine-samples="2.5"', 64, /refine-samples="2\.5"/],
+    ['refine-samples=""', 64, /refine-samples=""/],
+  ]) {
+    const r = read(attrs);
+    assert.equal(r.settings.refineSamples, refineSamples, attrs);
+    assert.deepEqual(r.problems.length, 1, attrs);
+    assert.match(r.problems[0], pattern);
+  }
+});
+
+test('the refinement status: interactive after a requested frame, refining k/N, converged N; nothing when off', () => {
+  assert.equal(refineStatus({ frame: 3, refined: false, samples: 1 }, 64), 'interactive');
+  assert.equal(refineStatus({ frame: 3, refined: true, samples: 2 }, 64), 'refining 2/64');
+  assert.equal(refineStatus({ frame: 3, refined: true, samples: 63 }, 64), 'refining 63/64');
+  assert.equal(refineStatus({ frame: 3, refined: true, samples: 64 }, 64), 'converged 64');
+  for (const off of [0, 1, undefined]) assert.equal(refineStatus({ frame: 3, refined: true, samples: 2 }, off), null);
 });
 
 test('bad numbers give a clear problem each and the default is used', () => {
-  for (const [attrs, settings, pattern] of [
+  for (const [attrs, withoutRefine, pattern] of [
     ['ao-samples="lots"', { aoSamples: 0, maxDepth: 4 }, /<xml3d ao-samples="lots">: not a whole number in 0\.\.256 .*using 0/],
     ['ao-samples="-1"', { aoSamples: 0, maxDepth: 4 }, /ao-samples="-1"/],
     ['ao-samples="257"', { aoSamples: 0, maxDepth: 4 }, /ao-samples="257"/],
@@ -26,7 +51,7 @@ test('bad numbers give a clear problem each and the default is used', () => {
     ['max-depth="65" ao-samples="2"', { aoSamples: 2, maxDepth: 4 }, /max-depth="65"/],
     ['max-depth="1e2"', { aoSamples: 0, maxDepth: 4 }, /max-depth="1e2"/],
   ]) {
-    const r = read(attrs);
+    const r = read(attrs), settings = { ...withoutRefine, refineSamples: 64 };
     assert.deepEqual(r.settings, settings, attrs);
     assert.equal(r.problems.length, 1, attrs);
     assert.match(r.problems[0], pattern);
@@ -120,3 +145,93 @@ test('an upload spread over several run-loop iterations by the send-buffer limit
     globalThis.WebSocket = saved;
   }
 });
+
+const HANDSHAKE = { renderer: 'raytracer', display: 'jpeg', jpegQuality: 85, maxNodes: 0, width: 8, height: 8 };
+const REPLY = { type: 'handshake_reply', renderer: 'raytracer', display: 'jpeg', jpegQuality: 85, nodes: 1, width: 8, height: 8,
+  maxMessageBytes: 1 << 20, maxBufferBytes: 1 << 28, serverVersion: 'test' };
+const frameRecord = (frame, f = {}) => ({ type: 'frame', frame, width: 8, height: 8, encoding: 'jpeg', timings: {}, payload: new Uint8Array(0), ...f });
+// A channel connected to a FakeSocket with a one-triangle scene, after the handshake reply.
+async function connected(options) {
+  const ch = new SyncChannel({ url: 'ws://x/ws', rate: 100, handshake: HANDSHAKE, ...options });
+  const doc = page('<xml3d><mesh><float3 name="position">0 0 -2 1 0 -2 0 1 -2</float3></mesh></xml3d>');
+  ch.setScene(new MarkupReader().read(doc.querySelector('xml3d')), { width: 8, height: 8 });
+  ch.connect();
+  await until(() => FakeSocket.last && FakeSocket.last.sent.length === 1);
+  const ws = FakeSocket.last;
+  ws.reply([REPLY]);
+  await until(() => ws.sent.flat().some((r) => r.type === 'render'));
+  return { ch, ws, all: () => ws.sent.flat() };
+}
+async function withFakeSocket(body) {
+  const saved = globalThis.WebSocket;
+  globalThis.WebSocket = FakeSocket;
+  const opened = [];
+  try { await body(opened); } finally {
+    for (const ch of opened) ch.close();
+    globalThis.WebSocket = saved;
+  }
+}
+
+test('the refine record goes in the first message after the handshake reply, with the settings, and again when it changes', () => withFakeSocket(async (opened) => {
+  const { ch, ws, all } = await connected({ settings: { aoSamples: 8, maxDepth: 5, refineSamples: 64 } });
+  opened.push(ch);
+  const first = ws.sent[1];
+  assert.deepEqual(first.slice(0, 2), [{ type: 'settings', aoSamples: 8, maxDepth: 5 }, { type: 'refine', samples: 64 }]);
+  assert.ok(first.some((r) => r.type === 'mesh'), 'with the first scene upload');
+  assert.equal(all().filter((r) => r.type === 'refine').length, 1);
+
+  // The same target again, or another AO setting: no refine record.
+  ws.reply([frameRecord(1)]);
+  let n = all().length;
+  ch.setSettings({ aoSamples: 8, maxDepth: 5, refineSamples: 64 });
+  await new Promise((r) => setTimeout(r, 50));
+  assert.equal(all().length, n);
+  ch.setSettings({ aoSamples: 2, maxDepth: 5, refineSamples: 64 });
+  await until(() => all().slice(n).some((r) => r.type === 'render'));
+  assert.deepEqual(all().slice(n).map((r) => r.type), ['settings', 'render']);
+
+  // A new target: a refine record alone, then a render request (a new still refines to it).
+  ws.reply([frameRecord(ch.frameNumber)]);
+  n = all().length;
+  ch.setSettings({ aoSamples: 2, maxDepth: 5, refineSamples: 0 });
+  await until(() => all().slice(n).some((r) => r.type === 'render'));
+  assert.deepEqual(all().slice(n).map((r) => r.type), ['refine', 'render']);
+  assert.deepEqual(all()[n], { type: 'refine', samples: 0 });
+}));
+
+test('after a reconnect the refine record is sent again; without a target none is sent', () => withFakeSocket(async (opened) => {
+  const a = await connected({ settings: { aoSamples: 0, maxDepth: 4, refineSamples: 16 } });
+  opened.push(a.ch);
+  a.ws.reply([REPLY]);  // a new session's handshake reply (as after a reconnect)
+  await until(() => a.all().filter((r) => r.type === 'refine').length === 2);
+  assert.deepEqual(a.all().filter((r) => r.type === 'refine'), [{ type: 'refine', samples: 16 }, { type: 'refine', samples: 16 }]);
+  const b = await connected({ settings: { aoSamples: 0, maxDepth: 4 } });
+  opened.push(b.ch);
+  assert.equal(b.all().filter((r) => r.type === 'refine').length, 0);
+}));
+
+test('refined frames are shown but answer no render request', () => withFakeSocket(async (opened) => {
+  const shown = [];
+  const { ch, ws, all } = await connected({ settings: { aoSamples: 0, maxDepth: 4, refineSamples: 8 }, onFrame: (f) => shown.push(f) });
+  opened.push(ch);
+  assert.equal(ch.outstanding, 1);
+  // Two more changes: the second request waits for a frame (two outstanding at most).
+  ch.requestRender();
+  ch.requestRender();
+  assert.equal(ch.outstanding, 2);
+  assert.equal(ch.renderWanted, true);
+  const requests = () => all().filter((r) => r.type === 'render').length;
+  const before = requests();
+  ws.reply([frameRecord(1, { refined: true, samples: 2 }), frameRecord(1, { refined: true, samples: 3 })]);
+  assert.equal(ch.outstanding, 2, 'refined frames do not count as answers');
+  assert.equal(ch.renderWanted, true);
+  assert.equal(requests(), before, 'no request is sent for them');
+  assert.deepEqual(shown.map((f) => [f.frame, f.refined, f.samples]), [[1, true, 2], [1, true, 3]]);
+  ws.reply([frameRecord(1)]);  // the answer to request 1
+  assert.equal(ch.outstanding, 2, 'the waiting request went out');
+  assert.equal(ch.renderWanted, false);
+  assert.equal(requests(), before + 1);
+  ws.reply([frameRecord(2), frameRecord(3), frameRecord(3, { refined: true, samples: 2 })]);
+  assert.equal(ch.outstanding, 0);
+  assert.equal(shown.length, 6);
+}));
