@@ -6,6 +6,7 @@
 #include "actors/errors.h"
 #include "actors/session_state.h"
 #include "protocol/scene_records.h"
+#include "renderer/accumulation.h"
 #include "renderer/raytracer.h"
 #include "update/scene_update.h"
 
@@ -90,6 +91,23 @@ void start_frame(self_ptr self, uint32_t client_frame, bool refine) {
     if (st.closed) return;
   }
   fs.refine = st.frame_is_sample && st.still.target > 1 && can_refine;
+  if (fs.refine) {
+    // The still's average is held by the frame actor while it refines: it counts against the
+    // node's memory budget like the scene; a still it cannot hold is not refined.
+    const uint64_t need = Accumulation::bytes(st.scene->width(), st.scene->height());
+    if (need > st.acc_bytes && !st.share.reserve(need - st.acc_bytes)) {
+      fs.refine = false;
+      st.still.active = st.still.after_scaled = false;
+      fail(self, Error{ErrorCode::limit_exceeded,
+                       "refining a " + std::to_string(st.scene->width()) + "x" + std::to_string(st.scene->height()) +
+                           " still needs " + std::to_string(need) +
+                           " bytes, which would exceed the node's memory budget; the frame is not refined",
+                       kNoRecord});
+      if (st.closed) return;
+    } else {
+      st.acc_bytes = need;
+    }
+  }
   fs.sample = refine ? st.still.samples : 0;
   fs.seed = st.still.seed;
   m.refined = refine;

@@ -27,7 +27,7 @@ void fail(self_ptr self, const Error& e) {
 // reserved: every update grows the scene by at most the size its message declared.
 void settle_budget(self_ptr self) {
   auto& st = self->state;
-  st.share.set(scene_bytes(*st.scene) + st.cached_bytes.waiting_bytes());
+  st.share.set(scene_bytes(*st.scene) + st.cached_bytes.waiting_bytes() + st.acc_bytes);
 }
 
 static void apply_update(self_ptr self, ClientRecord&& rec, uint32_t index) {
@@ -140,6 +140,9 @@ static void on_client_records(self_ptr self, std::vector<uint8_t>& bytes, const 
       st.render = *s;  // read when the next frame starts
     } else if (auto* rf = std::get_if<protocol::Refine>(&rec)) {
       st.refine = rf->samples;  // from the next requested frame on
+    } else if (auto* b = std::get_if<protocol::Budget>(&rec)) {
+      // The client's frame budget replaces the node's frame-budget-ms, from the next requested frame on.
+      if (b->frame_ms > 0) st.budget.emplace(double(b->frame_ms)); else st.budget.reset();
     } else if (auto* rr = std::get_if<RenderRequest>(&rec)) {
       if (!st.in_flight) {
         start_frame(self, rr->frame);

@@ -70,6 +70,8 @@ struct session_state {
   bool frame_is_sample = false;      // the frame in flight is a sample of the still
   bool frame_requested = false;      // the frame in flight answers a render request
   int64_t frame_t0_ns = 0;
+  // The still's average in the frame actor (Accumulation::bytes), counted in `share`.
+  uint64_t acc_bytes = 0;
   std::pair<uint32_t, uint64_t> checked{0, 0};  // AO samples and environment version last checked for them
   static inline const char* name = "tessera.session";
 };

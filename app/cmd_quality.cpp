@@ -65,7 +65,7 @@ std::string reference_key(const SceneSetup& setup, long frame, const RenderSetti
   std::ostringstream k;
   k << std::hex << fnv1a(bytes.str()) << std::dec << "-" << setup.loaded.scene.width() << "x"
     << setup.loaded.scene.height() << "-f" << frame << "-ao" << s.ao_samples << "-d" << s.max_depth << "-s"
-    << samples << "-v3";
+    << samples << "-v4";
   return k.str();
 }
 

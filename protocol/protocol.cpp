@@ -57,6 +57,7 @@ const char* to_string(RecordType t) {
     case RecordType::handshake: return "handshake";
     case RecordType::settings: return "settings";
     case RecordType::refine: return "refine";
+    case RecordType::budget: return "budget";
     case RecordType::resolution: return "resolution";
     case RecordType::camera: return "camera";
     case RecordType::environment: return "environment";
@@ -163,6 +164,11 @@ struct ClientEncoder {
   void operator()(const Refine& r) {
     size_t at = w.begin_record(RecordType::refine, Op::set);
     w.u32(r.samples);
+    w.end_record(at);
+  }
+  void operator()(const Budget& b) {
+    size_t at = w.begin_record(RecordType::budget, Op::set);
+    w.u32(b.frame_ms);
     w.end_record(at);
   }
   void operator()(const Resolution& r) {
@@ -574,6 +580,15 @@ class ClientDecoder {
           return c.fail(ErrorCode::limit_exceeded, "refine samples " + std::to_string(rf.samples) +
                                                        " exceeds the limit " + std::to_string(lim_.max_refine_samples));
         out = rf;
+        return true;
+      }
+      case RecordType::budget: {
+        if (!c.length(r.left(), wire::budget::kFixed)) return false;
+        Budget b{r.u32()};
+        if (b.frame_ms > lim_.max_frame_budget_ms)
+          return c.fail(ErrorCode::limit_exceeded, "budget frame_ms " + std::to_string(b.frame_ms) +
+                                                       " exceeds the limit " + std::to_string(lim_.max_frame_budget_ms));
+        out = b;
         return true;
       }
       case RecordType::resolution: {

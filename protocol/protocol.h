@@ -111,6 +111,7 @@ struct Limits {
   uint32_t max_nodes = wire::limits::max_nodes;                  // handshake max_nodes
   uint32_t max_ao_samples = wire::limits::max_ao_samples;
   uint32_t max_refine_samples = wire::limits::max_refine_samples;
+  uint32_t max_frame_budget_ms = wire::limits::max_frame_budget_ms;
   uint32_t max_depth = wire::limits::max_depth;
 };
 
@@ -145,6 +146,12 @@ struct Resolution {
 // "Refinement"); 0 or 1: none.
 struct Refine {
   uint32_t samples = 0;
+};
+
+// Interactive frames are rendered at a lower resolution to take about frame_ms (docs/protocol.md,
+// "Refinement"); 0: always the client's resolution.
+struct Budget {
+  uint32_t frame_ms = 0;
 };
 
 struct SetCamera {
@@ -190,7 +197,7 @@ struct RenderRequest {
 };
 
 using ClientRecord = std::variant<Handshake, Settings, Resolution, SetCamera, SetEnvironment, SetBuffer, SetTexture,
-                                  SetMaterial, SetMesh, SetLight, Remove, RenderRequest, Refine>;
+                                  SetMaterial, SetMesh, SetLight, Remove, RenderRequest, Refine, Budget>;
 
 // ---------------------------------------------------------------------------------------
 // Server -> client records.

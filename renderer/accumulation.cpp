@@ -12,7 +12,7 @@ void Accumulation::reset(int32_t width, int32_t height, bool srgb) {
   height_ = height;
   srgb_ = srgb;
   samples_ = 0;
-  sum_.assign(size_t(width) * size_t(height) * 3, 0.0);
+  sum_.assign(size_t(width) * size_t(height) * 3, 0.0f);
 }
 
 void Accumulation::add(const std::vector<float>& radiance, int32_t width, int32_t height, int32_t x, int32_t y) {
@@ -21,8 +21,8 @@ void Accumulation::add(const std::vector<float>& radiance, int32_t width, int32_
     throw std::invalid_argument("Accumulation::add: a tile outside the frame, or not its size");
   for (int32_t ty = 0; ty < height; ++ty) {
     const float* src = &radiance[size_t(ty) * size_t(width) * 3];
-    double* dst = &sum_[(size_t(y + ty) * size_t(width_) + size_t(x)) * 3];
-    for (size_t i = 0; i < size_t(width) * 3; ++i) dst[i] += double(src[i]);
+    float* dst = &sum_[(size_t(y + ty) * size_t(width_) + size_t(x)) * 3];
+    for (size_t i = 0; i < size_t(width) * 3; ++i) dst[i] += src[i];
   }
 }
 
@@ -32,11 +32,11 @@ void Accumulation::add_bytes(const std::vector<uint8_t>& radiance, int32_t width
     throw std::invalid_argument("Accumulation::add_bytes: a tile outside the frame, or not its size");
   for (int32_t ty = 0; ty < height; ++ty) {
     const uint8_t* src = &radiance[size_t(ty) * size_t(width) * 3 * sizeof(float)];
-    double* dst = &sum_[(size_t(y + ty) * size_t(width_) + size_t(x)) * 3];
+    float* dst = &sum_[(size_t(y + ty) * size_t(width_) + size_t(x)) * 3];
     for (size_t i = 0; i < size_t(width) * 3; ++i) {
       float v;
       std::memcpy(&v, src + i * sizeof(float), sizeof(float));
-      dst[i] += double(v);
+      dst[i] += v;
     }
   }
 }
@@ -44,11 +44,11 @@ void Accumulation::add_bytes(const std::vector<uint8_t>& radiance, int32_t width
 Image Accumulation::average() const {
   if (samples_ == 0) return {};
   Image out(width_, height_);
-  const double inv = 1.0 / double(samples_);
+  const float inv = 1.0f / float(samples_);
   const size_t pixels = size_t(width_) * size_t(height_);
   for (size_t p = 0; p < pixels; ++p) {
     for (int c = 0; c < 3; ++c) {
-      const float v = float(sum_[p * 3 + size_t(c)] * inv);  // one sample: exactly the renderer's value
+      const float v = sum_[p * 3 + size_t(c)] * inv;  // one sample: exactly the renderer's value
       out.rgba[p * 4 + size_t(c)] = uint8_t(srgb_ ? raytracer_detail::encode_srgb(v) : raytracer_detail::encode_plain(v));
     }
     out.rgba[p * 4 + 3] = 255;

@@ -24,6 +24,8 @@ class Accumulation {
   uint32_t samples() const { return samples_; }
   int32_t width() const { return width_; }
   int32_t height() const { return height_; }
+  // The memory a width x height average holds.
+  static uint64_t bytes(int32_t width, int32_t height) { return uint64_t(width) * uint64_t(height) * 3 * sizeof(float); }
   // The average, encoded (opaque alpha); an empty image before the first sample. With one
   // sample it is exactly the frame the renderer encoded.
   Image average() const;
@@ -32,7 +34,8 @@ class Accumulation {
   int32_t width_ = 0, height_ = 0;
   bool srgb_ = true;
   uint32_t samples_ = 0;
-  std::vector<double> sum_;  // RGB per pixel
+  std::vector<float> sum_;  // RGB per pixel (float: 12 bytes a pixel; 4096 samples of values
+                            // near 1 keep a relative error near 1e-6, far below 8 bits)
 };
 
 }  // namespace tessera

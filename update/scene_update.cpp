@@ -65,7 +65,8 @@ void PendingBytes::clear() {
 
 bool is_scene_update(const ClientRecord& r) {
   return !(std::holds_alternative<Handshake>(r) || std::holds_alternative<Settings>(r) ||
-           std::holds_alternative<RenderRequest>(r) || std::holds_alternative<Refine>(r));
+           std::holds_alternative<RenderRequest>(r) || std::holds_alternative<Refine>(r) ||
+           std::holds_alternative<Budget>(r));
 }
 
 Status apply(Scene& scene, ClientRecord&& record, const Limits& lim) {
@@ -75,6 +76,7 @@ Status apply(Scene& scene, ClientRecord&& record, const Limits& lim) {
     Status operator()(Handshake&) { return apply_error(ErrorCode::not_scene_update, "handshake is not a scene update"); }
     Status operator()(Settings&) { return apply_error(ErrorCode::not_scene_update, "settings are not a scene update"); }
     Status operator()(Refine&) { return apply_error(ErrorCode::not_scene_update, "a refine record is not a scene update"); }
+    Status operator()(Budget&) { return apply_error(ErrorCode::not_scene_update, "a budget record is not a scene update"); }
     Status operator()(RenderRequest&) {
       return apply_error(ErrorCode::not_scene_update, "a render request is not a scene update");
     }

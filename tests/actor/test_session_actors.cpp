@@ -373,7 +373,7 @@ CAF_TEST(every kind of client record ends a still that is refining) {
       {"settings", Settings{0, 3}}, {"resolution", Resolution{16, 16}}, {"camera", SetCamera{camera_at(4)}},
       {"environment", env},         {"light", light},                   {"material", mat},
       {"mesh", mesh},               {"remove", gone},                   {"refine", Refine{64}},
-      {"buffer", floats(40, 4)}};
+      {"buffer", floats(40, 4)},    {"budget", Budget{33}}};
   uint32_t frame = 0;
   for (auto& [name, rec] : changes) {
     CAF_MESSAGE("change: " << name);
@@ -392,6 +392,29 @@ CAF_TEST(every kind of client record ends a still that is refining) {
     CAF_CHECK_EQUAL(status().frames_started, after);  // and then nothing
   }
   CAF_CHECK_EQUAL(sink->all<ErrorReply>().size(), 0u);
+}
+
+CAF_TEST(a still whose average would not fit the memory budget is not refined and the client is told) {
+  settings->refine_samples = 8;
+  // 512x512 averages in 3 MiB, over the whole budget (1 MiB): refused.
+  client({Resolution{512, 512}, SetCamera{camera_at(3)}, RenderRequest{1}});
+  run();
+  auto frames = sink->all<Frame>();
+  CAF_REQUIRE_EQUAL(frames.size(), 1u);
+  CAF_CHECK_EQUAL(frames[0].samples, 1u);
+  CAF_CHECK_EQUAL(status().frames_started, 1u);
+  auto errors = sink->all<ErrorReply>();
+  CAF_REQUIRE_EQUAL(errors.size(), 1u);
+  CAF_CHECK_EQUAL(errors[0].code, ErrorCode::limit_exceeded);
+  CAF_CHECK(!errors[0].fatal);
+  CAF_CHECK_NOT_EQUAL(errors[0].message.find("memory budget"), std::string::npos);
+  // A small one fits, and what it holds is counted until the next still.
+  const uint64_t before = budget->used();
+  client({Resolution{64, 64}, RenderRequest{2}});
+  run();
+  CAF_CHECK_EQUAL(sink->all<Frame>().back().samples, 8u);
+  CAF_CHECK_EQUAL(sink->all<ErrorReply>().size(), 1u);
+  CAF_CHECK_EQUAL(budget->used(), before + Accumulation::bytes(64, 64));
 }
 
 CAF_TEST(a refine record from the client sets its target and 0 turns refinement off) {

@@ -44,7 +44,7 @@ bool scene_from_message(const uint8_t* data, size_t size, Scene& scene) {
   for (auto& r : msg.value()) {
     if (std::holds_alternative<Handshake>(r) || std::holds_alternative<Settings>(r) ||
         std::holds_alternative<Resolution>(r) || std::holds_alternative<RenderRequest>(r) ||
-        std::holds_alternative<Refine>(r))
+        std::holds_alternative<Refine>(r) || std::holds_alternative<Budget>(r))
       continue;  // session-level records; the render below uses its own settings
     (void)apply(scene, std::move(r), lim);
   }

@@ -117,6 +117,7 @@ void protocol_corpus() {
   put("protocol", "handshake", encode(ClientRecord{h}));
   put("protocol", "settings", encode(ClientRecord{Settings{4, 3}}));
   put("protocol", "refine", encode(ClientRecord{Refine{64}}));
+  put("protocol", "budget", encode(ClientRecord{Budget{33}}));
   put("protocol", "resolution", encode(ClientRecord{Resolution{1280, 720}}));
   SetCamera cam = camera_at({0, 1, 5});
   put("protocol", "camera", encode(ClientRecord{cam}));

@@ -185,6 +185,7 @@ std::vector<ClientRecord> every_client_record() {
   v.push_back(Remove{RecordType::light, 21});
   v.push_back(RenderRequest{42});
   v.push_back(Refine{256});
+  v.push_back(Budget{40});
   return v;
 }
 
@@ -244,6 +245,7 @@ TEST_CASE("Every client record survives an encode/decode round trip", "[protocol
     CHECK(std::get<Remove>(v[11]).id == 21);
     CHECK(std::get<RenderRequest>(v[12]).frame == 42);
     CHECK(std::get<Refine>(v[13]).samples == 256);
+    CHECK(std::get<Budget>(v[14]).frame_ms == 40);
   }
   SECTION("removes of every entry kind") {
     for (RecordType t : {RecordType::buffer, RecordType::texture, RecordType::material, RecordType::mesh,
@@ -577,6 +579,35 @@ TEST_CASE("Settings and resolution rules", "[protocol]") {
     CHECK_FALSE(is_scene_update(ClientRecord{Refine{8}}));
     CHECK(apply(scene, Refine{8}, Limits{}).code() == ErrorCode::not_scene_update);
   }
+  // Budget: frame_ms up to max_frame_budget_ms (60000 by default); 0 means no budget.
+  for (uint32_t ms : {0u, 1u, 33u, Limits{}.max_frame_budget_ms})
+    CHECK(one<Budget>(encode(ClientRecord{Budget{ms}})).frame_ms == ms);
+  CHECK(mentions(fails(encode(ClientRecord{Budget{Limits{}.max_frame_budget_ms + 1}}), ErrorCode::limit_exceeded),
+                 "budget frame_ms 60001"));
+  lim.max_frame_budget_ms = 100;
+  CHECK(one<Budget>(encode(ClientRecord{Budget{100}}), lim).frame_ms == 100);
+  fails(encode(ClientRecord{Budget{101}}), ErrorCode::limit_exceeded, lim);
+  fails(encode(ClientRecord{Budget{0xffffffffu}}), ErrorCode::limit_exceeded);
+  {
+    auto m = encode(ClientRecord{Budget{33}});
+    CHECK(m.size() == kBody + 4);
+    CHECK(m[8] == 0x07);
+    CHECK(m[kBody] == 33);
+    m.push_back(0);
+    patch<uint32_t>(m, 12, 5);
+    fails(m, ErrorCode::bad_length);
+    m = encode(ClientRecord{Budget{33}});
+    m.pop_back();
+    patch<uint32_t>(m, 12, 3);
+    fails(m, ErrorCode::bad_length);
+    m = encode(ClientRecord{Budget{33}});
+    m[9] = 1;  // remove is not defined for budget
+    fails(m, ErrorCode::bad_op);
+    Scene scene;  // a session record, not a scene update
+    CHECK_FALSE(is_scene_update(ClientRecord{Budget{33}}));
+    CHECK(apply(scene, Budget{33}, Limits{}).code() == ErrorCode::not_scene_update);
+    CHECK(std::string(to_string(RecordType::budget)) == "budget");
+  }
   fails(encode(ClientRecord{Resolution{10, 0}}), ErrorCode::out_of_range);
   fails(encode(ClientRecord{Resolution{-1, 10}}), ErrorCode::limit_exceeded);  // 0xffffffff on the wire
   fails(encode(ClientRecord{Resolution{7680, 4321}}), ErrorCode::limit_exceeded);
@@ -842,9 +873,10 @@ TEST_CASE("Applying decoded updates changes the scene", "[protocol]") {
   REQUIRE(r.ok());
   std::vector<ErrorCode> codes;
   for (auto& rec : r.value()) codes.push_back(apply(scene, std::move(rec), lim).code());
-  // Settings, render requests and refine are for the session; removing light 21 (absent) fails.
+  // Settings, render requests, refine and budget are for the session; removing light 21 (absent) fails.
   CHECK(codes.front() == ErrorCode::not_scene_update);
   CHECK(codes.back() == ErrorCode::not_scene_update);
+  for (size_t i = 12; i < codes.size(); ++i) CHECK(codes[i] == ErrorCode::not_scene_update);
   CHECK(codes[11] == ErrorCode::unknown_id);
   for (size_t i = 1; i < 11; ++i) CHECK(codes[i] == ErrorCode::ok);
   CHECK(scene.width() == 800);

@@ -191,6 +191,7 @@ struct ClientJs {
   }
   std::string operator()(const RenderRequest& r) { return Obj{}.f("type", q("render")).f("frame", num(r.frame)).str(); }
   std::string operator()(const Refine& r) { return Obj{}.f("type", q("refine")).f("samples", num(r.samples)).str(); }
+  std::string operator()(const Budget& b) { return Obj{}.f("type", q("budget")).f("frameMs", num(b.frame_ms)).str(); }
 };
 
 struct ServerJs {
@@ -231,6 +232,7 @@ std::string limits_json(const Limits& l) {
   TESSERA_LIMIT(max_message_payload_bytes) TESSERA_LIMIT(max_buffer_bytes) TESSERA_LIMIT(max_client_bytes)
   TESSERA_LIMIT(max_triangles) TESSERA_LIMIT(max_vertices) TESSERA_LIMIT(max_texture_size) TESSERA_LIMIT(max_nodes)
   TESSERA_LIMIT(max_ao_samples) TESSERA_LIMIT(max_depth) TESSERA_LIMIT(max_refine_samples)
+  TESSERA_LIMIT(max_frame_budget_ms)
 #undef TESSERA_LIMIT
   return o.str();
 }
@@ -242,7 +244,7 @@ std::string all_limits() {
       .f("max_client_bytes", num(l.max_client_bytes)).f("max_triangles", num(l.max_triangles))
       .f("max_vertices", num(l.max_vertices)).f("max_texture_size", num(l.max_texture_size))
       .f("max_nodes", num(l.max_nodes)).f("max_ao_samples", num(l.max_ao_samples)).f("max_depth", num(l.max_depth))
-      .f("max_refine_samples", num(l.max_refine_samples)).str();
+      .f("max_refine_samples", num(l.max_refine_samples)).f("max_frame_budget_ms", num(l.max_frame_budget_ms)).str();
 }
 
 // ---------------------------------------------------------------------------------------
@@ -557,8 +559,9 @@ void valid_messages() {
                                    Remove{RecordType::light, kMaxU32}});
   client("render requests", {RenderRequest{0}, RenderRequest{42}, RenderRequest{kMaxU32}});
   client("refine: off, one sample, a target, the limit", {Refine{0}, Refine{1}, Refine{64}, Refine{Limits{}.max_refine_samples}});
+  client("budget: off, 1 ms, 33 ms, the limit", {Budget{0}, Budget{1}, Budget{33}, Budget{Limits{}.max_frame_budget_ms}});
   client("every client record in one message",
-         {Settings{16, 5}, Refine{32}, Resolution{640, 360}, camera(), environment(),
+         {Settings{16, 5}, Refine{32}, Budget{33}, Resolution{640, 360}, camera(), environment(),
           f32_buffer(7, {0, 0, 0, 1, 0, 0, 0, 1, 0}, 3), u32_buffer(8, {0, 1, 2}, 1), rgba_texture(9, 1, 2), material(),
           mesh(), light(Light::Type::spot), Remove{RecordType::mesh, 5}, RenderRequest{42}});
 
@@ -713,7 +716,7 @@ void client_records() {
       {"handshake", handshake()}, {"settings", Settings{16, 5}}, {"resolution", Resolution{640, 360}},
       {"camera", camera()},       {"environment", environment()}, {"material", material()},
       {"mesh", mesh()},           {"light", light(Light::Type::spot)}, {"render", RenderRequest{1}},
-      {"remove", Remove{RecordType::mesh, 5}}, {"refine", Refine{64}}};
+      {"remove", Remove{RecordType::mesh, 5}}, {"refine", Refine{64}}, {"budget", Budget{33}}};
   for (const auto& [n, r] : fixed) {
     const Bytes m = one(r);
     const size_t len = m.size() - kB;
@@ -723,7 +726,8 @@ void client_records() {
   // Op remove where it is not defined.
   for (const auto& [n, r] : std::vector<std::pair<std::string, ClientRecord>>{
            {"handshake", handshake()}, {"settings", Settings{}}, {"resolution", Resolution{}}, {"camera", camera()},
-           {"environment", environment()}, {"render", RenderRequest{1}}, {"refine", Refine{64}}})
+           {"environment", environment()}, {"render", RenderRequest{1}}, {"refine", Refine{64}},
+           {"budget", Budget{33}}})
     bad_client(n + ": op remove", put<uint8_t>(one(r), 9, 1), ErrorCode::bad_op);
   for (auto t : {RecordType::buffer, RecordType::texture, RecordType::material, RecordType::mesh, RecordType::light})
     bad_client(std::string("remove ") + to_string(t) + ": id 0", one(Remove{t, 0}), ErrorCode::bad_id);
@@ -768,6 +772,14 @@ void client_records() {
     Limits few;
     few.max_refine_samples = 63;
     bad_client("refine: samples beyond a node's lower limit", f, ErrorCode::limit_exceeded, few);
+    const Bytes b = one(Budget{33});
+    bad_client("budget: frame_ms beyond the limit",
+               put<uint32_t>(b, kB + wire::budget::at::frame_ms, d.max_frame_budget_ms + 1), ErrorCode::limit_exceeded);
+    bad_client("budget: frame_ms 0xffffffff", put<uint32_t>(b, kB + wire::budget::at::frame_ms, kMaxU32),
+               ErrorCode::limit_exceeded);
+    Limits quick;
+    quick.max_frame_budget_ms = 32;
+    bad_client("budget: frame_ms beyond a node's lower limit", b, ErrorCode::limit_exceeded, quick);
     bad_client("resolution: width 0", put<uint32_t>(r, kB + wire::resolution::at::width, 0), ErrorCode::out_of_range);
     bad_client("resolution: height 0", put<uint32_t>(r, kB + wire::resolution::at::height, 0), ErrorCode::out_of_range);
     bad_client("resolution: width beyond the limit", put<uint32_t>(r, kB + wire::resolution::at::width, kMaxU32),

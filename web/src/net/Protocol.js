@@ -93,6 +93,8 @@ function encodeClientRecord(w, r) {
       at = w.begin(RecordType.settings); w.u32(r.aoSamples ?? 0); w.u32(r.maxDepth ?? 4); break;
     case 'refine':
       at = w.begin(RecordType.refine); w.u32(r.samples ?? 0); break;
+    case 'budget':
+      at = w.begin(RecordType.budget); w.u32(r.frameMs ?? 0); break;
     case 'resolution':
       at = w.begin(RecordType.resolution); w.u32(r.width); w.u32(r.height); break;
     case 'camera':
@@ -368,6 +370,12 @@ function decodeClientRecord(c, op, r, state) {
       const samples = r.u32();
       c.limit(samples, 'max_refine_samples', 'samples');
       return { type: name, samples };
+    }
+    case 'budget': {
+      c.length(r.left(), spec.fixed);
+      const frameMs = r.u32();
+      c.limit(frameMs, 'max_frame_budget_ms', 'frame_ms');
+      return { type: name, frameMs };
     }
     case 'resolution': {
       c.length(r.left(), spec.fixed);

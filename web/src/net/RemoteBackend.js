@@ -1,5 +1,6 @@
 // Server rendering backend: <xml3d server="host:port" renderer="raytracer" display="jpeg|s3tc|mjpeg"
-// nodes="N" sync-rate="30" jpeg-quality="85" ao-samples="0" max-depth="4" refine-samples="64" token="...">
+// nodes="N" sync-rate="30" jpeg-quality="85" ao-samples="0" max-depth="4" refine-samples="64"
+// frame-budget="33" token="...">
 // (RenderSettings.js; the access token also from the page's #tessera-token=..., AccessToken.js).
 // The scene goes to the node over the sync channel; frames come back on the same WebSocket and
 // are shown in a display element behind a transparent input canvas (which takes the mouse).
@@ -69,8 +70,8 @@ export class RemoteBackend {
     this.channel.connect();
   }
 
-  // ao-samples / max-depth / refine-samples from the element; bad values are warned about once
-  // and replaced by the default or clamped (also on the status line).
+  // ao-samples / max-depth / refine-samples / frame-budget from the element; bad values are
+  // warned about once and replaced by the default or clamped (also on the status line).
   readSettings() {
     const { settings, problems } = readRenderSettings(this.handler.xml3d);
     const key = problems.join('\n');
@@ -124,6 +125,9 @@ export class RemoteBackend {
 
   // Whether the node refines stills for this page: a target above 1 and the ray tracer.
   get refining() { return this.channel.settings?.refineSamples > 1 && this.channel.reply?.renderer === 'raytracer'; }
+  // Whether the node may send frames unasked after a requested one: refinements, or (within a
+  // frame budget) the full-resolution still after a scaled frame.
+  get unasked() { return this.refining || this.channel.settings?.frameBudget > 0; }
 
   // The refinement status line ("interactive", "refining k/N", "converged N"), while refinement is on.
   showRefinement(f) {
@@ -136,9 +140,10 @@ export class RemoteBackend {
   // the last frame of a change the client therefore asks for one more (identical) frame,
   // which pushes the previous one out; and while the stream has shown nothing (it connected
   // after the first frames went out) it asks again, at most 20 times. A node that refines
-  // stills sends refined frames after a requested one, which push it out: then the client asks
-  // only when none has come within half a second, and never after a refined frame (a request
-  // would start the still again), so the last refinement shows when the next frame comes.
+  // stills (or follows a scaled frame with its full-resolution still) sends refined frames
+  // after a requested one, which push it out: then the client asks only when none has come
+  // within half a second, and never after a refined frame (a request would start the still
+  // again), so the last refinement shows when the next frame comes.
   flushMjpeg(f) {
     const ch = this.channel;
     clearTimeout(this.flushTimer);
@@ -152,7 +157,7 @@ export class RemoteBackend {
       ch.requestRender();
       this.flushFrame = ch.frameNumber;
     };
-    if (this.refining) this.flushTimer = setTimeout(flush, 500);
+    if (this.unasked) this.flushTimer = setTimeout(flush, 500);
     else flush();
   }
 

@@ -1,21 +1,25 @@
-// The page's render settings for the node: <xml3d ao-samples="N" max-depth="D" refine-samples="R">,
-// sent as the protocol's settings record (protocol/protocol.h Settings) and refine record
-// (Refine) after the handshake and whenever the attributes change. Bad values are reported
-// (console warning, status line) and the default is used instead (a refine-samples beyond its
-// range is clamped to it), so a typo never makes the node refuse the session.
+// The page's render settings for the node: <xml3d ao-samples="N" max-depth="D" refine-samples="R"
+// frame-budget="MS">, sent as the protocol's settings record (protocol/protocol.h Settings),
+// refine record (Refine) and budget record (Budget) after the handshake and whenever the
+// attributes change. Bad values are reported (console warning, status line) and the default is
+// used instead (a refine-samples or frame-budget beyond its range is clamped to it), so a typo
+// never makes the node refuse the session.
 
 // Same ranges as `tessera render --ao/--depth` and the node's default limits
-// (protocol::Limits::max_ao_samples = 256, max_refine_samples = 4096; a depth of 1 means
-// primary rays only; 0 or 1 refine samples: no refinement).
+// (protocol::Limits::max_ao_samples = 256, max_refine_samples = 4096, max_frame_budget_ms =
+// 60000; a depth of 1 means primary rays only; 0 or 1 refine samples: no refinement; a frame
+// budget of 0: interactive frames always at the client's resolution).
 export const RENDER_SETTINGS = {
   aoSamples: { attribute: 'ao-samples', min: 0, max: 256, default: 0, what: 'ambient occlusion rays per hit' },
   maxDepth: { attribute: 'max-depth', min: 1, max: 64, default: 4, what: 'ray depth (1 = primary rays only)' },
   refineSamples: { attribute: 'refine-samples', min: 0, max: 4096, default: 64, clamp: true,
     what: 'samples per pixel a still image refines to; 0 or 1 = off' },
+  frameBudget: { attribute: 'frame-budget', min: 0, max: 60000, default: 33, clamp: true,
+    what: 'milliseconds an interactive frame should take, rendered at a lower resolution to fit; 0 = off' },
 };
 
-// Reads the settings from an <xml3d> element: {settings: {aoSamples, maxDepth, refineSamples},
-// problems: [text]}.
+// Reads the settings from an <xml3d> element: {settings: {aoSamples, maxDepth, refineSamples,
+// frameBudget}, problems: [text]}.
 export function readRenderSettings(xml3d) {
   const settings = {}, problems = [];
   for (const [key, spec] of Object.entries(RENDER_SETTINGS)) {
@@ -34,7 +38,7 @@ export function readRenderSettings(xml3d) {
 }
 
 export const sameSettings = (a, b) => !!a && !!b && a.aoSamples === b.aoSamples && a.maxDepth === b.maxDepth
-  && a.refineSamples === b.refineSamples;
+  && a.refineSamples === b.refineSamples && a.frameBudget === b.frameBudget;
 
 // The refinement status of a still after `frame` was shown, for a target of `target` samples per
 // pixel: null when refinement is off (target 0 or 1), 'interactive' after a requested frame,

@@ -3,7 +3,8 @@
 // deflated when CompressionStream exists, rate-controlled on ws.bufferedAmount) and asks for
 // a frame after every iteration that changed something. The render settings (AO samples, ray
 // depth) go as a settings record after the handshake and again whenever they change, the
-// refinement target (samples per pixel of a still) likewise as a refine record. Frames the node
+// refinement target (samples per pixel of a still) likewise as a refine record, and the frame
+// budget (milliseconds an interactive frame should take) as a budget record. Frames the node
 // sends unasked while it refines a still (`refined`) answer no render request. On connection
 // loss it reconnects with back-off and re-sends the whole scene and the settings.
 import { encodeClient, decodeServer, clientRecordSize, ProtocolError } from './Protocol.js';
@@ -91,15 +92,17 @@ export class SyncChannel {
     this.dirty = true;
   }
 
-  // New render settings {aoSamples, maxDepth, refineSamples}; the next run-loop iteration sends
-  // a settings record when the first two differ from the last ones, a refine record when the
-  // refinement target does, and a render request.
+  // New render settings {aoSamples, maxDepth, refineSamples, frameBudget}; the next run-loop
+  // iteration sends a settings record when the first two differ from the last ones, a refine
+  // record when the refinement target does, a budget record when the frame budget does, and a
+  // render request.
   setSettings(settings) {
     if (sameSettings(settings, this.settings)) return;
     const old = this.settings;
     this.settings = settings;
     if (!old || old.aoSamples !== settings.aoSamples || old.maxDepth !== settings.maxDepth) this.settingsDirty = true;
     if (settings.refineSamples !== undefined && (!old || old.refineSamples !== settings.refineSamples)) this.refineDirty = true;
+    if (settings.frameBudget !== undefined && (!old || old.frameBudget !== settings.frameBudget)) this.budgetDirty = true;
   }
 
   receive(data) {
@@ -120,6 +123,7 @@ export class SyncChannel {
         this.setState('ready', `${r.serverVersion || 'Tessera'}, ${r.nodes} node${r.nodes > 1 ? 's' : ''}, ${r.renderer}, ${r.display}`);
         this.settingsDirty = !!this.settings;
         this.refineDirty = !!this.settings && this.settings.refineSamples !== undefined;
+        this.budgetDirty = !!this.settings && this.settings.frameBudget !== undefined;
         clearInterval(this.timer);
         this.timer = setInterval(() => this.tick(), 1000 / this.rate);
         this.tick();
@@ -168,6 +172,12 @@ export class SyncChannel {
     if (this.refineDirty && this.settings) {
       this.refineDirty = false;
       const r = { type: 'refine', samples: this.settings.refineSamples };
+      this.queue.push({ size: clientRecordSize(r), record: r });
+      this.changed = true;
+    }
+    if (this.budgetDirty && this.settings) {
+      this.budgetDirty = false;
+      const r = { type: 'budget', frameMs: this.settings.frameBudget };
       this.queue.push({ size: clientRecordSize(r), record: r });
       this.changed = true;
     }

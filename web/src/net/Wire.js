@@ -26,6 +26,7 @@ export const LIMITS = Object.freeze({
   max_ao_samples: 256,  // settings ao_samples
   max_depth: 64,  // settings max_depth
   max_refine_samples: 4096,  // refine samples
+  max_frame_budget_ms: 60000,  // budget frame_ms
 });
 
 // Enums: the value on the wire is the index of the name.
@@ -85,6 +86,12 @@ export const RECORDS = Object.freeze({
     code: 0x06, channel: 'client', fixed: 4, tail: false, removable: false,
     fields: Object.freeze([
       { name: 'samples', type: 'u32', offset: 0, js: 'samples', limit: 'max_refine_samples' },
+    ]),
+  }),
+  budget: Object.freeze({
+    code: 0x07, channel: 'client', fixed: 4, tail: false, removable: false,
+    fields: Object.freeze([
+      { name: 'frame_ms', type: 'u32', offset: 0, js: 'frameMs', limit: 'max_frame_budget_ms' },
     ]),
   }),
   resolution: Object.freeze({

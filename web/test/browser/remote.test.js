@@ -2,7 +2,8 @@
 // handshake and every record the page sends against the protocol (decoded with our own
 // decoder, byte-checked against protocol/protocol.cpp in the unit tests) and answers render
 // requests with a JPEG (or DXT1) frame (and, with `refine`, refines it as a node does: frames
-// with the same number, refined, 2..target samples, the target from the page's refine record).
+// with the same number, refined, 2..target samples, the target from the page's refine record;
+// with `frameSize`, its frames have that size instead of the page's, as within a frame budget).
 // TODO(e2e): the same checks against a real node belong in web/test/browser/node-e2e.test.js
 // (start app/tessera-node serving web/ and ../shared/scenes, open /demo/pavilion.html?server=...).
 import { test, before, after } from 'node:test';
@@ -13,28 +14,33 @@ import { launch, open } from './browser.js';
 import { decodeClient, encodeServer, dxt1Size } from '../../src/net/Protocol.js';
 
 let env, jpeg;
+const jpegs = {};  // 'WxH' -> a solid green JPEG of that size
 before(async () => {
   env = await launch();
-  // A solid green 64x48 JPEG, made by the browser itself.
+  // Solid green JPEGs (64x48, the page's size, and 32x24), made by the browser itself.
   const page = await env.context.newPage();
-  const b64 = await page.evaluate(async () => {
-    const c = new OffscreenCanvas(64, 48);
-    const g = c.getContext('2d');
-    g.fillStyle = 'rgb(0, 200, 0)';
-    g.fillRect(0, 0, 64, 48);
-    const blob = await c.convertToBlob({ type: 'image/jpeg', quality: 0.95 });
-    const bytes = new Uint8Array(await blob.arrayBuffer());
-    return btoa(String.fromCharCode(...bytes));
-  });
-  jpeg = new Uint8Array(Buffer.from(b64, 'base64'));
+  for (const [w, h] of [[64, 48], [32, 24]]) {
+    const b64 = await page.evaluate(async ([w, h]) => {
+      const c = new OffscreenCanvas(w, h);
+      const g = c.getContext('2d');
+      g.fillStyle = 'rgb(0, 200, 0)';
+      g.fillRect(0, 0, w, h);
+      const blob = await c.convertToBlob({ type: 'image/jpeg', quality: 0.95 });
+      const bytes = new Uint8Array(await blob.arrayBuffer());
+      return btoa(String.fromCharCode(...bytes));
+    }, [w, h]);
+    jpegs[`${w}x${h}`] = new Uint8Array(Buffer.from(b64, 'base64'));
+  }
+  jpeg = jpegs['64x48'];
   await page.close();
 });
 after(async () => { await env.close(); });
 
 class MockNode {
-  constructor({ encoding = 'jpeg', refine = false } = {}) {
+  constructor({ encoding = 'jpeg', refine = false, frameSize = [64, 48] } = {}) {
     this.encoding = encoding;
     this.refine = refine;
+    this.frameSize = frameSize;
     this.sessions = [];
     this.wss = new WebSocketServer({ host: '127.0.0.1', port: 0, path: '/ws' });
     this.wss.on('connection', (ws, req) => this.session(ws, req));
@@ -66,15 +72,16 @@ class MockNode {
         if (r.type === 'render') {
           s.renders.push(r.frame);
           const dxt = this.encoding === 'dxt1';
-          let payload = jpeg;
+          const [width, height] = this.frameSize;
+          let payload = jpegs[`${width}x${height}`];
           if (dxt) {  // DXT1 blocks: colour0 = colour1 = pure red (RGB565 0xf800), indices 0
-            payload = new Uint8Array(dxt1Size(64, 48));
+            payload = new Uint8Array(dxt1Size(width, height));
             for (let i = 0; i < payload.length; i += 8) { payload[i] = 0x00; payload[i + 1] = 0xf8; payload[i + 2] = 0x00; payload[i + 3] = 0xf8; }
           }
-          ws.send(encodeServer([{ type: 'frame', frame: r.frame, width: 64, height: 48, encoding: dxt ? 'dxt1' : 'jpeg',
+          ws.send(encodeServer([{ type: 'frame', frame: r.frame, width, height, encoding: dxt ? 'dxt1' : 'jpeg',
             timings: { rendering: 5, pipeline: 7 }, payload }]));
           for (let k = 2; this.refine && k <= (s.refineSamples ?? 0); k++) {
-            ws.send(encodeServer([{ type: 'frame', frame: r.frame, width: 64, height: 48, encoding: dxt ? 'dxt1' : 'jpeg',
+            ws.send(encodeServer([{ type: 'frame', frame: r.frame, width, height, encoding: dxt ? 'dxt1' : 'jpeg',
               refined: true, samples: k, timings: { rendering: 5, pipeline: 7 }, payload }]));
           }
         }
@@ -228,4 +235,52 @@ test('refine-samples reaches the node as a refine record; refined frames are sho
   assert.doesNotMatch(await status(), /refin|converged|interactive/);
   await page.close();
   node.close();
+});
+
+// The pixel at (x, y) of what the page shows (a screenshot), in CSS pixels.
+async function screenPixel(page, x, y) {
+  const png = (await page.screenshot({ clip: { x: 0, y: 0, width: 64, height: 48 } })).toString('base64');
+  return page.evaluate(async ([png, x, y]) => {
+    const bitmap = await createImageBitmap(new Blob([Uint8Array.from(atob(png), (c) => c.charCodeAt(0))], { type: 'image/png' }));
+    const c = new OffscreenCanvas(bitmap.width, bitmap.height);
+    const g = c.getContext('2d');
+    g.drawImage(bitmap, 0, 0);
+    const sx = bitmap.width / 64;  // the device pixel ratio
+    return [...g.getImageData(Math.floor(x * sx), Math.floor(y * sx), 1, 1).data];
+  }, [png, x, y]);
+}
+
+test('frame-budget reaches the node as a budget record (33 ms by default); a frame smaller than the element is shown scaled up to it', async () => {
+  for (const display of ['jpeg', 's3tc']) {
+    const node = new MockNode({ encoding: display === 's3tc' ? 'dxt1' : 'jpeg', frameSize: [32, 24] });
+    await new Promise((r) => node.wss.on('listening', r));
+    const page = await open(env, `/test/browser/pages/remote.html?server=127.0.0.1:${node.port}&display=${display}`);
+    const s = node.sessions[0];
+    await node.until(() => s.renders.length >= 1);
+    assert.deepEqual(s.problems, []);
+    const budgetAt = s.records.findIndex((r) => r.type === 'budget');
+    assert.deepEqual(s.records[budgetAt], { type: 'budget', frameMs: 33 }, display);
+    assert.ok(budgetAt < s.records.findIndex((r) => r.type === 'render'), 'before the first render request');
+    // The display element: its pixels are the frame's, its displayed size the element's.
+    await page.waitForFunction(() => document.querySelector('.tessera-display').width === 32, null, { timeout: 5000 });
+    const size = await page.evaluate(() => {
+      const c = document.querySelector('.tessera-display'), r = c.getBoundingClientRect();
+      return { intrinsic: [c.width, c.height], shown: [r.width, r.height] };
+    });
+    assert.deepEqual(size, { intrinsic: [32, 24], shown: [64, 48] }, display);
+    // On screen the frame fills the element: its colour at the far corner too, not the page's blue.
+    const want = display === 's3tc' ? [255, 0, 0] : [0, 200, 0];
+    for (const [x, y] of [[8, 6], [56, 8], [60, 16]]) {  // above the status line
+      const px = await screenPixel(page, x, y);
+      assert.ok(px.slice(0, 3).every((v, i) => Math.abs(v - want[i]) < 40), `${display} at (${x}, ${y}): ${px}`);
+    }
+    // A new budget: a budget record, then a render request.
+    const before = s.records.length;
+    await page.evaluate(() => document.getElementById('x').setAttribute('frame-budget', '0'));
+    await node.until(() => s.records.slice(before).some((r) => r.type === 'render'));
+    assert.deepEqual(s.records.slice(before).map((r) => r.type), ['budget', 'render']);
+    assert.deepEqual(s.records[before], { type: 'budget', frameMs: 0 });
+    await page.close();
+    node.close();
+  }
 });

@@ -26,6 +26,7 @@ const CLIENT = [
   { type: 'remove', what: 'mesh', id: 5 },
   { type: 'render', frame: 42 },
   { type: 'refine', samples: 64 },
+  { type: 'budget', frameMs: 33 },
 ];
 
 // Each refusal carries the C++ decoder's error class and the offending record's index.
@@ -50,6 +51,7 @@ test('client records decode back to what was encoded', () => {
   assert.deepEqual(recs[10], { type: 'remove', what: 'mesh', id: 5 });
   assert.deepEqual(recs[11], { type: 'render', frame: 42 });
   assert.deepEqual(recs[12], { type: 'refine', samples: 64 });
+  assert.deepEqual(recs[13], { type: 'budget', frameMs: 33 });
 });
 
 test('a refine record: code 0x06, a u32 body, up to max_refine_samples, no remove', () => {
@@ -68,6 +70,27 @@ test('a refine record: code 0x06, a u32 body, up to max_refine_samples, no remov
   refuses(() => decodeClient(remove), 'bad_op', 0);
   const long = new Uint8Array(m.length + 1); long.set(m); long[12] = 5;
   refuses(() => decodeClient(long), 'bad_length', 0);
+});
+
+test('a budget record: code 0x07, a u32 body of milliseconds, up to max_frame_budget_ms, no remove', () => {
+  const m = encodeClient([{ type: 'budget', frameMs: 60000 }]);
+  assert.deepEqual([...m.slice(8)], [0x07, 0, 0, 0, 4, 0, 0, 0, 0x60, 0xea, 0, 0]);
+  assert.equal(LIMITS.max_frame_budget_ms, 60000);
+  assert.equal(RECORDS.budget.removable, false);
+  for (const frameMs of [0, 1, 33, LIMITS.max_frame_budget_ms])
+    assert.deepEqual(decodeClient(encodeClient([{ type: 'budget', frameMs }])), [{ type: 'budget', frameMs }]);
+  assert.deepEqual(decodeClient(encodeClient([{ type: 'budget' }])), [{ type: 'budget', frameMs: 0 }]);
+  refuses(() => decodeClient(encodeClient([{ type: 'render', frame: 1 }, { type: 'budget', frameMs: LIMITS.max_frame_budget_ms + 1 }])),
+    'limit_exceeded', 1);
+  refuses(() => decodeClient(encodeClient([{ type: 'budget', frameMs: 0xffffffff }])), 'limit_exceeded', 0);
+  const lower = encodeClient([{ type: 'budget', frameMs: 101 }]);
+  refuses(() => decodeClient(lower, { limits: { max_frame_budget_ms: 100 } }), 'limit_exceeded', 0);
+  const remove = m.slice(); remove[9] = 1;
+  refuses(() => decodeClient(remove), 'bad_op', 0);
+  const long = new Uint8Array(m.length + 1); long.set(m); long[12] = 5;
+  refuses(() => decodeClient(long), 'bad_length', 0);
+  const short = m.slice(0, m.length - 1); short[12] = 3;
+  refuses(() => decodeClient(short), 'bad_length', 0);
 });
 
 test('record sizes match the encoder', () => {

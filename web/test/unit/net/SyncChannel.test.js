@@ -1,19 +1,47 @@
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import { page } from '../dom.js';
-import { readRenderSettings, refineStatus } from '../../../src/net/RenderSettings.js';
+import { readRenderSettings, refineStatus, sameSettings } from '../../../src/net/RenderSettings.js';
 import { SyncChannel } from '../../../src/net/SyncChannel.js';
 import { MarkupReader } from '../../../src/reader/MarkupReader.js';
 import { encodeServer, decodeClient } from '../../../src/net/Protocol.js';
 
 const read = (attrs) => readRenderSettings(page(`<xml3d ${attrs}></xml3d>`).querySelector('xml3d'));
 
-test('ao-samples, max-depth and refine-samples are read from <xml3d>, with the defaults when absent', () => {
-  assert.deepEqual(read(''), { settings: { aoSamples: 0, maxDepth: 4, refineSamples: 64 }, problems: [] });
-  assert.deepEqual(read('ao-samples="8" max-depth="6"'), { settings: { aoSamples: 8, maxDepth: 6, refineSamples: 64 }, problems: [] });
-  assert.deepEqual(read('ao-samples=" 256 " max-depth="1" refine-samples="4096"').settings, { aoSamples: 256, maxDepth: 1, refineSamples: 4096 });
-  assert.deepEqual(read('ao-samples="0" max-depth="64" refine-samples="0"').settings, { aoSamples: 0, maxDepth: 64, refineSamples: 0 });
-  assert.deepEqual(read('refine-samples=" +1 "'), { settings: { aoSamples: 0, maxDepth: 4, refineSamples: 1 }, problems: [] });
+test('ao-samples, max-depth, refine-samples and frame-budget are read from <xml3d>, with the defaults when absent', () => {
+  assert.deepEqual(read(''), { settings: { aoSamples: 0, maxDepth: 4, refineSamples: 64, frameBudget: 33 }, problems: [] });
+  assert.deepEqual(read('ao-samples="8" max-depth="6"'), { settings: { aoSamples: 8, maxDepth: 6, refineSamples: 64, frameBudget: 33 }, problems: [] });
+  assert.deepEqual(read('ao-samples=" 256 " max-depth="1" refine-samples="4096" frame-budget="60000"').settings,
+    { aoSamples: 256, maxDepth: 1, refineSamples: 4096, frameBudget: 60000 });
+  assert.deepEqual(read('ao-samples="0" max-depth="64" refine-samples="0" frame-budget="0"').settings,
+    { aoSamples: 0, maxDepth: 64, refineSamples: 0, frameBudget: 0 });
+  assert.deepEqual(read('refine-samples=" +1 " frame-budget=" +50 "'),
+    { settings: { aoSamples: 0, maxDepth: 4, refineSamples: 1, frameBudget: 50 }, problems: [] });
+});
+
+test('frame-budget beyond 0..60000 is clamped with a warning; what is not a whole number gives the default (33)', () => {
+  for (const [attrs, frameBudget, pattern] of [
+    ['frame-budget="60001"', 60000, /<xml3d frame-budget="60001">: not in 0\.\.60000 .*using 60000/],
+    ['frame-budget="99999999999999999999"', 60000, /using 60000/],
+    ['frame-budget="-5"', 0, /<xml3d frame-budget="-5">: not in 0\.\.60000 .*using 0/],
+    ['frame-budget="fast"', 33, /<xml3d frame-budget="fast">: not a whole number in 0\.\.60000 .*using 33/],
+    ['frame-budget="16.7"', 33, /frame-budget="16\.7"/],
+    ['frame-budget="1e3"', 33, /frame-budget="1e3"/],
+    ['frame-budget=""', 33, /frame-budget=""/],
+  ]) {
+    const r = read(attrs);
+    assert.equal(r.settings.frameBudget, frameBudget, attrs);
+    assert.equal(r.problems.length, 1, attrs);
+    assert.match(r.problems[0], pattern);
+    assert.deepEqual({ ...r.settings, frameBudget: 0 }, { aoSamples: 0, maxDepth: 4, refineSamples: 64, frameBudget: 0 }, attrs);
+  }
+});
+
+test('sameSettings compares the frame budget too', () => {
+  const a = { aoSamples: 1, maxDepth: 4, refineSamples: 64, frameBudget: 33 };
+  assert.equal(sameSettings(a, { ...a }), true);
+  assert.equal(sameSettings(a, { ...a, frameBudget: 0 }), false);
+  assert.equal(sameSettings(a, { ...a, refineSamples: 0 }), false);
 });
 
 test('refine-samples beyond 0..4096 is clamped with a warning; what is not a whole number gives the default', () => {
@@ -51,7 +79,7 @@ test('bad numbers give a clear problem each and the default is used', () => {
     ['max-depth="65" ao-samples="2"', { aoSamples: 2, maxDepth: 4 }, /max-depth="65"/],
     ['max-depth="1e2"', { aoSamples: 0, maxDepth: 4 }, /max-depth="1e2"/],
   ]) {
-    const r = read(attrs), settings = { ...withoutRefine, refineSamples: 64 };
+    const r = read(attrs), settings = { ...withoutRefine, refineSamples: 64, frameBudget: 33 };
     assert.deepEqual(r.settings, settings, attrs);
     assert.equal(r.problems.length, 1, attrs);
     assert.match(r.problems[0], pattern);
@@ -234,4 +262,56 @@ test('refined frames are shown but answer no render request', () => withFakeSock
   ws.reply([frameRecord(2), frameRecord(3), frameRecord(3, { refined: true, samples: 2 })]);
   assert.equal(ch.outstanding, 0);
   assert.equal(shown.length, 6);
+}));
+
+test('the budget record goes in the first message after the handshake reply, with the settings and the refine record, and again when it changes', () => withFakeSocket(async (opened) => {
+  const { ch, ws, all } = await connected({ settings: { aoSamples: 8, maxDepth: 5, refineSamples: 64, frameBudget: 33 } });
+  opened.push(ch);
+  const first = ws.sent[1];
+  assert.deepEqual(first.slice(0, 3), [{ type: 'settings', aoSamples: 8, maxDepth: 5 }, { type: 'refine', samples: 64 },
+    { type: 'budget', frameMs: 33 }]);
+  assert.ok(first.some((r) => r.type === 'mesh'), 'with the first scene upload');
+  assert.ok(all().findIndex((r) => r.type === 'budget') < all().findIndex((r) => r.type === 'render'), 'before the first render request');
+  assert.equal(all().filter((r) => r.type === 'budget').length, 1);
+
+  // The same budget again, or another refinement target: no budget record.
+  ws.reply([frameRecord(1)]);
+  let n = all().length;
+  ch.setSettings({ aoSamples: 8, maxDepth: 5, refineSamples: 64, frameBudget: 33 });
+  await new Promise((r) => setTimeout(r, 50));
+  assert.equal(all().length, n);
+  ch.setSettings({ aoSamples: 8, maxDepth: 5, refineSamples: 16, frameBudget: 33 });
+  await until(() => all().slice(n).some((r) => r.type === 'render'));
+  assert.deepEqual(all().slice(n).map((r) => r.type), ['refine', 'render']);
+
+  // A new budget: a budget record alone, then a render request; 0 turns it off.
+  for (const frameMs of [100, 0]) {
+    ws.reply([frameRecord(ch.frameNumber)]);
+    n = all().length;
+    ch.setSettings({ aoSamples: 8, maxDepth: 5, refineSamples: 16, frameBudget: frameMs });
+    await until(() => all().slice(n).some((r) => r.type === 'render'));
+    assert.deepEqual(all().slice(n).map((r) => r.type), ['budget', 'render']);
+    assert.deepEqual(all()[n], { type: 'budget', frameMs });
+  }
+}));
+
+test('after a reconnect the budget record is sent again; without a budget in the settings none is sent', () => withFakeSocket(async (opened) => {
+  const a = await connected({ settings: { aoSamples: 0, maxDepth: 4, refineSamples: 0, frameBudget: 0 } });
+  opened.push(a.ch);
+  a.ws.reply([REPLY]);  // a new session's handshake reply (as after a reconnect)
+  await until(() => a.all().filter((r) => r.type === 'budget').length === 2);
+  assert.deepEqual(a.all().filter((r) => r.type === 'budget'), [{ type: 'budget', frameMs: 0 }, { type: 'budget', frameMs: 0 }]);
+  const b = await connected({ settings: { aoSamples: 0, maxDepth: 4, refineSamples: 64 } });
+  opened.push(b.ch);
+  assert.equal(b.all().filter((r) => r.type === 'budget').length, 0);
+}));
+
+test('a frame smaller than the client\'s resolution (within a budget) goes to the display like any other; the still that follows it unasked answers no request', () => withFakeSocket(async (opened) => {
+  const shown = [];
+  const { ch, ws } = await connected({ settings: { aoSamples: 0, maxDepth: 4, refineSamples: 0, frameBudget: 33 }, onFrame: (f) => shown.push(f) });
+  opened.push(ch);
+  assert.equal(ch.outstanding, 1);
+  ws.reply([frameRecord(1, { width: 4, height: 3 }), frameRecord(1, { refined: true, samples: 1 })]);
+  assert.equal(ch.outstanding, 0, 'the scaled frame answers the request, the full-resolution still answers none');
+  assert.deepEqual(shown.map((f) => [f.frame, f.width, f.height, f.refined, f.samples]), [[1, 4, 3, false, 1], [1, 8, 8, true, 1]]);
 }));
