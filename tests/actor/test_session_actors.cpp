@@ -82,6 +82,12 @@ struct fixture : test_coordinator_fixture<TestConfig> {
     rh.receive([&](SessionStatus& x) { s = x; }, [&](caf::error& e) { CAF_FAIL(sys.render(e)); });
     return s;
   }
+  // The last frame sent (a copy: CAF's check macros keep references to their arguments).
+  Frame last_frame() {
+    auto frames = sink->all<Frame>();
+    CAF_REQUIRE(!frames.empty());
+    return frames.back();
+  }
   std::vector<uint32_t> frames_sent() {
     std::vector<uint32_t> out;
     for (auto& f : sink->all<Frame>()) out.push_back(f.frame);
@@ -387,7 +393,8 @@ CAF_TEST(every kind of client record ends a still that is refining) {
     run();
     const uint32_t after = status().frames_started;
     CAF_CHECK_LESS_OR_EQUAL(after, started + 1);  // at most the sample in flight finishes
-    CAF_CHECK_LESS(sink->all<Frame>().back().samples, 64u);
+    const Frame last = last_frame();
+    CAF_CHECK_LESS(last.samples, 64u);
     run();
     CAF_CHECK_EQUAL(status().frames_started, after);  // and then nothing
   }
@@ -412,7 +419,8 @@ CAF_TEST(a still whose average would not fit the memory budget is not refined an
   const uint64_t before = budget->used();
   client({Resolution{64, 64}, RenderRequest{2}});
   run();
-  CAF_CHECK_EQUAL(sink->all<Frame>().back().samples, 8u);
+  const Frame refined = last_frame();
+  CAF_CHECK_EQUAL(refined.samples, 8u);
   CAF_CHECK_EQUAL(sink->all<ErrorReply>().size(), 1u);
   CAF_CHECK_EQUAL(budget->used(), before + Accumulation::bytes(64, 64));
 }
@@ -421,12 +429,14 @@ CAF_TEST(a refine record from the client sets its target and 0 turns refinement 
   settings->refine_samples = 8;
   client({Refine{3}, SetCamera{camera_at(3)}, RenderRequest{1}});
   run();
-  CAF_CHECK_EQUAL(sink->all<Frame>().back().samples, 3u);
+  const Frame three = last_frame();
+  CAF_CHECK_EQUAL(three.samples, 3u);
   CAF_CHECK_EQUAL(status().frames_started, 3u);
   client({Refine{0}, RenderRequest{2}});
   run();
-  CAF_CHECK_EQUAL(sink->all<Frame>().back().frame, 2u);
-  CAF_CHECK_EQUAL(sink->all<Frame>().back().samples, 1u);
+  const Frame off = last_frame();
+  CAF_CHECK_EQUAL(off.frame, 2u);
+  CAF_CHECK_EQUAL(off.samples, 1u);
   CAF_CHECK_EQUAL(status().frames_started, 4u);
 }
 
