@@ -83,14 +83,13 @@ void start_frame(self_ptr self, uint32_t client_frame, bool refine) {
     st.still.after_scaled = false;  // the still's sample 0, at full resolution, seeds it
     st.still.seed = st.seq;
   }
-  st.frame_is_sample = st.frame_scale == 1;
   if (st.budget || st.scene->width() != st.full_w || st.scene->height() != st.full_h) {
     int32_t w = st.full_w, h = st.full_h;
     if (st.frame_scale < 1) FrameBudget::scaled(st.full_w, st.full_h, st.frame_scale, w, h);
     set_resolution(self, w, h);
     if (st.closed) return;
   }
-  fs.refine = st.frame_is_sample && st.still.target > 1 && can_refine;
+  fs.refine = st.frame_scale == 1 && st.still.target > 1 && can_refine;
   if (fs.refine) {
     // The still's average is held by the frame actor while it refines: it counts against the
     // node's memory budget like the scene; a still it cannot hold is not refined.
@@ -138,7 +137,7 @@ void start_frame(self_ptr self, uint32_t client_frame, bool refine) {
       .then(
           [self](uint32_t) {
             auto& st = self->state;
-            if (st.frame_is_sample) st.still.samples++;
+            if (st.frame_scale == 1) st.still.samples++;  // a sample of the still, not a scaled frame
             if (st.budget && st.frame_requested)  // an interactive frame: its time steers the next scale
               st.budget->observe(st.frame_scale, double(steady_ns() - st.frame_t0_ns) / 1e6);
             frame_done(self);

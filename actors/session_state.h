@@ -66,8 +66,7 @@ struct session_state {
   // and what the frame in flight is.
   std::optional<FrameBudget> budget;
   int32_t full_w = 0, full_h = 0;
-  double frame_scale = 1;            // of the frame in flight
-  bool frame_is_sample = false;      // the frame in flight is a sample of the still
+  double frame_scale = 1;            // of the frame in flight (1: it is a sample of the still)
   bool frame_requested = false;      // the frame in flight answers a render request
   int64_t frame_t0_ns = 0;
   // The still's average in the frame actor (Accumulation::bytes), counted in `share`.

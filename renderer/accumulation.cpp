@@ -15,30 +15,30 @@ void Accumulation::reset(int32_t width, int32_t height, bool srgb) {
   sum_.assign(size_t(width) * size_t(height) * 3, 0.0f);
 }
 
-void Accumulation::add(const std::vector<float>& radiance, int32_t width, int32_t height, int32_t x, int32_t y) {
+// Adds a tile whose i-th value `value(i)` gives (RGB triples, row by row).
+template <class Value>
+void Accumulation::add_tile(size_t values, int32_t width, int32_t height, int32_t x, int32_t y, Value value) {
   if (x < 0 || y < 0 || width < 0 || height < 0 || x + width > width_ || y + height > height_ ||
-      radiance.size() != size_t(width) * size_t(height) * 3)
-    throw std::invalid_argument("Accumulation::add: a tile outside the frame, or not its size");
+      values != size_t(width) * size_t(height) * 3)
+    throw std::invalid_argument("Accumulation: a tile outside the frame, or not its size");
   for (int32_t ty = 0; ty < height; ++ty) {
-    const float* src = &radiance[size_t(ty) * size_t(width) * 3];
+    const size_t row = size_t(ty) * size_t(width) * 3;
     float* dst = &sum_[(size_t(y + ty) * size_t(width_) + size_t(x)) * 3];
-    for (size_t i = 0; i < size_t(width) * 3; ++i) dst[i] += src[i];
+    for (size_t i = 0; i < size_t(width) * 3; ++i) dst[i] += value(row + i);
   }
 }
 
+void Accumulation::add(const std::vector<float>& radiance, int32_t width, int32_t height, int32_t x, int32_t y) {
+  add_tile(radiance.size(), width, height, x, y, [&](size_t i) { return radiance[i]; });
+}
+
 void Accumulation::add_bytes(const std::vector<uint8_t>& radiance, int32_t width, int32_t height, int32_t x, int32_t y) {
-  if (x < 0 || y < 0 || width < 0 || height < 0 || x + width > width_ || y + height > height_ ||
-      radiance.size() != size_t(width) * size_t(height) * 3 * sizeof(float))
-    throw std::invalid_argument("Accumulation::add_bytes: a tile outside the frame, or not its size");
-  for (int32_t ty = 0; ty < height; ++ty) {
-    const uint8_t* src = &radiance[size_t(ty) * size_t(width) * 3 * sizeof(float)];
-    float* dst = &sum_[(size_t(y + ty) * size_t(width_) + size_t(x)) * 3];
-    for (size_t i = 0; i < size_t(width) * 3; ++i) {
-      float v;
-      std::memcpy(&v, src + i * sizeof(float), sizeof(float));
-      dst[i] += v;
-    }
-  }
+  if (radiance.size() % sizeof(float)) throw std::invalid_argument("Accumulation: radiance bytes not whole floats");
+  add_tile(radiance.size() / sizeof(float), width, height, x, y, [&](size_t i) {
+    float v;
+    std::memcpy(&v, radiance.data() + i * sizeof(float), sizeof(float));
+    return v;
+  });
 }
 
 Image Accumulation::average() const {

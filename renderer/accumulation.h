@@ -31,6 +31,8 @@ class Accumulation {
   Image average() const;
 
  private:
+  template <class Value>
+  void add_tile(size_t values, int32_t width, int32_t height, int32_t x, int32_t y, Value value);
   int32_t width_ = 0, height_ = 0;
   bool srgb_ = true;
   uint32_t samples_ = 0;

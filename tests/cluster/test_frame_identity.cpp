@@ -20,6 +20,7 @@
 #include <cstdlib>
 #include <fstream>
 #include <map>
+#include <memory>
 #include <set>
 #include <sstream>
 #include <string>
@@ -58,32 +59,35 @@ const SharedScene& shared_scene(const std::string& name) {
   return it->second;
 }
 
-// The direct render of camera `k` as a session renders its frame `seq`.
-Image direct(const SharedScene& s, size_t k, uint32_t seq) {
-  Scene scene = s.scene.scene;
+// A ray tracer synced with the scene seen from camera `k` at W x H.
+std::unique_ptr<RayTracer> synced(const SharedScene& s, size_t k, Scene& scene) {
+  scene = s.scene.scene;
   scene.set_resolution(W, H);
   scene.set_camera(s.loop.camera(k));
-  RayTracer rt;
+  auto rt = std::make_unique<RayTracer>();
   std::vector<std::string> warnings;
-  rt.sync(scene, warnings);
+  rt->sync(scene, warnings);
+  return rt;
+}
+
+// The direct render of camera `k` as a session renders its frame `seq`.
+Image direct(const SharedScene& s, size_t k, uint32_t seq) {
+  Scene scene;
+  auto rt = synced(s, k, scene);
   RenderSettings settings;
   settings.ao_samples = kAo;
   settings.max_depth = kDepth;
   settings.frame = seq;
   TaskResult r;
-  rt.render({0, 0, W, H}, settings, r);
+  rt->render({0, 0, W, H}, settings, r);
   return std::move(r.image);
 }
 
 // The progressive still of camera `k` as a session refines it: samples 0..n-1 seeded by the
 // still's first frame `seed`, averaged as radiance (renderer/accumulation.h).
 Image direct_refined(const SharedScene& s, size_t k, uint32_t seed, uint32_t n) {
-  Scene scene = s.scene.scene;
-  scene.set_resolution(W, H);
-  scene.set_camera(s.loop.camera(k));
-  RayTracer rt;
-  std::vector<std::string> warnings;
-  rt.sync(scene, warnings);
+  Scene scene;
+  auto rt = synced(s, k, scene);
   Accumulation acc;
   acc.reset(W, H, scene.environment().linear);
   for (uint32_t i = 0; i < n; ++i) {
@@ -94,7 +98,7 @@ Image direct_refined(const SharedScene& s, size_t k, uint32_t seed, uint32_t n) 
     settings.sample = i;
     settings.radiance = true;
     TaskResult r;
-    rt.render({0, 0, W, H}, settings, r);
+    rt->render({0, 0, W, H}, settings, r);
     acc.add(r.radiance, W, H, 0, 0);
     acc.end_sample();
   }
