@@ -2,7 +2,9 @@
 #include "actors/checks.h"
 #include "actors/errors.h"
 
+#include <atomic>
 #include <chrono>
+#include <cstdint>
 #include <condition_variable>
 #include <cstdio>
 #include <mutex>
@@ -108,6 +110,27 @@ std::string json_quote(const std::string& s) {
 
 namespace {
 
+// What the process holds beyond what its heap has in use: RSS less the allocator's live bytes
+// (code, stacks and the like count too; only its change matters). -1 where it cannot be read.
+int64_t heap_slack_bytes() {
+#if defined(__GLIBC__) && (__GLIBC__ > 2 || (__GLIBC__ == 2 && __GLIBC_MINOR__ >= 33))
+  long pages = 0, resident = 0;
+  if (FILE* f = std::fopen("/proc/self/statm", "r")) {
+    if (std::fscanf(f, "%ld %ld", &pages, &resident) != 2) resident = 0;
+    std::fclose(f);
+  }
+  if (resident <= 0) return -1;
+  const struct mallinfo2 mi = mallinfo2();
+  return int64_t(resident) * 4096 - int64_t(mi.uordblks + mi.hblkhd);
+#else
+  return -1;
+#endif
+}
+
+// The slack right after the last trim, lowered when freed memory is put back to use (the
+// low-water mark): a rise above it is memory freed since, still resident.
+std::atomic<int64_t> slack_mark{-1};
+
 // One trimmer per process: a deadline that later calls push out, and a thread that waits for
 // it, trims, and ends (so an idle node keeps no thread for it).
 struct HeapTrimmer {
@@ -134,6 +157,7 @@ struct HeapTrimmer {
 #ifdef __GLIBC__
     malloc_trim(0);
 #endif
+    slack_mark = heap_slack_bytes();
   }
 };
 
@@ -142,6 +166,18 @@ struct HeapTrimmer {
 void schedule_heap_trim(uint32_t delay_ms) {
   static HeapTrimmer* trimmer = new HeapTrimmer;  // never destroyed: its thread may outlive main
   trimmer->schedule(delay_ms);
+}
+
+bool trim_heap_if_regrown(int64_t regrow_bytes) {
+  const int64_t slack = heap_slack_bytes(), mark = slack_mark;
+  if (slack < 0) return false;
+  if (mark >= 0 && slack - mark > regrow_bytes) {
+    slack_mark = slack;  // one trim per rise, not one per tick until the trim has run
+    schedule_heap_trim(0);
+    return true;
+  }
+  if (mark < 0 || slack < mark) slack_mark = slack;
+  return false;
 }
 
 

@@ -92,6 +92,12 @@ void flush_logger(caf::actor_system& sys, const logger_actor& logger);
 // trim about `delay_ms` after the last call, on a background thread of its own, so neither an
 // actor nor the network thread waits for it. No-op where the C library has no malloc_trim.
 void schedule_heap_trim(uint32_t delay_ms = 500);
+// The node's tick calls this once a second: a trim is scheduled when the memory the process
+// holds beyond its heap's live bytes grew by `regrow_bytes` since the last trim. What an ended
+// session held is not all freed by the time of the trim its end scheduled: on a loaded
+// machine its scene may still sit in a message to a child or in a worker that ends seconds
+// later. Cheap (one read of /proc/self/statm and mallinfo2); false where glibc cannot say.
+bool trim_heap_if_regrown(int64_t regrow_bytes = int64_t(16) << 20);
 // A string as a JSON string literal, quotes included: '"', '\\' and control characters escaped,
 // bytes that are not UTF-8 replaced by U+FFFD. Every string a client, a peer or an error
 // message supplies goes into a log line through this, so no text can forge log lines.

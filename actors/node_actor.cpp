@@ -141,6 +141,8 @@ node_actor::behavior_type node_impl(node_ptr self, std::shared_ptr<const NodeSet
         if (st.trim_in > 0 && --st.trim_in == 0 && st.workers.empty()) {
           malloc_trim(0);
           node_event(self, Event(Ev::heap_trimmed, true));
+        } else {
+          trim_heap_if_regrown();
         }
         self->delayed_send(self, std::chrono::milliseconds(st.settings->reconnect_ms), tick_atom::value);
       },

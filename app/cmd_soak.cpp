@@ -1,7 +1,7 @@
 // tessera soak [--topology single|cluster] [--seconds S] [--clients N] [--scene S.gltf --camera-loop L.json]
 //              [--size W H] [--frames-per-session F] [--alone-seconds A] [--drain-seconds D]
 //              [--rss-tolerance-mb M] [--rss-tolerance-pct P] [--thread-tolerance T] [--threads T]
-//              [--malformed all|safe] [--reader-size W H] [--binary PATH] [--trim-probe]
+//              [--malformed all|safe] [--reader-size W H] [--binary PATH] [--trim-probe] [--full-drain]
 // The robustness soak (issue 16's proof). Starts the nodes itself as child processes of this
 // binary (`tessera serve` on port 0; one node, or a dedicated master with two workers), then:
 //   warm-up   one ordinary session, then one client alone streaming for A seconds (its fps);
@@ -741,7 +741,7 @@ const char* kHelp =
     "tessera soak [--topology single|cluster] [--seconds S] [--clients N] [--scene S.gltf --camera-loop L.json]\n"
     "             [--size W H] [--frames-per-session F] [--alone-seconds A] [--drain-seconds D]\n"
     "             [--rss-tolerance-mb M] [--rss-tolerance-pct P] [--thread-tolerance T] [--threads T]\n"
-    "             [--malformed all|safe] [--reader-size W H] [--binary PATH] [--trim-probe] [--samples FILE]\n"
+    "             [--malformed all|safe] [--reader-size W H] [--binary PATH] [--trim-probe] [--full-drain] [--samples FILE]\n"
     "Robustness soak: starts the nodes (a single node, or a dedicated master with two workers) as\n"
     "child processes, measures one client alone, then churns N clients (default 8) for S seconds\n"
     "(default 60): N-2 well-behaved (connect, upload the scene, render F frames, disconnect, repeat),\n"
@@ -750,6 +750,7 @@ const char* kHelp =
     "node died, or when a process's RSS did not come back to within max(M MiB, P% of baseline) of its baseline (defaults 64 MiB,\n"
     "25%) or its threads to within T (default 2) after the churn, in D seconds (default 20).\n"
     "--malformed safe leaves out the kinds that abort a node without issue 16's validation.\n"
+    "--full-drain: the drain and final phases last --drain-seconds each, back or not (to watch trends).\n"
     "--trim-probe: at the end, gdb calls malloc_trim(0) in each node and the RSS after it is reported\n"
     "(trimmed_rss_mb: what the allocator kept but was free; needs gdb and ptrace rights; not a verdict;\n"
     "it runs after the verdict's measurements, and gdb may disturb the node's clean exit).\n"
@@ -779,6 +780,7 @@ int run(const std::vector<std::string>& argv_in) {
   const int reader_w = int(args.integer("--reader-size", 640, 0)), reader_h = int(args.integer("--reader-size", 360, 1));
   std::string binary = args.str("--binary", "");
   const bool trim_probe = args.flag("--trim-probe");
+  const bool full_drain = args.flag("--full-drain");
   const std::string samples_path = args.str("--samples", "");
   SceneSetup setup = load_scene(args, 320, 180, LoopOption::required);
   args.finish();
@@ -1012,7 +1014,7 @@ int run(const std::vector<std::string>& argv_in) {
           all_back = all_back && back;
         }
       }
-      if (all_back && since(d0) >= 2.0) break;  // back, and stays back for a moment
+      if (all_back && since(d0) >= 2.0 && !full_drain) break;  // back, and stays back for a moment
       if (since(d0) >= drain_seconds) break;
     }
     std::lock_guard<std::mutex> l(sample_mu);
