@@ -59,6 +59,12 @@ class Sat {
     return p(bx, by) - p(ax, by) - p(bx, ay) + p(ax, ay);
   }
 
+  // The padded table itself, for callers that walk it (the tiler's single-SAT path): entry
+  // (i, j) at table()[j * stride() + i] is the sum over packets [x0, x0 + i) x [y0, y0 + j),
+  // so row 0 and column 0 are zero. Null when empty().
+  const uint64_t* table() const { return table_.get(); }
+  size_t stride() const { return stride_; }
+
   // Wire format, little endian: "TSAT", u16 version (1), u16 header bytes (32),
   // i32 x0, y0, x1, y1, u64 count (= width * height), then count u64 inclusive prefix sums
   // in row-major order.
