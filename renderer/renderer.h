@@ -26,6 +26,9 @@ struct RenderSettings {
   // Also write each pixel's linear colour (after exposure, before encoding) to
   // TaskResult::radiance, for averaging samples (renderer/accumulation.h).
   bool radiance = false;
+  // Also write what each packet saw first to TaskResult::points (lb/reproject.h uses it to
+  // carry a frame's cost map into the next camera).
+  bool hit_points = false;
 };
 
 struct RayCounts {
@@ -43,6 +46,7 @@ struct TaskResult {
   Image image;            // pixels.width() x pixels.height()
   std::vector<float> radiance;  // with RenderSettings::radiance: RGB per pixel, row by row (else empty)
   CostMap cost;           // per-packet cost (cost_map.h for the unit); empty if not measured
+  PacketPoints points;    // with RenderSettings::hit_points (cost_map.h); else empty
   double kernel_ms = 0;   // sum of the cost map, in milliseconds of one core
   double rendering_ms = 0;  // wall time of the multi-threaded rendering
   RayCounts rays;

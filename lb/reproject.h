@@ -1,0 +1,53 @@
+#pragma once
+// Prediction that follows the camera (issue 22 item 1): the previous frame's per-packet cost,
+// carried into the next frame's view before the tiler sees it.
+//
+// The paper predicts frame f from frame f-1's cost maps as if nothing moved. When the camera
+// turns or walks, an expensive region (a glass wall, the water) moves across the image and
+// the tiling lags one frame behind it. Here every packet of frame f-1 is forward-splatted
+// with the new camera: its first-hit point (PacketPoints, from the renderer) is projected into
+// frame f's image and its cost lands in the packet it falls in. Where several land in one
+// packet the nearest surface wins (a depth test with a 2% margin; equally near ones are
+// averaged), so an occluder's cost is not mixed with what it hides. Packets that saw only sky
+// are points at infinity and move with the rotation alone. Packets nothing lands in (what the
+// move uncovered, the image border that came into view) are filled from their filled
+// neighbours, ring by ring; what is still empty after that keeps the plain previous-frame cost.
+//
+// A cut (the new view shares little with the old one: under `min_coverage` of the packets got
+// a splat) gives the unprojected map back, so the tiler never works from a mostly invented map.
+#include <cstdint>
+
+#include "core/cost_map.h"
+#include "core/rect.h"
+#include "core/scene.h"
+
+namespace tessera {
+
+// The primary rays of a camera at a resolution, as the ray tracer makes them: the ray through
+// pixel position (x, y) (pixel centres at +0.5) has direction
+//   cz + cx * (2 x / width - 1) * sx_scale + cy * (1 - 2 y / height) * sy_scale.
+struct ViewRays {
+  Vec3 eye, cx, cy, cz;
+  float sx_scale = 1, sy_scale = 1;
+  int32_t width = 1, height = 1;
+  static ViewRays of(const Camera& camera, int32_t width, int32_t height);
+  // Pixel position (x, y) of a world point (w = 1) or direction (w = 0); false when it is
+  // behind the camera or the view is degenerate. *depth: distance along cz (0 for directions).
+  bool project(const float xyzw[4], float& x, float& y, float& depth) const;
+};
+
+struct ReprojectStats {
+  int64_t packets = 0;   // of the new view
+  int64_t splatted = 0;  // got at least one splat
+  int64_t filled = 0;    // filled from neighbours
+  int64_t kept = 0;      // nothing near: the previous frame's cost at the same packet
+  bool cut = false;      // coverage under min_coverage: the unprojected map was returned
+};
+
+// The previous frame's cost map (covering packet space [0, W) x [0, H) of `layout` at the
+// view's resolution) carried into `to`. `points` must cover the same packets; where it does
+// not (a renderer that gives none), the map comes back unchanged (stats->cut).
+CostMap reproject(const CostMap& cost, const PacketPoints& points, const ViewRays& to, PacketLayout layout,
+                  ReprojectStats* stats = nullptr, double min_coverage = 0.5);
+
+}  // namespace tessera

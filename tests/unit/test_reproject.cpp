@@ -1,0 +1,267 @@
+// The balancer's reprojection (lb/reproject.h) against brute force: a wall with an occluder in
+// front, rendered by the ray tracer with hit points; the previous frame's cost map carried
+// into a moved camera is checked, target packet by target packet, against what casting every
+// pixel of that packet in the new view and projecting its hit back into the old view says.
+#include <catch2/catch.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <set>
+
+#include "lb/reproject.h"
+#include "lb/tiler.h"
+#include "scene_builders.h"
+
+using namespace tessera;
+using namespace tessera::testing;
+
+namespace {
+
+constexpr int W = 256, H = 144;
+constexpr float kFov = 1.0471976f;  // 60 degrees
+constexpr float kWallZ = -20, kOccZ = -8, kOccHalf = 1.5f;
+
+// What the pixel ray from eye along d hits first: 2 the occluder, 1 the wall, 0 nothing.
+int hit(Vec3 eye, Vec3 d, Vec3& p) {
+  if (d.z < 0) {
+    const float t = (kOccZ - eye.z) / d.z;
+    const Vec3 q = eye + d * t;
+    if (std::fabs(q.x) <= kOccHalf && std::fabs(q.y) <= kOccHalf) {
+      p = q;
+      return 2;
+    }
+    const float tw = (kWallZ - eye.z) / d.z;
+    p = eye + d * tw;
+    return std::fabs(p.x) <= 40 && std::fabs(p.y) <= 40 ? 1 : 0;
+  }
+  return 0;
+}
+
+struct Frame {
+  Camera cam;
+  TaskResult r;
+  PacketLayout layout;
+};
+
+Frame render_view(const Camera& cam) {
+  Scene scene;
+  scene.set_resolution(W, H);
+  scene.set_environment(plain_env({0.2f, 0.3f, 0.9f}, {0.5f, 0.5f, 0.5f}));
+  scene.set_material(1, diffuse({0.8f, 0.8f, 0.8f}));
+  scene.set_material(2, diffuse({0.9f, 0.2f, 0.1f}));
+  add_object(scene, 10, quad({-40, -40, kWallZ}, {80, 0, 0}, {0, 80, 0}), 1);
+  add_object(scene, 20, quad({-kOccHalf, -kOccHalf, kOccZ}, {2 * kOccHalf, 0, 0}, {0, 2 * kOccHalf, 0}), 2);
+  scene.set_light(1, directional({0.2f, -1, -0.3f}));
+  scene.set_camera(cam);
+  RayTracer rt;
+  RenderSettings s = no_ao(1);
+  s.hit_points = true;
+  Frame f{cam, {}, rt.packet_layout()};
+  render_full(rt, scene, s, nullptr, &f.r);
+  return f;
+}
+
+// The surface a packet of the old frame saw (its centre pixel), for costs by surface.
+int surface_of(const Frame& f, int32_t px, int32_t py) {
+  const int x = std::min(px * f.layout.w + f.layout.w / 2, W - 1), y = std::min(py * f.layout.h + f.layout.h / 2, H - 1);
+  Vec3 p;
+  return hit(cam_pos(f.cam), pixel_dir(f.cam, W, H, float(x), float(y)), p);
+}
+
+// Whether the old frame's packet saw both surfaces (the occluder's outline): its hit point is
+// a mean of the two, in mid-air.
+bool mixed(const Frame& f, int32_t px, int32_t py) {
+  int seen = 0;
+  for (int y = py * f.layout.h; y < std::min((py + 1) * f.layout.h, H); ++y)
+    for (int x = px * f.layout.w; x < std::min((px + 1) * f.layout.w, W); ++x) {
+      Vec3 p;
+      seen |= hit(cam_pos(f.cam), pixel_dir(f.cam, W, H, float(x), float(y)), p);
+    }
+  return seen == 3;
+}
+
+// Brute force for target packet (tx, ty) of view `to`: the old frame's packets its pixels'
+// hits project into (`sources`), and whether some pixel sees a point the old view did not
+// see (disoccluded) or that lies outside the old image.
+struct Truth {
+  std::set<std::pair<int32_t, int32_t>> sources;
+  int surfaces = 0;  // bit 1: some pixel sees the wall, bit 2: the occluder
+  bool unseen = false;
+};
+
+Truth brute_force(const Frame& from, const Camera& to, PacketLayout layout, int32_t tx, int32_t ty) {
+  Truth t;
+  for (int y = ty * layout.h; y < std::min((ty + 1) * layout.h, H); ++y)
+    for (int x = tx * layout.w; x < std::min((tx + 1) * layout.w, W); ++x) {
+      Vec3 p;
+      const int s = hit(cam_pos(to), pixel_dir(to, W, H, float(x), float(y)), p);
+      if (s == 0) {
+        t.unseen = true;
+        continue;
+      }
+      t.surfaces |= s;
+      float ox, oy;
+      project(from.cam, W, H, p, ox, oy);
+      const int sx = int(std::floor(ox + 0.5f)), sy = int(std::floor(oy + 0.5f));
+      if (sx < 0 || sy < 0 || sx >= W || sy >= H) {
+        t.unseen = true;
+        continue;
+      }
+      Vec3 q;  // does the old view see this point there, or something nearer?
+      const int s_old = hit(cam_pos(from.cam), pixel_dir(from.cam, W, H, float(sx), float(sy)), q);
+      if (s_old != s) t.unseen = true;
+      t.sources.insert({sx / layout.w, sy / layout.h});
+    }
+  return t;
+}
+
+// Every packet a cost of its own, so a value names the packet it came from.
+CostMap distinct_costs(const Frame& f) {
+  CostMap m = f.r.cost;
+  for (size_t i = 0; i < m.cost.size(); ++i) m.cost[i] = uint32_t(1000 + 7 * i);
+  return m;
+}
+
+}  // namespace
+
+TEST_CASE("The renderer's hit points put each packet back where it was", "[reproject]") {
+  const Frame a = render_view(look({0, 0, 0}, {0, 0, -1}, kFov));
+  REQUIRE(a.r.points.packets == a.r.cost.packets);
+  REQUIRE(a.r.points.xyzw.size() == a.r.cost.cost.size() * 4);
+  const CostMap cost = distinct_costs(a);
+  ReprojectStats st;
+  const CostMap same = reproject(cost, a.r.points, ViewRays::of(a.cam, W, H), a.layout, &st);
+  CHECK_FALSE(st.cut);
+  CHECK(st.splatted == st.packets);
+  CHECK(same.cost == cost.cost);
+  // Hit points lie on the surfaces (between them for a packet on the occluder's outline,
+  // whose rays hit both), w = 1 everywhere here.
+  int on_surface = 0;
+  for (size_t i = 0; i < cost.cost.size(); ++i) {
+    const float* p = &a.r.points.xyzw[i * 4];
+    REQUIRE(p[3] == 1);
+    REQUIRE(p[2] >= kWallZ - 1e-3f);
+    REQUIRE(p[2] <= kOccZ + 1e-3f);
+    on_surface += std::fabs(p[2] - kWallZ) < 1e-3f || std::fabs(p[2] - kOccZ) < 1e-3f;
+  }
+  CHECK(on_surface > int(cost.cost.size()) * 9 / 10);
+}
+
+TEST_CASE("A sideways move of exactly two packets on the wall shifts its costs by two packets", "[reproject]") {
+  const Frame a = render_view(look({0, 0, 0}, {0, 0, -1}, kFov));
+  // One pixel on the wall (depth 20) is 2 * 20 * tan(fov/2) / H world units.
+  const float pixel = 2 * 20 * std::tan(kFov / 2) / float(H);
+  const float dx = 2 * float(a.layout.w) * pixel;
+  const Camera b = look({dx, 0, 0}, {dx, 0, -1}, kFov);
+  const CostMap cost = distinct_costs(a);
+  ReprojectStats st;
+  const CostMap moved = reproject(cost, a.r.points, ViewRays::of(b, W, H), a.layout, &st);
+  CHECK_FALSE(st.cut);
+  int checked = 0, wrong = 0;
+  for (int32_t ty = 0; ty < moved.packets.y1; ++ty)
+    for (int32_t tx = 0; tx < moved.packets.x1; ++tx) {
+      const Truth t = brute_force(a, b, a.layout, tx, ty);
+      if (t.unseen || t.sources.size() != 1 || t.surfaces != 1) continue;
+      const auto [sx, sy] = *t.sources.begin();
+      CHECK(sx == tx + 2);  // the brute force agrees with the geometry of the move
+      ++checked;
+      if (moved.at(tx, ty) != cost.at(sx, sy)) ++wrong;
+    }
+  INFO(checked << " wall packets checked, " << wrong << " wrong");
+  CHECK(checked > moved.packets.area() / 2);
+  CHECK(wrong == 0);
+}
+
+TEST_CASE("A turn lands each packet's cost where the geometry says", "[reproject]") {
+  const Frame a = render_view(look({0, 0, 0}, {0, 0, -1}, kFov));
+  const float yaw = 4 * kPi / 180;
+  const Camera b = look({0, 0, 0}, {std::sin(yaw), 0.02f, -std::cos(yaw)}, kFov);
+  const CostMap cost = distinct_costs(a);
+  ReprojectStats st;
+  const CostMap moved = reproject(cost, a.r.points, ViewRays::of(b, W, H), a.layout, &st);
+  CHECK_FALSE(st.cut);
+  int checked = 0, from_sources = 0;
+  for (int32_t ty = 0; ty < moved.packets.y1; ++ty)
+    for (int32_t tx = 0; tx < moved.packets.x1; ++tx) {
+      const Truth t = brute_force(a, b, a.layout, tx, ty);
+      if (t.unseen || t.sources.empty()) continue;
+      ++checked;
+      bool found = false;
+      for (auto [sx, sy] : t.sources) found = found || moved.at(tx, ty) == cost.at(sx, sy);
+      from_sources += found;
+    }
+  INFO(checked << " packets checked, " << from_sources << " hold a cost of a packet their pixels come from; "
+               << st.filled << " filled");
+  CHECK(checked > moved.packets.area() * 8 / 10);
+  // The rest are packets no centre landed in (a turn spreads some packets over two): filled
+  // from neighbours, so their value is a mean, not one packet's cost.
+  CHECK(from_sources + st.filled >= checked);
+  CHECK(from_sources >= checked * 9 / 10);
+}
+
+TEST_CASE("The nearer surface wins, and what the move uncovered is filled from neighbours", "[reproject]") {
+  const Frame a = render_view(look({0, 0, 0}, {0, 0, -1}, kFov));
+  const Camera b = look({1.2f, 0.3f, 0}, {1.2f, 0.3f, -1}, kFov);  // the occluder slides over the wall
+  CostMap cost = a.r.cost;
+  for (int32_t py = 0; py < cost.packets.y1; ++py)
+    for (int32_t px = 0; px < cost.packets.x1; ++px)
+      cost.cost[size_t(py) * cost.packets.x1 + px] = surface_of(a, px, py) == 2 ? 9000 : 1000;
+  ReprojectStats st;
+  const CostMap moved = reproject(cost, a.r.points, ViewRays::of(b, W, H), a.layout, &st);
+  CHECK_FALSE(st.cut);
+  int occluder = 0, wall = 0, uncovered = 0;
+  for (int32_t ty = 0; ty < moved.packets.y1; ++ty)
+    for (int32_t tx = 0; tx < moved.packets.x1; ++tx) {
+      const Truth t = brute_force(a, b, a.layout, tx, ty);
+      const uint32_t v = moved.at(tx, ty);
+      bool outline = false;  // a source on the occluder's outline: its point is a mean in mid-air
+      for (auto [sx, sy] : t.sources) outline = outline || mixed(a, sx, sy);
+      if (t.surfaces == 2 && !t.unseen) {  // all of it sees the occluder, which the old view saw
+        if (outline) continue;
+        ++occluder;
+        INFO("occluder packet " << tx << "," << ty);
+        CHECK(v == 9000);  // not the wall behind it, whose points land here too
+      } else if (t.surfaces == 1 && !t.unseen) {
+        bool next_to_occluder = false;
+        for (auto [sx, sy] : t.sources) next_to_occluder = next_to_occluder || surface_of(a, sx, sy) == 2;
+        if (next_to_occluder) continue;
+        ++wall;
+        CHECK(v == 1000);
+      } else if (t.surfaces == 1 && t.unseen) {
+        ++uncovered;
+        CHECK(v >= 1000);
+        CHECK(v <= 9000);
+      }
+    }
+  INFO(occluder << " occluder, " << wall << " wall, " << uncovered << " uncovered packets; " << st.filled << " filled");
+  CHECK(occluder > 20);
+  CHECK(wall > moved.packets.area() / 2);
+  CHECK(uncovered > 0);
+  CHECK(st.filled >= 1);
+  CHECK(st.kept == 0);
+}
+
+TEST_CASE("A cut gives the unprojected map back, and the tiling from it is sound", "[reproject]") {
+  const Frame a = render_view(look({0, 0, 0}, {0, 0, -1}, kFov));
+  const Camera back = look({0, 0, 0}, {0, 0, 1}, kFov);  // turned round: nothing of the old view
+  const CostMap cost = distinct_costs(a);
+  ReprojectStats st;
+  const CostMap m = reproject(cost, a.r.points, ViewRays::of(back, W, H), a.layout, &st);
+  CHECK(st.cut);
+  CHECK(st.splatted == 0);
+  CHECK(m.cost == cost.cost);
+  SatArray sats(m.packets);
+  sats.add(Sat::from_cost_map(m));
+  sats.finalize();
+  const auto tasks = tile(&sats, m.packets, std::vector<double>(8, 1.0));
+  int64_t area = 0;
+  for (const Rect& r : tasks) {
+    CHECK_FALSE(r.empty());
+    area += r.area();
+  }
+  CHECK(area == m.packets.area());
+  // Without hit points (a renderer that gives none) the map also comes back as it was.
+  ReprojectStats none;
+  CHECK(reproject(cost, PacketPoints{}, ViewRays::of(a.cam, W, H), a.layout, &none).cost == cost.cost);
+  CHECK(none.cut);
+}
