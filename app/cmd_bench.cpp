@@ -18,7 +18,7 @@ namespace {
 const char* kHelp =
     "tessera bench --scene S.gltf --camera-loop L.json [--frames N] [--step K] [--size W H]\n"
     "              [--ao N] [--depth D] [--shadows 0|1] [--threads T] [--warmup W] [--reps R]\n"
-    "              [--compare bare|specialised|costmap|breakdown] [--plain] [--renderer raytracer|rasterizer]\n"
+    "              [--compare bare|specialised|costmap|disturbance|breakdown] [--plain] [--renderer raytracer|rasterizer]\n"
     "Replays the camera loop (every K-th frame with --step K) and prints one JSON line per frame:\n"
     "kernel_ms (sum of the cost map), rendering_ms (wall), rays by kind and Mrays/s, then a summary\n"
     "line with medians and conditions. --compare adds, in the same run and per frame (with --reps R\n"
@@ -33,6 +33,9 @@ const char* kHelp =
     "              general kernel (render itself runs the specialised one where the scene allows:\n"
     "              \"kernel\" in the summary says which)\n"
     "  costmap     the same render with the per-packet TSC timing switched off\n"
+    "  disturbance the same render with the disturbance check (stalled packets found with the thread's\n"
+    "              CPU clock and replaced; docs/load-balancing.md) switched off; every frame also\n"
+    "              prints disturbed_packets and disturbed_ms (the stall found) of its render\n"
     "  breakdown   marginal Mrays/s per ray kind (primary; +shadow; +AO; +secondary)\n"
     "--plain strips textures, reflection, refraction and alpha masks from the scene's materials.\n"
     "--renderer rasterizer replays the loop with the OpenGL ES rasterizer (its threads: LP_NUM_THREADS;\n"
@@ -123,8 +126,9 @@ int run(const std::vector<std::string>& argv) {
     return run_rasterizer(setup, frames, step, warmup, compare == "bare", settings, threads);
   }
   if (step < 1 || frames < 1) throw std::invalid_argument("--step and --frames must be >= 1");
-  if (!compare.empty() && compare != "bare" && compare != "specialised" && compare != "costmap" && compare != "breakdown")
-    throw std::invalid_argument("--compare must be bare, specialised, costmap or breakdown");
+  if (!compare.empty() && compare != "bare" && compare != "specialised" && compare != "costmap" && compare != "disturbance" &&
+      compare != "breakdown")
+    throw std::invalid_argument("--compare must be bare, specialised, costmap, disturbance or breakdown");
 
   RayTracer rt;
   std::vector<std::string> warnings;
@@ -146,17 +150,19 @@ int run(const std::vector<std::string>& argv) {
   std::vector<double> isect, bare_isects, after_hit;  // --compare bare: the split of our time
   std::vector<double> floor_ratio, shading, shading_budget;  // --compare bare: against no shading
   RayCounts total_rays;
+  uint64_t disturbed_packets = 0;  // summed over the frames
   for (long f = 0; f < frames; ++f) {
     size_t k = setup.replay(f, step, settings);
     sync();
     // With a same-run comparison, odd frames render the comparison first so that neither
     // side always pays for the first touch after a camera change.
     // specialised and costmap compare against the same frame rendered another way.
-    const bool against_variant = compare == "specialised" || compare == "costmap";
+    const bool against_variant = compare == "specialised" || compare == "costmap" || compare == "disturbance";
     auto variant = [&] {
       TaskResult t;
       RenderSettings off = settings;
-      off.cost_map = false;
+      if (compare == "disturbance") off.disturbance_check = false;
+      else off.cost_map = false;
       if (compare == "specialised") bench::render_specialised(rt, full, settings, t);
       else rt.render(full, off, t);
       return t;
@@ -171,9 +177,11 @@ int run(const std::vector<std::string>& argv) {
     rate.push_back(mrays(r.rays.total(), r.rendering_ms));
     total_rays += r.rays;
     std::printf("{\"frame\": %zu, \"kernel_ms\": %.3f, \"rendering_ms\": %.3f, \"rays\": {\"primary\": %llu, \"shadow\": %llu, "
-                "\"ao\": %llu, \"secondary\": %llu}, \"mrays_per_s\": %.3f",
+                "\"ao\": %llu, \"secondary\": %llu}, \"mrays_per_s\": %.3f, \"disturbed_packets\": %u, \"disturbed_ms\": %.3f",
                 k, r.kernel_ms, r.rendering_ms, (unsigned long long)r.rays.primary, (unsigned long long)r.rays.shadow,
-                (unsigned long long)r.rays.ao, (unsigned long long)r.rays.secondary, rate.back());
+                (unsigned long long)r.rays.ao, (unsigned long long)r.rays.secondary, rate.back(), r.disturbed_packets,
+                double(r.disturbed_ns) * 1e-6);
+    disturbed_packets += r.disturbed_packets;
     // --reps R: both sides run R times in turn and the fastest of each counts (noise on a
     // shared machine only ever adds time).
     auto best = [&](double& ours_ms, double& other_ms, auto&& other) {
@@ -229,6 +237,9 @@ int run(const std::vector<std::string>& argv) {
       cmp_ratio.push_back(v.rendering_ms > 0 ? r.rendering_ms / v.rendering_ms : 0);
       if (compare == "specialised")
         std::printf(", \"specialised_rendering_ms\": %.3f, \"general_over_specialised\": %.4f", v.rendering_ms, cmp_ratio.back());
+      else if (compare == "disturbance")
+        std::printf(", \"no_check_rendering_ms\": %.3f, \"no_check_kernel_ms\": %.3f, \"with_over_without\": %.4f", v.rendering_ms,
+                    v.kernel_ms, cmp_ratio.back());
       else
         std::printf(", \"no_costmap_rendering_ms\": %.3f, \"with_over_without\": %.4f", v.rendering_ms, cmp_ratio.back());
     } else if (compare == "breakdown") {
@@ -264,6 +275,7 @@ int run(const std::vector<std::string>& argv) {
               settings.max_depth, median(kernel), median(rendering), median(rate), scene.triangle_count(),
               feat.secondary ? "true" : "false", feat.textures ? "true" : "false", feat.alpha_masks ? "true" : "false",
               rt.plain_kernel(settings) ? "specialised" : "general", json_str(cpu_model()).c_str(), json_str(isa_name(pl)).c_str(), pl.w, pl.h, threads);
+  std::printf(", \"disturbed_packets\": %llu", (unsigned long long)disturbed_packets);
   if (!cmp_ratio.empty())
     std::printf(", \"compare\": %s, \"reps\": %ld, \"compare_ms\": %.3f, \"compare_ratio\": %.4f", json_str(compare).c_str(), reps, median(cmp_ms),
                 median(cmp_ratio));

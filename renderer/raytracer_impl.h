@@ -4,6 +4,7 @@
 // compiles the production kernel, and by the benchmarks' kernel variants
 // (app/bench_kernels.cpp), which compile the same kernel source with their own policies.
 // Not part of the renderer API: nothing else includes it.
+#include "renderer/disturbance.h"
 #include "renderer/embree_device.h"
 #include "renderer/raytracer.h"
 #include "renderer/sampling.h"

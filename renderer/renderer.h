@@ -18,6 +18,14 @@ struct RenderSettings {
   int32_t max_depth = 4;      // maximum recursion depth of reflection/refraction (1 = primary only)
   bool shadows = true;
   bool cost_map = true;       // time each packet with the TSC
+  // With cost_map: find the packets whose cost includes a stall of the thread (preemption,
+  // long interrupt: wall time without CPU time) and replace their cost by a prediction from
+  // undisturbed neighbours (renderer/disturbance.h, docs/load-balancing.md).
+  bool disturbance_check = true;
+  // Test hook: sleep stall_us microseconds inside the timing window of packet
+  // (stall_px, stall_py) (absolute packet coordinates), as a preemption would; 0 = none.
+  uint32_t stall_us = 0;
+  int32_t stall_px = -1, stall_py = -1;
   uint32_t frame = 0;         // seeds the AO sample pattern
   // Progressive rendering (renderer/sampling.h): which of the frame's samples this render is.
   // 0: pixel centres and the fixed AO pattern (what a non-progressive frame shows); s > 0: a
@@ -50,6 +58,10 @@ struct TaskResult {
   double kernel_ms = 0;   // sum of the cost map, in milliseconds of one core
   double rendering_ms = 0;  // wall time of the multi-threaded rendering
   RayCounts rays;
+  // RenderSettings::disturbance_check: packets whose measured cost was replaced, and the
+  // stall found (wall - CPU time summed over the disturbed sub-blocks), in ns.
+  uint32_t disturbed_packets = 0;
+  uint64_t disturbed_ns = 0;
 };
 
 class Renderer {

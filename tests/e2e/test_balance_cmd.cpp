@@ -242,6 +242,20 @@ TEST_CASE("tessera bench --reps: best-of-R comparisons, bad counts rejected", "[
     INFO(bad);
     CHECK(run_tessera("bench " + base_args() + " --compare bare " + bad).rc != 0);
   }
+  // --compare disturbance: the same frame with the disturbance check off; every frame reports
+  // the packets it replaced and the stall it found (docs/load-balancing.md).
+  Run d = run_tessera("bench " + base_args() + " --compare disturbance");
+  REQUIRE(d.rc == 0);
+  REQUIRE(d.lines.size() == 4);
+  for (size_t i = 0; i < 3; ++i) {
+    const json& f = d.lines[i];
+    CHECK(f.at("disturbed_packets").get<int64_t>() >= 0);
+    CHECK(f.at("disturbed_ms").get<double>() >= 0);
+    CHECK(f.at("no_check_kernel_ms").get<double>() > 0);
+    CHECK(f.at("with_over_without").get<double>() > 0);
+  }
+  CHECK(d.lines.back().at("compare") == "disturbance");
+  CHECK(d.lines.back().at("disturbed_packets").get<int64_t>() >= 0);
 }
 
 TEST_CASE("tessera loadtest --frames: exactly the frames after the warm-up, numbered by the camera loop", "[loadtest]") {
