@@ -12,6 +12,7 @@
 #include "app/command.h"
 #include "app/common.h"
 #include "renderer/raytracer.h"
+#include "lb/reproject.h"
 #include "lb/sat.h"
 #include "lb/tiler.h"
 
@@ -21,7 +22,7 @@ namespace {
 const char* kHelp =
     "tessera balance --scene S.gltf --camera-loop L.json --nodes N[,N2,...] [--frames F] [--step K]\n"
     "                [--size W H] [--ao A] [--depth D] [--coefficients c1,c2,...] [--whole-task]\n"
-    "                [--threads T] [--reps R] [--tiling-png F.png]\n"
+    "                [--threads T] [--reps R] [--predictor previous|reproject|both] [--tiling-png F.png]\n"
     "For every node count N of the list and every frame: the single-node kernel (the whole frame\n"
     "rendered as one task, once per frame for all N), each node's kernel for its task, efficiency,\n"
     "balance = largest / mean normalised node kernel, SAT generation and tiling times. Frame 0 is\n"
@@ -44,7 +45,10 @@ const char* kHelp =
     "The noise floor: every frame's reference is rendered twice (R times each); the smaller kernel\n"
     "over the larger is the efficiency of one node against itself, the best any row can be trusted\n"
     "to. Each row names its predictor: area (frame 0), previous_frame (the last frame's cost maps),\n"
-    "whole_task.\n";
+    "reprojected (the last frame's cost carried into this frame's camera with each packet's first\n"
+    "hit, lb/reproject.h; its rows also give reproject_ms, filled packets and whether it was a cut),\n"
+    "whole_task. --predictor both (the default) balances every node count twice, once with each,\n"
+    "on the same frames and the same single-node reference, so the two compare within one run.\n";
 
 double ms_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
@@ -64,6 +68,9 @@ void render_min(RayTracer& rt, const Rect& px, const RenderSettings& s, long rep
 // The simulated cluster of one node count: its coefficients and last frame's SATs.
 struct Cluster {
   long nodes = 0;
+  bool reproject = false;  // predictor: the last frame's map carried into this camera
+  CostMap last_cost;       // reproject: last frame's normalised cost over the packet space
+  PacketPoints last_points;
   std::vector<double> coeff;
   double coeff_sum = 0;
   std::unique_ptr<SatArray> prev;
@@ -78,6 +85,27 @@ std::string list_json(const std::vector<double>& v, const char* fmt) {
     s += (i ? ", " : "") + std::string(buf);
   }
   return s + "]";
+}
+
+const char* predictor_name(const Cluster& cl, long frame, bool whole_task) {
+  if (frame == 0) return "area";
+  if (whole_task) return cl.reproject ? "whole_task_reprojected" : "whole_task";
+  return cl.reproject ? "reprojected" : "previous_frame";
+}
+
+// A node's task into the frame-wide map and hit points the reprojection starts from.
+void copy_task(const TaskResult& r, CostMap& cost, PacketPoints& points) {
+  const Rect& t = r.cost.packets;
+  const bool has_points = r.points.packets == t && r.points.xyzw.size() == r.cost.cost.size() * 4;
+  for (int32_t y = t.y0; y < t.y1; ++y)
+    for (int32_t x = t.x0; x < t.x1; ++x) {
+      if (!cost.packets.contains(x, y)) continue;
+      const size_t src = size_t(y - t.y0) * size_t(t.width()) + size_t(x - t.x0);
+      const size_t dst = size_t(y) * size_t(cost.packets.width()) + size_t(x);
+      cost.cost[dst] = r.cost.cost[src];
+      if (has_points)
+        for (int k = 0; k < 4; ++k) points.xyzw[dst * 4 + k] = r.points.xyzw[src * 4 + k];
+    }
 }
 
 void draw_tiling(Image& img, const std::vector<Rect>& tasks, PacketLayout pl) {
@@ -103,10 +131,13 @@ int run(const std::vector<std::string>& argv) {
   bool whole_task = args.flag("--whole-task");
   std::string png = args.str("--tiling-png");
   long reps = args.integer("--reps", 3);
+  const std::string predictor = args.str("--predictor", "both");
   RenderSettings settings = read_settings(args);
   args.finish();
   if (step < 1 || frames < 2) throw std::invalid_argument("--step >= 1 and --frames >= 2 are needed");
   if (reps < 1 || reps > 100) throw std::invalid_argument("--reps must be in 1..100");
+  if (predictor != "previous" && predictor != "reproject" && predictor != "both")
+    throw std::invalid_argument("--predictor must be previous, reproject or both");
   std::vector<double> coeff_pattern = coeff_arg.empty() ? std::vector<double>{1.0} : parse_number_list("--coefficients", coeff_arg);
   for (double c : coeff_pattern)
     if (!(c > 0) || !std::isfinite(c)) throw std::invalid_argument("coefficients must be finite and > 0");
@@ -117,9 +148,22 @@ int run(const std::vector<std::string>& argv) {
     c.nodes = long(n);
     for (long i = 0; i < c.nodes; ++i) c.coeff.push_back(coeff_pattern[size_t(i) % coeff_pattern.size()]);
     c.coeff_sum = std::accumulate(c.coeff.begin(), c.coeff.end(), 0.0);
-    clusters.push_back(std::move(c));
+    if (predictor != "previous") {
+      Cluster r;
+      r.nodes = c.nodes;
+      r.coeff = c.coeff;
+      r.coeff_sum = c.coeff_sum;
+      r.reproject = true;
+      if (predictor == "both") clusters.push_back(std::move(c));
+      clusters.push_back(std::move(r));
+    } else {
+      clusters.push_back(std::move(c));
+    }
   }
 
+  // Every render of the run writes hit points when a predictor needs them, the reference's too,
+  // so that the kernels compared include the same per-packet work.
+  settings.hit_points = predictor != "previous";
   RayTracer rt;
   Scene& scene = setup.loaded.scene;
   const PacketLayout pl = rt.packet_layout();
@@ -141,9 +185,26 @@ int run(const std::vector<std::string>& argv) {
     for (size_t ci = 0; ci < clusters.size(); ++ci) {
       Cluster& cl = clusters[ci];
       const bool draw = !png.empty() && f == frames - 1 && ci + 1 == clusters.size();
+      // Reprojected prediction: the last frame's map in this frame's camera, as one SAT.
+      ReprojectStats rs;
+      double reproject_ms = 0;
+      if (cl.reproject && cl.prev) {
+        auto t_rep = std::chrono::steady_clock::now();
+        const CostMap carried =
+            reproject(cl.last_cost, cl.last_points, ViewRays::of(scene.camera(), scene.width(), scene.height()), pl, &rs);
+        auto array = std::make_unique<SatArray>(space);
+        array->add(Sat::from_cost_map(carried));
+        array->finalize();
+        cl.prev = std::move(array);
+        reproject_ms = ms_since(t_rep);
+      }
       auto t_tile = std::chrono::steady_clock::now();
       std::vector<Rect> tasks = tile(cl.prev.get(), space, cl.coeff);
       double tiling_ms = ms_since(t_tile);
+      if (cl.reproject) {
+        cl.last_cost = CostMap{space, std::vector<uint32_t>(size_t(space.area()), 0)};
+        cl.last_points = PacketPoints{space, std::vector<float>(size_t(space.area()) * 4, -1.0f)};
+      }
 
       auto next = std::make_unique<SatArray>(space);
       std::vector<double> kern(size_t(cl.nodes), 0.0);  // simulated: measured / coefficient
@@ -157,6 +218,7 @@ int run(const std::vector<std::string>& argv) {
         render_min(rt, px, settings, reps, r);
         kern[size_t(i)] = r.kernel_ms / c;
         if (draw) blit(frame_img, r.image, px.x0, px.y0);
+        if (cl.reproject) copy_task(r, cl.last_cost, cl.last_points);
         if (whole_task && !r.cost.cost.empty()) {  // one timing per task, spread evenly
           uint64_t avg = r.cost.total() / r.cost.cost.size();
           std::fill(r.cost.cost.begin(), r.cost.cost.end(), uint32_t(avg));
@@ -188,10 +250,12 @@ int run(const std::vector<std::string>& argv) {
       });
       std::printf("{\"frame\": %zu, \"nodes\": %ld, \"whole_task\": %s, \"single_kernel_ms\": %.3f, \"node_kernel_ms\": %s, "
                   "\"node_kernel_sum_ratio\": %.4f, \"efficiency\": %.4f, \"balance\": %.4f, \"sat_ms\": %.3f, "
-                  "\"tiling_ms\": %.4f, \"predictor\": \"%s\", \"noise_floor_efficiency\": %.4f}\n",
+                  "\"tiling_ms\": %.4f, \"predictor\": \"%s\", \"reproject_ms\": %.3f, \"reproject_filled\": %lld, "
+                  "\"reproject_cut\": %s, \"noise_floor_efficiency\": %.4f}\n",
                   k, cl.nodes, whole_task ? "true" : "false", single.kernel_ms, list_json(kern, "%.3f").c_str(),
                   single.kernel_ms > 0 ? kern_sum / single.kernel_ms : 0, eff, bal, sat_ms, tiling_ms,
-                  f == 0 ? "area" : (whole_task ? "whole_task" : "previous_frame"), noise_eff);
+                  predictor_name(cl, f, whole_task), reproject_ms, (long long)rs.filled,
+                  cl.reproject && f > 0 && rs.cut ? "true" : "false", noise_eff);
       std::fflush(stdout);
       if (draw) {
         draw_tiling(frame_img, tasks, pl);
@@ -200,6 +264,11 @@ int run(const std::vector<std::string>& argv) {
     }
   }
   std::vector<double> means, medians;
+  std::string rows = "[";  // which node count and predictor each entry of the lists below is
+  for (const Cluster& cl : clusters)
+    rows += (rows.size() > 1 ? ", " : "") + std::string("\"") + std::to_string(cl.nodes) +
+            (cl.reproject ? " reprojected" : " previous_frame") + "\"";
+  rows += "]";
   for (const Cluster& cl : clusters) {
     double mean_eff = cl.effs.empty() ? 0 : std::accumulate(cl.effs.begin(), cl.effs.end(), 0.0) / double(cl.effs.size());
     double mean_bal = cl.balances.empty() ? 0 : std::accumulate(cl.balances.begin(), cl.balances.end(), 0.0) / double(cl.balances.size());
@@ -207,18 +276,19 @@ int run(const std::vector<std::string>& argv) {
     double hi = cl.effs.empty() ? 0 : *std::max_element(cl.effs.begin(), cl.effs.end());
     means.push_back(mean_eff);
     medians.push_back(median(cl.effs));
-    std::printf("{\"nodes_summary\": true, \"nodes\": %ld, \"whole_task\": %s, \"coefficients\": %s, \"frames_counted\": %zu, "
+    std::printf("{\"nodes_summary\": true, \"nodes\": %ld, \"predictor\": \"%s\", \"whole_task\": %s, \"coefficients\": %s, \"frames_counted\": %zu, "
                 "\"mean_efficiency\": %.4f, \"median_efficiency\": %.4f, \"min_efficiency\": %.4f, \"max_efficiency\": %.4f, "
                 "\"mean_balance\": %.4f}\n",
-                cl.nodes, whole_task ? "true" : "false", list_json(cl.coeff, "%g").c_str(), cl.effs.size(), mean_eff,
+                cl.nodes, cl.reproject ? "reprojected" : "previous_frame", whole_task ? "true" : "false",
+                list_json(cl.coeff, "%g").c_str(), cl.effs.size(), mean_eff,
                 medians.back(), lo, hi, mean_bal);
   }
   std::printf("{\"summary\": true, \"scene\": %s, \"nodes\": %s, \"frames\": %ld, \"step\": %ld, \"whole_task\": %s, "
-              "\"coefficients\": %s, \"mean_efficiency\": %s, \"median_efficiency\": %s, "
+              "\"coefficients\": %s, \"rows\": %s, \"mean_efficiency\": %s, \"median_efficiency\": %s, "
               "\"reps\": %ld, \"width\": %d, \"height\": %d, \"ao\": %d, \"depth\": %d, \"cpu\": %s, \"isa\": %s, \"packet\": \"%dx%d\", "
               "\"threads\": %d, \"noise_floor_median_efficiency\": %.4f, \"noise_floor_min_efficiency\": %.4f}\n",
               json_str(setup.scene_path).c_str(), list_json(node_list, "%g").c_str(), frames, step, whole_task ? "true" : "false",
-              json_str(coeff_arg.empty() ? "equal" : coeff_arg).c_str(), list_json(means, "%.4f").c_str(),
+              json_str(coeff_arg.empty() ? "equal" : coeff_arg).c_str(), rows.c_str(), list_json(means, "%.4f").c_str(),
               list_json(medians, "%.4f").c_str(), reps, scene.width(), scene.height(), settings.ao_samples, settings.max_depth,
               json_str(cpu_model()).c_str(), json_str(isa_name(pl)).c_str(), pl.w, pl.h, threads, median(noise_effs),
               noise_effs.empty() ? 0.0 : *std::min_element(noise_effs.begin(), noise_effs.end()));

@@ -23,17 +23,17 @@ NODES=1,2,4,8,12,16,20
 command -v gnuplot >/dev/null || { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq gnuplot-nox; }
 if [ $PLOTS_ONLY = 0 ]; then
 P="--scene $S/pavilion/scene.gltf --camera-loop $S/pavilion/camera-loop.json --size $W $H"
-B="$T balance $P --ao 2 --frames $F --nodes $NODES"
+B="$T balance $P --ao 2 --frames $F --nodes $NODES --predictor previous"
 $B --threads 1 --reps 3                    > "$out/balance-equal.jsonl"
 $B --threads 1 --reps 3 --coefficients 1,2 > "$out/balance-hetero.jsonl"
 $B --threads 1 --reps 3 --whole-task       > "$out/balance-whole-task.jsonl"
 $B --threads 1 --reps 3 --step 4           > "$out/balance-coarse.jsonl"
 $B --threads 2 --reps 1                    > "$out/balance-equal-t2.jsonl"
 # Twice the resolution (4x the packets per task), equal nodes and whole-task timings.
-B2="$T balance --scene $S/pavilion/scene.gltf --camera-loop $S/pavilion/camera-loop.json --size $((2*W)) $((2*H)) --ao 2 --frames $F --nodes $NODES"
+B2="$T balance --scene $S/pavilion/scene.gltf --camera-loop $S/pavilion/camera-loop.json --size $((2*W)) $((2*H)) --ao 2 --frames $F --nodes $NODES --predictor previous"
 $B2 --threads 1 --reps 3              > "$out/balance-equal-2x.jsonl"
 $B2 --threads 1 --reps 3 --whole-task > "$out/balance-whole-task-2x.jsonl"
-$T balance $P --ao 2 --frames 3 --nodes 8 --threads 1 --reps 3 --tiling-png "$out/balance-tiling.png" > /dev/null
+$T balance $P --ao 2 --frames 3 --nodes 8 --threads 1 --reps 3 --predictor previous --tiling-png "$out/balance-tiling.png" > /dev/null
 : > "$out/balance-threads.jsonl"
 for sc in pavilion living-room; do
   for th in 2 1; do  # 1 thread: the control (the schedules can differ only by overhead and noise)

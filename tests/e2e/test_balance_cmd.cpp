@@ -63,13 +63,17 @@ TEST_CASE("tessera balance: per-frame lines per node count, consistent efficienc
     if (l.value("summary", false)) {
       ++summaries;
       CHECK(l["nodes"] == json({1, 3, 5}));
-      CHECK(l["mean_efficiency"].size() == 3);
+      // --predictor both (the default): each node count with either predictor, in that order.
+      CHECK(l["mean_efficiency"].size() == 6);
+      CHECK(l["rows"] == json({"1 previous_frame", "1 reprojected", "3 previous_frame", "3 reprojected",
+                               "5 previous_frame", "5 reprojected"}));
       CHECK(l["whole_task"] == false);
       CHECK(l["width"] == 64);
       CHECK(l["cpu"].is_string());
       CHECK(l["reps"] == 3);
       CHECK(l.contains("threads"));
     } else if (l.value("nodes_summary", false)) {
+      CHECK(l["predictor"] == (node_summaries % 2 ? "reprojected" : "previous_frame"));
       ++node_summaries;
       CHECK(l["frames_counted"] == 2);  // frame 0 (area split) is not counted
       int n = l["nodes"];
@@ -95,7 +99,15 @@ TEST_CASE("tessera balance: per-frame lines per node count, consistent efficienc
       // Efficiency = (single / sum of coefficients) / largest normalised node kernel.
       CHECK(eff == Approx(single / coeff_sum / worst).epsilon(0.01));
       CHECK(double(l["balance"]) >= 0.999);
-      CHECK(l["predictor"] == (l["frame"] == 0 ? "area" : "previous_frame"));
+      if (l["frame"] == 0) {
+        CHECK(l["predictor"] == "area");
+      } else {
+        CHECK((l["predictor"] == "previous_frame" || l["predictor"] == "reprojected"));
+        if (l["predictor"] == "reprojected") {
+          CHECK(double(l["reproject_ms"]) > 0);
+          CHECK(l["reproject_cut"] == false);  // a recorded loop's small steps are no cut
+        }
+      }
       // The reference against itself: at most 1, and a render twice as slow as the other
       // would be a broken measurement, not noise.
       CHECK(double(l["noise_floor_efficiency"]) <= 1.0);
@@ -107,8 +119,8 @@ TEST_CASE("tessera balance: per-frame lines per node count, consistent efficienc
       }
     }
   }
-  CHECK(frames == 3 * 3);
-  CHECK(node_summaries == 3);
+  CHECK(frames == 3 * 3 * 2);
+  CHECK(node_summaries == 6);
   CHECK(summaries == 1);
   // The tiling PNG: the frame at full size with the task borders drawn in (255, 230, 0).
   tessera::Image img = tessera::read_image(png);
@@ -126,7 +138,7 @@ TEST_CASE("tessera balance: per-frame lines per node count, consistent efficienc
 }
 
 TEST_CASE("tessera balance --whole-task is reported as such", "[balance]") {
-  Run r = run_tessera("balance " + base_args() + " --nodes 4 --whole-task --reps 2");
+  Run r = run_tessera("balance " + base_args() + " --nodes 4 --whole-task --reps 2 --predictor previous");
   REQUIRE(r.rc == 0);
   REQUIRE(r.lines.size() == 3 + 1 + 1);
   for (size_t i = 0; i < 3; ++i) {
@@ -157,7 +169,7 @@ TEST_CASE("tessera balance defaults to the meaningful protocol: 1 thread per nod
 
 TEST_CASE("tessera balance rejects bad options", "[balance]") {
   for (const char* bad : {"--nodes 0", "--nodes 2,x", "--nodes 1.5", "--nodes 2 --coefficients 1,-1", "--nodes 2 --frames 1",
-                          "--nodes 2 --step 0", "--nodes 2 --reps 0", "--nodes 2 --bogus"}) {
+                          "--nodes 2 --step 0", "--nodes 2 --reps 0", "--nodes 2 --bogus", "--nodes 2 --predictor next"}) {
     INFO(bad);
     CHECK(run_tessera("balance " + base_args() + " " + bad).rc != 0);
   }
