@@ -324,3 +324,24 @@ TEST_CASE("tessera quality: a refining still gains PSNR sample by sample, the re
   }
   std::system(("rm -rf " + cache).c_str());
 }
+
+TEST_CASE("The repository's fast camera loops load, and both predictors run on them", "[balance]") {
+  // tests/data/camera-loops (bench/make_camera_loops.py): 1.5 degrees per frame, every 10th
+  // frame here (15 degrees between the frames compared): fast, but no cut.
+  for (const char* scene : {"pavilion", "living-room", "kitchen"})
+    for (const char* loop : {"turn90", "walk"}) {
+      INFO(scene << " " << loop);
+      const std::string dir = "../shared/scenes/" + std::string(scene);
+      Run r = run_tessera("balance --scene " + dir + "/scene.gltf --camera-loop tests/data/camera-loops/" + scene + "-" + loop +
+                          ".json --size 64 36 --frames 3 --step 10 --nodes 4 --reps 1");
+      REQUIRE(r.rc == 0);
+      int reprojected = 0;
+      for (const json& l : r.lines)
+        if (l.contains("frame") && l.value("predictor", "") == "reprojected") {
+          ++reprojected;
+          CHECK(l["reproject_cut"] == false);
+          CHECK(double(l["efficiency"]) > 0);
+        }
+      CHECK(reprojected == 2);
+    }
+}
