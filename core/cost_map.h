@@ -29,8 +29,9 @@ struct CostMap {
 
 // What each packet of a task saw first (for the balancer's reprojection, lb/reproject.h):
 // per packet four floats x, y, z, w in world coordinates. w = 1: the mean first-hit point of
-// the packet's rays that hit something; w = 0: none hit, (x, y, z) is the packet's mean ray
-// direction (a point at infinity: the sky); w = -1: no valid ray (nothing known).
+// the packet's rays that hit its nearest surface (within 10% of the nearest hit's distance);
+// w = 0: none hit, (x, y, z) is the packet's mean ray direction (a point at infinity: the
+// sky); w = -1: no valid ray (nothing known).
 struct PacketPoints {
   Rect packets;
   std::vector<float> xyzw;  // 4 per packet, row-major like CostMap::cost

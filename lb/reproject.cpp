@@ -1,5 +1,6 @@
 #include "lb/reproject.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <vector>
@@ -78,9 +79,17 @@ CostMap reproject(const CostMap& cost, const PacketPoints& points, const ViewRay
 
   const int32_t W = space.width(), H = space.height();
   const size_t n = size_t(W) * size_t(H);
-  std::vector<float> zmin(n, std::numeric_limits<float>::infinity());
-  std::vector<double> sum(n, 0.0);
-  std::vector<uint32_t> count(n, 0);
+  // Each old packet's footprint (one packet, centred where its point lands) overlaps up to four
+  // new packets, with bilinear weights. The new packet keeps the nearest surface that covers a
+  // quarter of it or more; nearer ones below that are mixed in by their share (an outline
+  // crossing it), farther ones are hidden.
+  struct Splat {
+    size_t target;
+    float w, depth;
+    uint32_t cost;
+  };
+  std::vector<Splat> splats;
+  splats.reserve(cost.cost.size() * 4);
   const Rect& src = cost.packets;
   for (int32_t sy = src.y0; sy < src.y1; ++sy)
     for (int32_t sx = src.x0; sx < src.x1; ++sx) {
@@ -89,27 +98,36 @@ CostMap reproject(const CostMap& cost, const PacketPoints& points, const ViewRay
       if (!(p[3] >= 0)) continue;
       float x, y, d;
       if (!to.project(p, x, y, d)) continue;
-      const int32_t tx = int32_t(std::floor(x / float(layout.w))), ty = int32_t(std::floor(y / float(layout.h)));
-      if (tx < 0 || ty < 0 || tx >= W || ty >= H) continue;
-      const size_t ti = size_t(ty) * size_t(W) + size_t(tx);
-      const float z = zmin[ti];
-      if (d < z * 0.98f) {  // clearly nearer: what was there is hidden
-        zmin[ti] = d;
-        sum[ti] = cost.cost[si];
-        count[ti] = 1;
-      } else if (d <= z * 1.02f) {  // the same surface (or both sky)
-        if (d < z) zmin[ti] = d;
-        sum[ti] += cost.cost[si];
-        ++count[ti];
-      }
+      const float u = x / float(layout.w) - 0.5f, v = y / float(layout.h) - 0.5f;
+      if (!(u > -2 && v > -2 && u < float(W) + 1 && v < float(H) + 1)) continue;
+      const int32_t i0 = int32_t(std::floor(u)), j0 = int32_t(std::floor(v));
+      const float fx = u - float(i0), fy = v - float(j0);
+      const float wx[2] = {1 - fx, fx}, wy[2] = {1 - fy, fy};
+      for (int b = 0; b < 2; ++b)
+        for (int a = 0; a < 2; ++a) {
+          const int32_t tx = i0 + a, ty = j0 + b;
+          const float w = wx[a] * wy[b];
+          if (tx < 0 || ty < 0 || tx >= W || ty >= H || !(w > 1e-4f)) continue;
+          splats.push_back({size_t(ty) * size_t(W) + size_t(tx), w, d, cost.cost[si]});
+        }
     }
+  std::vector<float> zmin(n, std::numeric_limits<float>::infinity());
+  for (const Splat& s : splats)
+    if (s.w >= 0.25f && s.depth < zmin[s.target]) zmin[s.target] = s.depth;
+  std::vector<double> sum(n, 0.0), weight(n, 0.0);
+  for (const Splat& s : splats) {
+    if (!(s.depth <= zmin[s.target] * 1.02f)) continue;  // hidden (sky against sky: inf <= inf)
+    sum[s.target] += double(s.w) * s.cost;
+    weight[s.target] += s.w;
+  }
 
+  // Known: covered by a quarter of a packet or more of footprints.
   CostMap out{space, std::vector<uint32_t>(n, 0)};
   std::vector<uint8_t> known(n, 0);
   std::vector<size_t> frontier;
   for (size_t i = 0; i < n; ++i)
-    if (count[i] > 0) {
-      out.cost[i] = uint32_t(std::llround(sum[i] / count[i]));
+    if (weight[i] >= 0.25) {
+      out.cost[i] = uint32_t(std::llround(std::min(sum[i] / weight[i], 4294967295.0)));
       known[i] = 1;
       ++st.splatted;
     }

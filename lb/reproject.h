@@ -6,12 +6,14 @@
 // turns or walks, an expensive region (a glass wall, the water) moves across the image and
 // the tiling lags one frame behind it. Here every packet of frame f-1 is forward-splatted
 // with the new camera: its first-hit point (PacketPoints, from the renderer) is projected into
-// frame f's image and its cost lands in the packet it falls in. Where several land in one
-// packet the nearest surface wins (a depth test with a 2% margin; equally near ones are
-// averaged), so an occluder's cost is not mixed with what it hides. Packets that saw only sky
-// are points at infinity and move with the rotation alone. Packets nothing lands in (what the
-// move uncovered, the image border that came into view) are filled from their filled
-// neighbours, ring by ring; what is still empty after that keeps the plain previous-frame cost.
+// frame f's image, and its cost is spread over the (up to four) packets its one-packet
+// footprint centred there overlaps, with bilinear weights. A new packet keeps the nearest
+// surface that covers at least a quarter of it (a depth test with a 2% margin: an occluder's
+// cost is not mixed with the wall it hides; nearer surfaces covering less, an outline crossing
+// it, are mixed in by their share). Packets that saw only sky are points at infinity and move
+// with the rotation alone. Packets covered by less than a quarter (what the move uncovered,
+// the border that came into view) are filled from their filled neighbours, ring by ring; what
+// is still empty after that keeps the plain previous-frame cost.
 //
 // A cut (the new view shares little with the old one: under `min_coverage` of the packets got
 // a splat) gives the unprojected map back, so the tiler never works from a mostly invented map.
@@ -38,7 +40,7 @@ struct ViewRays {
 
 struct ReprojectStats {
   int64_t packets = 0;   // of the new view
-  int64_t splatted = 0;  // got at least one splat
+  int64_t splatted = 0;  // covered by a quarter of a packet or more of footprints
   int64_t filled = 0;    // filled from neighbours
   int64_t kept = 0;      // nothing near: the previous frame's cost at the same packet
   bool cut = false;      // coverage under min_coverage: the unprojected map was returned
