@@ -184,15 +184,16 @@ TEST_CASE("an injected 5 ms stall is detected, replaced and does not move the ti
   CHECK(stalled.disturbed_packets >= 1);
   CHECK(stalled.disturbed_ns >= 4500000);
   const double nb = neighbour_median(stalled.cost, st.stall_px, st.stall_py);
-  CHECK(stalled.cost.cost[p] < 1000000);
+  CHECK(stalled.cost.cost[p] < 5000000);  // less than the stall alone (ASan packets take ~1 ms)
   CHECK(stalled.cost.cost[p] <= 3 * nb);
   CHECK(stalled.cost.cost[p] * 3 >= nb);
 
   // The tiling. Two renders of a frame on a shared machine differ by far more than one packet
   // (contention and frequency changes that are not stalls: the thread runs, slower), so the
   // tiling is compared on one map, the per-packet minimum of 3 undisturbed renders: with the
-  // stall added to the stalled packet (what the raw map held), and with that packet replaced
-  // as the renderer replaced it above. The cleaned map's tiling must balance the undisturbed
+  // stall added to the stalled packet (what the raw map held, at least 5% of the frame's cost,
+  // so that it steers the tiling also where packets are slow, as under ASan), and with that
+  // packet replaced as the renderer replaced it above. The cleaned map's tiling must balance the undisturbed
   // costs as well as the undisturbed map's own tiling, within 2% of a task's share; the raw
   // map's must be visibly worse.
   CostMap ref_min = ref.cost;
@@ -203,13 +204,13 @@ TEST_CASE("an injected 5 ms stall is detected, replaced and does not move the ti
     for (size_t j = 0; j < ref_min.cost.size(); ++j) ref_min.cost[j] = std::min(ref_min.cost[j], r.cost.cost[j]);
   }
   CostMap raw_min = ref_min;
-  raw_min.cost[p] += raw.cost.cost[p];
+  raw_min.cost[p] += uint32_t(std::max<uint64_t>(raw.cost.cost[p], ref_min.total() / 20));
   CostMap clean_min = raw_min;
   std::vector<uint8_t> marks(clean_min.cost.size(), 0);
   marks[p] = 1;
   replace_disturbed(clean_min, marks);
   CHECK(raw_min.cost[p] >= 5000000);
-  CHECK(clean_min.cost[p] < 1000000);
+  CHECK(clean_min.cost[p] <= 3 * nb);
   for (int nodes : {2, 8}) {
     const double imb_ref = imbalance(tiling(ref_min, nodes), ref_min);
     const double imb_clean = imbalance(tiling(clean_min, nodes), ref_min);
