@@ -385,6 +385,7 @@ TEST_CASE("Workers in two network namespaces render for a master; a cut link tim
   {
     std::string line = cluster_frame(log, n - 1);
     INFO("master stderr: " << tail(log.err()));
+    INFO("worker a stderr: " << tail(wa.p->err()));
     INFO("cluster_frame line: " << line);
     CHECK(log.err_count("\"used\": 2") == used2 + 1);
     CHECK(count(line, "{\"node\": ") == 2);
