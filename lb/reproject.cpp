@@ -36,12 +36,12 @@ ViewRays ViewRays::of(const Camera& camera, int32_t width, int32_t height) {
   v.height = std::max(height, 1);
   v.sx_scale = tan_half * (float(v.width) / float(v.height));
   v.sy_scale = tan_half;
+  v.ok = basis_inverse(v.cz, v.cx, v.cy, v.inv);
   return v;
 }
 
 bool ViewRays::project(const float p[4], float& x, float& y, float& depth) const {
-  double inv[9];
-  if (!basis_inverse(cz, cx, cy, inv)) return false;
+  if (!ok) return false;
   double vx = p[0], vy = p[1], vz = p[2];
   if (p[3] > 0) {
     vx -= eye.x;
@@ -74,8 +74,7 @@ CostMap reproject(const CostMap& cost, const PacketPoints& points, const ViewRay
   if (points.packets != cost.packets || points.xyzw.size() != cost.cost.size() * 4 || cost.cost.empty() ||
       space.empty())
     return give_back();
-  double inv[9];
-  if (!basis_inverse(to.cz, to.cx, to.cy, inv)) return give_back();
+  if (!to.ok) return give_back();
 
   const int32_t W = space.width(), H = space.height();
   const size_t n = size_t(W) * size_t(H);

@@ -32,9 +32,11 @@ struct ViewRays {
   Vec3 eye, cx, cy, cz;
   float sx_scale = 1, sy_scale = 1;
   int32_t width = 1, height = 1;
+  double inv[9] = {};  // the inverse of the basis (columns cz, cx, cy), row-major
+  bool ok = false;     // the basis is invertible (else nothing projects)
   static ViewRays of(const Camera& camera, int32_t width, int32_t height);
   // Pixel position (x, y) of a world point (w = 1) or direction (w = 0); false when it is
-  // behind the camera or the view is degenerate. *depth: distance along cz (0 for directions).
+  // behind the camera or the view is degenerate. depth: distance along cz (+inf for directions).
   bool project(const float xyzw[4], float& x, float& y, float& depth) const;
 };
 

@@ -23,7 +23,6 @@ Rect second_side(const Rect& t, Axis axis, int32_t s) {
 // SatArray::cost (or the area).
 struct ArrayWeights {
   using W = double;
-  static constexpr int32_t kScanBelow = 0;  // every probe is a SatArray query: bisect
   const SatArray* sats;
   W weight(const Rect& r, bool by_area) const { return by_area ? double(r.area()) : sats->cost(r); }
   static double value(W w, bool) { return w; }
@@ -43,7 +42,6 @@ struct ArrayWeights {
 // cost), so both paths give the same tiling.
 struct SingleWeights {
   using W = uint64_t;
-  static constexpr int32_t kScanBelow = 16;  // probes are two loads: scan lines this short
   const uint64_t* table;
   size_t stride;
   int32_t ox, oy;
@@ -169,17 +167,6 @@ struct Tiler {
       int32_t lo = lo0, hi = hi0;
       W wlo{}, whi = t_w;
       wts.with_line(t, axis, by_area, [&](auto&& w_of) {
-        if (Weights::kScanBelow > 0 && hi0 - lo0 <= Weights::kScanBelow) {
-          // A short line (most splits of a deep tiling): count the lines below the target
-          // without a branch to mispredict; w is monotone, so this is the bisection's answer.
-          int32_t below = 0;
-          for (int32_t q = lo0 + 1; q < hi0; ++q) below += wts.value(w_of(q), by_area) < target;
-          hi = lo0 + 1 + below;
-          lo = hi - 1;
-          whi = hi == hi0 ? t_w : w_of(hi);
-          wlo = lo == lo0 ? W{} : w_of(lo);
-          return;
-        }
         while (hi - lo > 1) {
           const int32_t mid = lo + (hi - lo) / 2;
           const W wm = w_of(mid);

@@ -471,6 +471,11 @@ struct Check {
   bool finite(const Mat4& m, const char* field) {
     return m.finite() || fail(ErrorCode::not_finite, std::string(field) + " is not finite");
   }
+  // A count or size a node caps (Limits): "<field> v exceeds the limit limit".
+  bool at_most(uint64_t v, uint64_t limit, const char* field) {
+    return v <= limit || fail(ErrorCode::limit_exceeded, std::string(field) + " " + std::to_string(v) +
+                                                              " exceeds the limit " + std::to_string(limit));
+  }
   // Finite and within the field's range (protocol/wire.toml), by the range's kind.
   bool range(float v, wire::Closed r, const char* field) {
     if (!finite(v, field)) return false;
@@ -564,30 +569,23 @@ class ClientDecoder {
         Settings s;
         s.ao_samples = r.u32();
         s.max_depth = r.u32();
-        if (s.ao_samples > lim_.max_ao_samples)
-          return c.fail(ErrorCode::limit_exceeded, "ao_samples " + std::to_string(s.ao_samples) + " exceeds the limit " +
-                                                       std::to_string(lim_.max_ao_samples));
-        if (s.max_depth > lim_.max_depth)
-          return c.fail(ErrorCode::limit_exceeded, "max_depth " + std::to_string(s.max_depth) + " exceeds the limit " +
-                                                       std::to_string(lim_.max_depth));
+        if (!c.at_most(s.ao_samples, lim_.max_ao_samples, "ao_samples") ||
+            !c.at_most(s.max_depth, lim_.max_depth, "max_depth"))
+          return false;
         out = s;
         return true;
       }
       case RecordType::refine: {
         if (!c.length(r.left(), wire::refine::kFixed)) return false;
         Refine rf{r.u32()};
-        if (rf.samples > lim_.max_refine_samples)
-          return c.fail(ErrorCode::limit_exceeded, "refine samples " + std::to_string(rf.samples) +
-                                                       " exceeds the limit " + std::to_string(lim_.max_refine_samples));
+        if (!c.at_most(rf.samples, lim_.max_refine_samples, "refine samples")) return false;
         out = rf;
         return true;
       }
       case RecordType::budget: {
         if (!c.length(r.left(), wire::budget::kFixed)) return false;
         Budget b{r.u32()};
-        if (b.frame_ms > lim_.max_frame_budget_ms)
-          return c.fail(ErrorCode::limit_exceeded, "budget frame_ms " + std::to_string(b.frame_ms) +
-                                                       " exceeds the limit " + std::to_string(lim_.max_frame_budget_ms));
+        if (!c.at_most(b.frame_ms, lim_.max_frame_budget_ms, "budget frame_ms")) return false;
         out = b;
         return true;
       }
