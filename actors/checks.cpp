@@ -22,6 +22,7 @@ RenderTask task_of(const RenderBatch& b, const Rect& pixels) {
   t.sample = b.sample;
   t.seed = b.seed;
   t.radiance = b.radiance;
+  t.hit_points = b.hit_points;
   return t;
 }
 
@@ -57,6 +58,15 @@ std::string check_tile(const TileResult& t, uint32_t frame, const Rect& expected
               (expected.y1 + layout.h - 1) / layout.h};
     if (!(sat->packets() == want) || !packet_space(width, height, layout).contains(sat->packets()))
       return "cost SAT over packets " + str(sat->packets()) + " for task packets " + str(want);
+  }
+  // Depths: one float per packet of the task, or none. Their values are not checked: the
+  // tiler reads any float safely (lb/reproject.h, decode_depths).
+  if (!t.depth.empty()) {
+    const Rect want{expected.x0 / layout.w, expected.y0 / layout.h, (expected.x1 + layout.w - 1) / layout.w,
+                    (expected.y1 + layout.h - 1) / layout.h};
+    if (t.depth.size() != size_t(want.area()) * 4)
+      return "tile " + str(expected) + " with " + std::to_string(t.depth.size()) + " bytes of depths, expected " +
+             std::to_string(size_t(want.area()) * 4);
   }
   return {};
 }

@@ -32,6 +32,7 @@ struct frame_state {
   RenderBatch batch;            // its settings and one task per node
   caf::typed_response_promise<uint32_t> done;
   uint32_t recovered = 0;       // tasks of lost nodes rendered here
+  TaskList tiling;              // how its tasks were made (predictor, reprojection), without the tasks
   double last_rendering_ms = 0;
   // The progressive still's average (FrameStart::refine): the tiles' radiance of every sample
   // since its sample 0, composed here, where the tiles of all nodes meet.
@@ -86,7 +87,8 @@ void finish_frame(self_ptr self, std::vector<TileResult>&& tiles, std::vector<do
   FrameMeta& meta = st.cur.meta;
   meta.render_end_ns = steady_ns();
   std::string error;
-  SatReport rep{meta.seq, meta.width, meta.height, st.layout.w, st.layout.h, {}, {}};
+  SatReport rep{meta.seq, meta.width, meta.height, st.layout.w, st.layout.h, {}, {}, {}, {}};
+  if (st.batch.hit_points) rep.camera = pack_camera(st.cur.scene.scene->camera());
   std::vector<TileResult> shown;
   std::vector<Json> per_node;
   double max_norm = 0, sum_norm = 0;
@@ -110,6 +112,7 @@ void finish_frame(self_ptr self, std::vector<TileResult>&& tiles, std::vector<do
                                        {"pixels", static_cast<long long>(tile.pixels.area())}}));
     }
     rep.sats.push_back(std::move(tile.sat));
+    rep.depths.push_back(std::move(tile.depth));
     rep.perf.push_back(i < perf.size() ? perf[i] : 1.0);
     shown.push_back(std::move(tile));
   }
@@ -119,6 +122,10 @@ void finish_frame(self_ptr self, std::vector<TileResult>&& tiles, std::vector<do
     const double balance = rendered && sum_norm > 0 ? max_norm / (sum_norm / double(rendered)) : 1.0;
     log(self, Event(Ev::cluster_frame, meta.client_frame)
                   .with("balance", Json::number(balance, 4))
+                  .with("predictor", to_string(Predictor(st.tiling.predictor)))
+                  .with("reproject_ms", Json::number(st.tiling.reproject_ms))
+                  .with("reproject_cpu_ms", Json::number(st.tiling.reproject_cpu_ms))
+                  .with("filled", static_cast<long long>(st.tiling.filled))
                   .with("recovered", st.recovered)
                   .with("per_node", Json::array(std::move(per_node))));
   }
@@ -202,6 +209,8 @@ void render_batch(self_ptr self) {
   batch.sample = st.cur.sample;
   batch.seed = st.cur.seed;
   batch.radiance = st.cur.refine;
+  // The balancer's reprojection needs each packet's depth, which only the ray tracer gives.
+  batch.hit_points = st.settings->reproject && st.cur.renderer == 0;
   // Bounded delay for lost nodes: the configured timeout, or 3x the last frame if longer.
   batch.timeout_ms = std::max<uint32_t>(st.settings->task_timeout_ms, uint32_t(3 * st.last_rendering_ms + 200));
   batch.tasks.assign(st.nodes.size(), Rect{});
@@ -213,10 +222,12 @@ void render_batch(self_ptr self) {
     r.tiles = {failed_tile(task_of(batch, batch.tasks[0]), ErrorCode::no_node, "no rendering node")};
     return recover(self, std::move(r));
   }
-  TaskRequest req{meta.seq, meta.width, meta.height, st.layout.w, st.layout.h};
+  TaskRequest req{meta.seq, meta.width, meta.height, st.layout.w, st.layout.h, {}};
+  if (batch.hit_points) req.camera = pack_camera(st.cur.scene.scene->camera());
   self->request(st.a.tiler, caf::infinite, tasks_atom::value, req).then([=](TaskList& tl) {
     auto& st = self->state;
     st.cur.meta.tiling_ms = tl.tiling_ms;
+    st.tiling = TaskList{tl.frame, {}, tl.tiling_ms, tl.from_sats, tl.predictor, tl.reproject_ms, tl.reproject_cpu_ms, tl.filled};
     for (size_t k = 0; k < tl.tasks.size() && k < st.used.size(); ++k) st.batch.tasks[st.used[k]] = tl.tasks[k];
     st.cur.meta.nodes = uint32_t(st.used.size());
     if (st.cur.scene.scene != st.sent) {  // the session's scene object (changed in place between frames)

@@ -67,6 +67,10 @@ struct NodeSettings {
   // them within this many ms (lb/frame_budget.h); the still after them at full resolution.
   // 0: every frame at the client's resolution.
   uint32_t frame_budget_ms = 0;
+  // The balancer carries each frame's cost into the next frame's camera with the packets'
+  // first-hit depths, which the workers then return with their tiles (lb/reproject.h,
+  // docs/load-balancing.md). false: the paper's predictor, the previous frame's map as it is.
+  bool reproject = true;
   uint32_t handshake_timeout_ms = 5000;  // a session without a valid handshake by then is closed
                                          // with a fatal bad_handshake (0: no timeout)
   std::shared_ptr<MemoryBudget> budget;  // node-wide: every session's scene bytes and the frames

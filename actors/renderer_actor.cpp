@@ -13,6 +13,7 @@
 #include "actors/node.h"
 #include "renderer/rasterizer.h"
 #include "renderer/raytracer.h"
+#include "lb/reproject.h"
 #include "lb/sat.h"
 
 namespace tessera {
@@ -66,6 +67,7 @@ renderer_actor::behavior_type renderer_impl(renderer_actor::stateful_pointer<ren
           s.sample = task.sample;
           s.radiance = task.radiance;
           s.cost_map = true;
+          s.hit_points = task.hit_points && task.renderer == 0;
           TaskResult r;
           renderer->render(task.pixels, s, r);
           out.pixels = r.pixels;
@@ -83,6 +85,8 @@ renderer_actor::behavior_type renderer_impl(renderer_actor::stateful_pointer<ren
             sat.serialize_into(out.sat);
             out.sat_ms = ms_since(t0);
           }
+          if (s.hit_points && r.points.packets == r.cost.packets && !r.points.xyzw.empty())
+            out.depth = encode_depths(r.points, ViewRays::of(snap.scene->camera(), task.width, task.height));
         } catch (const std::exception& e) {
           return make_error(ErrorCode::render_failed, e.what());
         }

@@ -27,11 +27,14 @@ struct RenderTask {
   uint32_t sample = 0;
   uint32_t seed = 0;
   bool radiance = false;
+  // Also return each packet's first-hit depth (TileResult::depth), for the balancer's
+  // reprojection (lb/reproject.h). The ray tracer only; the rasterizer gives none.
+  bool hit_points = false;
 };
 template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, RenderTask& x) {
   return f(caf::meta::type_name("tessera::render_task"), x.frame, x.width, x.height, x.pixels, x.ao_samples,
-           x.max_depth, x.renderer, x.sample, x.seed, x.radiance);
+           x.max_depth, x.renderer, x.sample, x.seed, x.radiance, x.hit_points);
 }
 
 // What a rendering node returns for a task: RGBA pixels of the rectangle and the serialised
@@ -44,6 +47,9 @@ struct TileResult {
   // With RenderTask::radiance: each pixel's linear RGB as float32 (pixels.area() x 12 bytes,
   // row by row, the byte order of x86 peers); else empty.
   std::vector<uint8_t> radiance;
+  // With RenderTask::hit_points: lb/reproject.h's encode_depths over the SAT's packets (4 bytes
+  // a packet); else empty.
+  std::vector<uint8_t> depth;
   double kernel_ms = 0, rendering_ms = 0, sat_ms = 0;
   uint64_t rays = 0;
   protocol::ErrorCode code = protocol::ErrorCode::ok;  // not ok: the task failed (pixels are not valid)
@@ -53,7 +59,7 @@ struct TileResult {
 template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, TileResult& x) {
   return f(caf::meta::type_name("tessera::tile_result"), x.frame, x.pixels, BytesField{x.rgba}, BytesField{x.sat},
-           BytesField{x.radiance}, x.kernel_ms,
+           BytesField{x.radiance}, BytesField{x.depth}, x.kernel_ms,
            x.rendering_ms, x.sat_ms, x.rays, x.code, x.error);
 }
 

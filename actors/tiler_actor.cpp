@@ -1,22 +1,39 @@
-// Tiler actor: the SAT array of the last frame -> the tasks of the next (lb/tiler.h).
+// Tiler actor: the SAT array of the last frame -> the tasks of the next (lb/tiler.h). With the
+// last frame's depths and both cameras, the last frame's cost is first carried into the new
+// view (lb/reproject.h) and the tasks are tiled from that one map.
 #include <chrono>
 #include <cmath>
 #include <optional>
 
+#include <time.h>
+
 #include <caf/all.hpp>
 
 #include "actors/node.h"
+#include "lb/reproject.h"
 #include "lb/sat.h"
 #include "lb/tiler.h"
 
 namespace tessera {
 namespace {
 
+// This thread's CPU time: the reprojection's own cost, apart from time the thread was
+// preempted (a dedicated master shares its core with other work).
+double thread_cpu_ms() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return double(ts.tv_sec) * 1e3 + double(ts.tv_nsec) * 1e-6;
+}
+
 struct tiler_state {
   std::vector<double> coefficients;
   std::optional<SatArray> sats;
   int32_t width = 0, height = 0;
   PacketLayout layout;
+  // The last frame's packet points (decoded from its depths) and its camera; empty when it
+  // gave none (the paper's predictor then).
+  PacketPoints points;
+  std::vector<float> camera;
   static inline const char* name = "tessera.tiler";
 };
 
@@ -26,23 +43,46 @@ tiler_actor::behavior_type tiler_impl(tiler_actor::stateful_pointer<tiler_state>
       [=](sats_atom, const SatReport& r) {
         auto& st = self->state;
         st.sats.reset();
+        st.points = {};
+        st.camera.clear();
         st.width = r.width;
         st.height = r.height;
         st.layout = {r.packet_w, r.packet_h};
         try {
           SatArray arr(packet_space(r.width, r.height, st.layout));
+          std::vector<Rect> rects(r.sats.size());  // each node's packets (empty: no SAT)
           for (size_t i = 0; i < r.sats.size(); ++i) {
             if (r.sats[i].empty()) continue;  // a node without a SAT: filled by SatArray's missing-area rule
             std::string err;
             auto sat = Sat::try_deserialize(r.sats[i].data(), r.sats[i].size(), &err);
             if (!sat) continue;
+            rects[i] = sat->packets();
             double perf = i < r.perf.size() && r.perf[i] > 0 ? r.perf[i] : 1.0;
             arr.add(std::move(*sat), perf);
           }
           arr.finalize();
           st.sats = std::move(arr);
+          // The points, where the report has a camera and depths: a node's depths that do not
+          // fit its SAT are left out (its packets count as unknown: filled, or a cut).
+          Camera cam;
+          if (unpack_camera(r.camera, cam) && r.depths.size() == r.sats.size()) {
+            const ViewRays from = ViewRays::of(cam, r.width, r.height);
+            const Rect space = st.sats->packet_space();
+            PacketPoints pts{space, std::vector<float>(size_t(space.area()) * 4, 0.0f)};
+            for (size_t i = 3; i < pts.xyzw.size(); i += 4) pts.xyzw[i] = -1;
+            bool any = false;
+            for (size_t i = 0; i < r.sats.size(); ++i)
+              if (!rects[i].empty() && decode_depths(r.depths[i].data(), r.depths[i].size(), rects[i], from, st.layout, pts))
+                any = true;
+            if (any) {
+              st.points = std::move(pts);
+              st.camera = r.camera;
+            }
+          }
         } catch (const std::exception&) {
           st.sats.reset();  // inconsistent SATs: the next frame is split by area
+          st.points = {};
+          st.camera.clear();
         }
       },
       [=](nodes_atom, std::vector<double>& coefficients) {
@@ -60,7 +100,36 @@ tiler_actor::behavior_type tiler_impl(tiler_actor::stateful_pointer<tiler_state>
         TaskList out;
         out.frame = req.frame;
         out.from_sats = use;
-        for (const Rect& r : tile(use ? &*st.sats : nullptr, space, st.coefficients))
+        out.predictor = uint8_t(use ? Predictor::previous : Predictor::area);
+        const SatArray* sats = use ? &*st.sats : nullptr;
+        // Reprojection: the last frame's cost in this frame's camera, as one SAT. Not when the
+        // camera did not move (the map is already where it belongs).
+        std::optional<SatArray> carried;
+        Camera cam;
+        if (use && !st.points.xyzw.empty() && req.camera != st.camera && unpack_camera(req.camera, cam)) {
+          auto t_rep = std::chrono::steady_clock::now();
+          const double cpu0 = thread_cpu_ms();
+          ReprojectStats rs;
+          // Large frames are carried in blocks of packets (lb/reproject.h, reproject_blocks): at
+          // most about 16k items, under a millisecond or so of one core.
+          int32_t block = 1;
+          while (space.area() / (int64_t(block) * block) > 16384 && block < 8) block *= 2;
+          CostMap map = reproject_blocks(st.sats->cost_map(), st.points, ViewRays::of(cam, req.width, req.height), layout,
+                                         block, &rs);
+          if (rs.cut) {
+            out.predictor = uint8_t(Predictor::cut);
+          } else {
+            carried.emplace(space);
+            carried->add(Sat::from_cost_map(map));
+            carried->finalize();
+            sats = &*carried;
+            out.predictor = uint8_t(Predictor::reprojected);
+            out.filled = rs.filled;
+          }
+          out.reproject_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t_rep).count();
+          out.reproject_cpu_ms = thread_cpu_ms() - cpu0;
+        }
+        for (const Rect& r : tile(sats, space, st.coefficients))
           out.tasks.push_back(packets_to_pixels(r, layout, req.width, req.height));
         out.tiling_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
         return out;

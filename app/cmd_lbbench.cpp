@@ -14,6 +14,7 @@
 #include <tbb/task_arena.h>
 
 #include "app/command.h"
+#include "lb/reproject.h"
 #include "lb/sat.h"
 #include "lb/tiler.h"
 
@@ -185,6 +186,56 @@ int lbbench(const std::vector<std::string>& args) {
         "{\"bench\": \"tiling\", \"nodes\": 50000, \"sats\": 1, \"packet\": \"2x2\", \"threads\": %d, \"reps\": %d, "
         "\"median_ms\": %.4f, \"min_ms\": %.4f, \"max_cost_over_ideal\": %.5f}\n",
         n, reps, t.median_ms, t.min_ms, imbalance(whole, tasks, coef50k));
+  }
+
+  // The reprojecting tiler's step at 1280x720 (actors/tiler_actor.cpp): the previous frame's
+  // SATs of 8 nodes as one cost map, carried into a camera turned by 1 degree (points: a
+  // surface at smoothly varying depth below a sky band), one SAT of it, 8 tasks.
+  for (const PacketLayout p : {PacketLayout{4, 4}, PacketLayout{4, 2}}) {
+    const CostMap cm = synthetic_cost_map(p, 42);
+    Camera a;
+    a.fov_y = 1.0f;
+    Camera b = a;
+    b.to_world = Mat4::rotate({0, 1, 0}, 3.14159265f / 180);
+    const ViewRays va = ViewRays::of(a, kWidth, kHeight);
+    PacketPoints pts{cm.packets, std::vector<float>(size_t(cm.packets.area()) * 4)};
+    for (int32_t py = 0; py < cm.packets.y1; ++py)
+      for (int32_t px = 0; px < cm.packets.x1; ++px) {
+        float* o = &pts.xyzw[(size_t(py) * size_t(cm.packets.x1) + size_t(px)) * 4];
+        const Vec3 d = va.direction((float(px) + 0.5f) * float(p.w), (float(py) + 0.5f) * float(p.h));
+        const bool sky = py < cm.packets.y1 * 3 / 10;
+        const float depth = 10 + 5 * std::sin(0.05f * float(px)) + 3 * std::cos(0.07f * float(py));
+        o[0] = sky ? d.x : d.x * depth, o[1] = sky ? d.y : d.y * depth, o[2] = sky ? d.z : d.z * depth, o[3] = sky ? 0 : 1;
+      }
+    const std::vector<double> coef(8, 1.0);
+    SatArray prev(cm.packets);
+    {
+      SatArray whole8(cm.packets);
+      whole8.add(Sat::from_cost_map(cm));
+      whole8.finalize();
+      for (const Rect& r : tile(&whole8, cm.packets, coef)) prev.add(Sat::from_cost_map(sub_map(cm, r)));
+      prev.finalize();
+    }
+    const ViewRays vb = ViewRays::of(b, kWidth, kHeight);
+    ReprojectStats rs;
+    CostMap flat;
+    const Timing tmap = time_it(reps, [&] { flat = prev.cost_map(); });
+    const Timing trep = time_it(reps, [&] { reproject(flat, pts, vb, p, &rs); });
+    ReprojectStats bs;
+    const Timing tblk = time_it(reps, [&] { reproject_blocks(flat, pts, vb, p, 2, &bs); });
+    std::vector<Rect> tasks;
+    const Timing tall = time_it(reps, [&] {
+      SatArray one(cm.packets);
+      one.add(Sat::from_cost_map(reproject(prev.cost_map(), pts, vb, p)));
+      one.finalize();
+      tasks = tile(&one, cm.packets, coef);
+    });
+    std::printf(
+        "{\"bench\": \"reproject\", \"packet\": \"%dx%d\", \"packets\": %lld, \"turn_deg\": 1, \"threads\": 1, "
+        "\"reps\": %d, \"cost_map_ms\": %.4f, \"reproject_ms\": %.4f, \"reproject_blocks2_ms\": %.4f, "
+        "\"tiler_step_ms\": %.4f, \"filled\": %lld, \"cut\": %s}\n",
+        p.w, p.h, (long long)cm.packets.area(), reps, tmap.median_ms, trep.median_ms, tblk.median_ms, tall.median_ms,
+        (long long)rs.filled, rs.cut || bs.cut ? "true" : "false");
   }
 
   std::printf(

@@ -100,6 +100,8 @@ NodeConfig::NodeConfig() {
   custom_options_.add(bool_option(require_origin, "tessera", "require-origin",
                                   "refuse WebSocket requests without an Origin header (non-browser clients)"));
   custom_options_.add(bool_option(log_frames, "tessera", "log-frames", "log one JSON line per frame"));
+  custom_options_.add(bool_option(reproject, "tessera", "reproject",
+                                  "balance each frame from the last frame's cost carried into its camera (false: as it is)"));
   custom_options_.add(bool_option(renders, "tessera", "render", "render tasks here (false: hub or dedicated master)"));
   custom_options_.add(bool_option(http, "tessera", "http", "serve HTTP and WebSocket clients (false: worker or hub only)"));
   custom_options_.add(string_list_option(children, "tessera", "children", "child nodes as [\"host:port\", ...]"));
@@ -140,6 +142,7 @@ std::shared_ptr<NodeSettings> NodeConfig::node_settings() const {
   s->frame_budget_ms = uint32_t(frame_budget_ms);
   s->budget = std::make_shared<MemoryBudget>(max_node_bytes > 0 ? uint64_t(max_node_bytes) : MemoryBudget::default_limit());
   s->render = renders;
+  s->reproject = reproject;
   s->children = children;
   s->task_timeout_ms = uint32_t(task_timeout_ms);
   s->reconnect_ms = uint32_t(reconnect_ms);

@@ -49,6 +49,7 @@ struct NodeConfig : caf::actor_system_config {
   std::string cluster_host = "127.0.0.1";  // address the cluster port binds to
   std::vector<std::string> children;       // "host:port" of child nodes
   bool renders = true;            // false: hub or dedicated master
+  bool reproject = true;          // the balancer reprojects the last frame's cost (NodeSettings::reproject)
   bool http = true;               // false: no HTTP/WebSocket endpoint (a worker or hub only)
   std::string name;               // in node lists and logs (default host:cluster-port)
   int task_timeout_ms = 5000;

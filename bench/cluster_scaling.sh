@@ -18,6 +18,11 @@
 # works too, e.g. "bundle/ld.so --library-path bundle/lib bundle/tessera"). SCENE: a folder with
 # scene.gltf and camera-loop.json (default ../shared/scenes/pavilion). AO: AO samples (2).
 # PIN=0: no taskset. WORKER_ARGS: more options for every worker (e.g. CAF's scheduler threads).
+# LOOP: the camera loop (default $SCENE/camera-loop.json). VARIANTS: the balancer's predictors to
+# compare, run one after the other on the same frames (e.g. "previous reproject": the master with
+# --tessera.reproject=false / true; runs named SIZE-nN-VARIANT-rK); REPS: how many times each
+# (alternating). The 1-worker reference runs once, without a variant. MASTER_ARGS: more options
+# for the master.
 set -euo pipefail
 OUT=$1
 SIZES=${2:-"640x360 1280x720"}
@@ -25,6 +30,9 @@ FRAMES=(${3:-12 6})
 WORKERS=${4:-"1 2 4 8 15"}
 TESSERA=${TESSERA:-build/app/tessera}
 SCENE=${SCENE:-../shared/scenes/pavilion}
+LOOP=${LOOP:-$SCENE/camera-loop.json}
+VARIANTS=${VARIANTS:-}
+REPS=${REPS:-1}
 AO=${AO:-2}
 mkdir -p "$OUT"
 load_before=$(cut -d' ' -f1-3 /proc/loadavg)
@@ -47,8 +55,8 @@ wait_line() {  # file pattern count timeout_s
   return 1
 }
 
-run() {  # name size frames workers
-  local name=$1 size=$2 frames=$3 n=$4 base=$((20000 + RANDOM % 1000 * 40)) kids="" i
+run() {  # name size frames workers [master options]
+  local name=$1 size=$2 frames=$3 n=$4 extra=${5:-} base=$((20000 + RANDOM % 1000 * 40)) kids="" i
   pids=()
   for ((i = 1; i <= n; ++i)); do
     # shellcheck disable=SC2086
@@ -58,11 +66,12 @@ run() {  # name size frames workers
     kids="$kids${kids:+,}127.0.0.1:$((base + i))"
   done
   for ((i = 1; i <= n; ++i)); do wait_line "$OUT/$name.w$i.out" cluster 1 60; done
-  $(pin 0) "${T[@]}" serve --port "$base" --no-render --threads 1 --children "$kids" --tessera.name=master \
+  # shellcheck disable=SC2086
+  $(pin 0) "${T[@]}" serve --port "$base" --no-render --threads 1 --children "$kids" --tessera.name=master ${MASTER_ARGS:-} $extra \
     > "$OUT/$name.master.out" 2> "$OUT/$name.master.err" &
   pids+=($!)
   wait_line "$OUT/$name.master.err" child_connected "$n" 60
-  $(pin 0) "${T[@]}" loadtest --scene "$SCENE/scene.gltf" --camera-loop "$SCENE/camera-loop.json" --port "$base" \
+  $(pin 0) "${T[@]}" loadtest --scene "$SCENE/scene.gltf" --camera-loop "$LOOP" --port "$base" \
     --frames "$frames" --warmup 2 --size "${size%x*}" "${size#*x}" --ao "$AO" > "$OUT/$name.load" 2> "$OUT/$name.load.err" || true
   cleanup
   echo "$name: $(grep -c cluster_frame "$OUT/$name.master.err" || true) frames" >&2
@@ -72,7 +81,7 @@ control() {  # size workers: N concurrent whole-frame renders of loop frame 10, 
   local size=$1 n=$2 i
   for ((i = 1; i <= n; ++i)); do
     $(pin "$i") "${T[@]}" render --threads 1 --size "${size%x*}" "${size#*x}" --ao "$AO" --scene "$SCENE/scene.gltf" \
-      --camera-loop "$SCENE/camera-loop.json" --frame 10 --out "$OUT/control-$i.png" > "$OUT/control-$i.json" 2> /dev/null &
+      --camera-loop "$LOOP" --frame 10 --out "$OUT/control-$i.png" > "$OUT/control-$i.json" 2> /dev/null &
   done
   wait
   cat "$OUT"/control-*.json > "$OUT/$size-control-n$n.json"
@@ -83,10 +92,22 @@ k=0
 for size in $SIZES; do
   f=${FRAMES[$k]:-${FRAMES[0]}}
   k=$((k + 1))
-  for n in $WORKERS; do run "$size-n$n" "$size" "$f" "$n"; done
+  for n in $WORKERS; do
+    if [[ -z $VARIANTS || $n == 1 ]]; then run "$size-n$n" "$size" "$f" "$n"; continue; fi
+    for ((rep = 1; rep <= REPS; ++rep)); do
+      for v in $VARIANTS; do
+        case $v in
+          previous) opt=--tessera.reproject=false ;;
+          reproject) opt=--tessera.reproject=true ;;
+          *) echo "unknown variant $v" >&2; exit 2 ;;
+        esac
+        run "$size-n$n-$v-r$rep" "$size" "$f" "$n" "$opt"
+      done
+    done
+  done
   for n in $WORKERS; do control "$size" "$n"; done
 done
 isa=$(grep -m1 -o -w 'avx512f' /proc/cpuinfo || grep -m1 -o -w 'avx2' /proc/cpuinfo || echo sse)
-printf '{"summary": true, "scene": "%s", "ao": %s, "sizes": "%s", "frames": "%s", "workers": "%s", "cpu": "%s", "cores": %s, "isa": "%s", "load_before": "%s", "load_after": "%s", "pinned": %s}\n' \
-  "$SCENE" "$AO" "$SIZES" "${FRAMES[*]}" "$WORKERS" "$(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | xargs)" "$cores" "$isa" \
+printf '{"summary": true, "scene": "%s", "loop": "%s", "variants": "%s", "reps": %s, "ao": %s, "sizes": "%s", "frames": "%s", "workers": "%s", "cpu": "%s", "cores": %s, "isa": "%s", "load_before": "%s", "load_after": "%s", "pinned": %s}\n' \
+  "$SCENE" "$LOOP" "$VARIANTS" "$REPS" "$AO" "$SIZES" "${FRAMES[*]}" "$WORKERS" "$(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | xargs)" "$cores" "$isa" \
   "$load_before" "$(cut -d' ' -f1-3 /proc/loadavg)" "$([[ ${PIN:-1} != 0 ]] && command -v taskset > /dev/null && echo true || echo false)" > "$OUT/summary.json"

@@ -11,7 +11,10 @@ kernel and rendering efficiency frame by frame against the 1-worker run on the s
                                     sharing the machine costs each process, with no cluster)
   net kernel efficiency           = kernel efficiency x machine slowdown
 
-Frames with a recovered task (a late or lost worker) are left out and counted.
+Frames with a recovered task (a late or lost worker) are left out and counted. Runs of several
+predictors (VARIANTS in cluster_scaling.sh: SIZE-nN-VARIANT-rK) are rows of their own, each
+compared with the same 1-worker run; each row also gives the master's predictor counts and its
+median reprojection time.
 
   python3 bench/cluster_scaling_report.py OUTDIR [--jsonl FILE]   (FILE: every frame, one line each)
 """
@@ -19,11 +22,11 @@ import glob, json, os, re, statistics, sys
 
 out = sys.argv[1]
 jsonl = sys.argv[sys.argv.index("--jsonl") + 1] if "--jsonl" in sys.argv else None
-runs = {}  # (size, n) -> {frame: cluster_frame event}
+runs = {}  # (size, n, variant) -> {frame: cluster_frame event}
 recovered = {}
 for path in glob.glob(os.path.join(out, "*-n*.master.err")):
-    m = re.match(r"(\d+x\d+)-n(\d+)\.master\.err", os.path.basename(path))
-    key = (m.group(1), int(m.group(2)))
+    m = re.match(r"(\d+x\d+)-n(\d+)(-.*)?\.master\.err", os.path.basename(path))
+    key = (m.group(1), int(m.group(2)), (m.group(3) or "")[1:])
     frames = {}
     for line in open(path):
         if '"cluster_frame"' not in line:
@@ -46,22 +49,22 @@ def slowdown(size, n):
     one, many = kernels(1), kernels(n)
     return statistics.median(many) / one[0] if one and many else float("nan")
 
-def fps(size, n):
-    p = os.path.join(out, "%s-n%d.load" % (size, n))
+def fps(size, n, variant=""):
+    p = os.path.join(out, "%s-n%d%s.load" % (size, n, "-" + variant if variant else ""))
     for line in open(p) if os.path.exists(p) else []:
         if '"summary"' in line:
             return json.loads(line)["fps_total"]
     return float("nan")
 
 rows = []
-for size in sorted({s for s, _ in runs}, key=lambda s: int(s.split("x")[0])):
-    ref = runs.get((size, 1), {})
-    print("### %s, AO %s, %s\n" % (size, summary["ao"], summary["scene"]))
-    print("| workers | frames | kernel eff. median (worst) | rendering eff. median (worst) | balance median (worst) | kernel sum / single | machine slowdown | net kernel eff. | fps |")
-    print("|---|---|---|---|---|---|---|---|---|")
-    for n in sorted(n for s, n in runs if s == size):
-        ke, re_, bal, ksum = [], [], [], []
-        for k, e in sorted(runs[(size, n)].items()):
+for size in sorted({k[0] for k in runs}, key=lambda s: int(s.split("x")[0])):
+    ref = runs.get((size, 1, ""), {})
+    print("### %s, AO %s, %s, loop %s\n" % (size, summary["ao"], summary["scene"], summary.get("loop", "")))
+    print("| workers | run | frames | kernel eff. median (worst) | rendering eff. median (worst) | balance median (worst) | kernel sum / single | machine slowdown | net kernel eff. | fps | predictors | reproject ms |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for (_, n, variant) in sorted(k for k in runs if k[0] == size):
+        ke, re_, bal, ksum, preds, rep_ms = [], [], [], [], {}, []
+        for k, e in sorted(runs[(size, n, variant)].items()):
             if k not in ref:
                 continue
             k1 = ref[k]["per_node"][0]["kernel_ms"]
@@ -69,7 +72,11 @@ for size in sorted({s for s, _ in runs}, key=lambda s: int(s.split("x")[0])):
             ks = [p["kernel_ms"] for p in e["per_node"]]
             rs = [p["rendering_ms"] for p in e["per_node"]]
             nodes = len(ks)
-            row = {"size": size, "workers": n, "frame": k, "kernel_eff": k1 / (nodes * max(ks)),
+            pred = e.get("predictor", "")
+            preds[pred] = preds.get(pred, 0) + 1
+            if pred == "reprojected":
+                rep_ms.append(e.get("reproject_ms", 0))
+            row = {"size": size, "workers": n, "run": variant, "predictor": pred, "reproject_ms": e.get("reproject_ms"), "reproject_cpu_ms": e.get("reproject_cpu_ms"), "frame": k, "kernel_eff": k1 / (nodes * max(ks)),
                    "rendering_eff": r1 / (nodes * max(rs)), "balance": e["balance"], "kernel_sum": sum(ks) / k1,
                    "kernel_ms": ks, "rendering_ms": rs, "single_kernel_ms": k1, "single_rendering_ms": r1}
             rows.append(row)
@@ -77,11 +84,13 @@ for size in sorted({s for s, _ in runs}, key=lambda s: int(s.split("x")[0])):
         if not ke:
             continue
         pct = lambda xs, worst: "%.1f%% (%.1f%%)" % (100 * statistics.median(xs), 100 * worst(xs))
-        rec = recovered.get((size, n), 0)
+        rec = recovered.get((size, n, variant), 0)
         sd = slowdown(size, n)
-        print("| %d | %d%s | %s | %s | %.3f (%.3f) | %.3f | %.3f | %.1f%% | %.2f |" % (
-            n, len(ke), " (+%d recovered)" % rec if rec else "", pct(ke, min), pct(re_, min),
-            statistics.median(bal), max(bal), statistics.median(ksum), sd, 100 * statistics.median(ke) * sd, fps(size, n)))
+        print("| %d | %s | %d%s | %s | %s | %.3f (%.3f) | %.3f | %.3f | %.1f%% | %.2f | %s | %s |" % (
+            n, variant or "-", len(ke), " (+%d recovered)" % rec if rec else "", pct(ke, min), pct(re_, min),
+            statistics.median(bal), max(bal), statistics.median(ksum), sd, 100 * statistics.median(ke) * sd,
+            fps(size, n, variant), " ".join("%s %d" % kv for kv in sorted(preds.items())),
+            "%.2f" % statistics.median(rep_ms) if rep_ms else "-"))
     print()
 print("Conditions: " + ", ".join("%s %s" % (k, v) for k, v in summary.items() if k != "summary"))
 if jsonl:

@@ -17,7 +17,9 @@
 //
 // A cut (the new view shares little with the old one: under `min_coverage` of the packets got
 // a splat) gives the unprojected map back, so the tiler never works from a mostly invented map.
+#include <cstddef>
 #include <cstdint>
+#include <vector>
 
 #include "core/cost_map.h"
 #include "core/rect.h"
@@ -38,6 +40,9 @@ struct ViewRays {
   // Pixel position (x, y) of a world point (w = 1) or direction (w = 0); false when it is
   // behind the camera or the view is degenerate. depth: distance along cz (+inf for directions).
   bool project(const float xyzw[4], float& x, float& y, float& depth) const;
+  // The ray through pixel position (x, y), with unit coefficient on cz: the point at depth d
+  // on it (project's depth) is eye + d * direction.
+  Vec3 direction(float x, float y) const;
 };
 
 struct ReprojectStats {
@@ -51,7 +56,29 @@ struct ReprojectStats {
 // The previous frame's cost map (covering packet space [0, W) x [0, H) of `layout` at the
 // view's resolution) carried into `to`. `points` must cover the same packets; where it does
 // not (a renderer that gives none), the map comes back unchanged (stats->cut).
+// The wire form of a task's PacketPoints (TileResult::depth): one float32 per packet of
+// points.packets, row-major, little endian (x86 peers' order, like the radiance): the depth
+// of the packet's point along the view direction of the camera that rendered it
+// (ViewRays::project), +inf for sky, NaN for nothing known. 4 bytes a packet, not 16: the
+// receiver puts each point back on the ray through its packet's centre at that depth, within
+// half a packet of where the mean hit projected, which the one-packet footprints blur anyway.
+std::vector<uint8_t> encode_depths(const PacketPoints& points, const ViewRays& from);
+// Decodes a task's depths over `packets` (packet space of `from`'s resolution in `layout`)
+// into `into`, whose rectangle must contain them. False, writing nothing, when the size does
+// not match or the rectangle is not inside `into`. Any float value is safe: one that is
+// negative, NaN or zero gives w = -1 (nothing known); +inf gives the sky.
+bool decode_depths(const uint8_t* data, size_t size, const Rect& packets, const ViewRays& from, PacketLayout layout,
+                   PacketPoints& into);
+
 CostMap reproject(const CostMap& cost, const PacketPoints& points, const ViewRays& to, PacketLayout layout,
                   ReprojectStats* stats = nullptr, double min_coverage = 0.5);
+
+// The same at a coarser grain, for large frames: the map is carried in blocks of `block` x
+// `block` packets (the cost summed, the points of each block merged into the mean of its surface
+// points, else the mean sky direction), and each block's carried cost is spread evenly over its
+// packets. About block^2 times less work; the tiler, which cuts at packet boundaries, then sees
+// a map that is flat inside each block. block <= 1 is reproject(). stats count blocks.
+CostMap reproject_blocks(const CostMap& cost, const PacketPoints& points, const ViewRays& to, PacketLayout layout,
+                         int32_t block, ReprojectStats* stats = nullptr, double min_coverage = 0.5);
 
 }  // namespace tessera

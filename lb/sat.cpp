@@ -312,4 +312,23 @@ double SatArray::cost(const Rect& q) const {
   return sum;
 }
 
+CostMap SatArray::cost_map() const {
+  if (!finalized_) throw std::logic_error("SatArray::cost_map: finalize() was not called");
+  const int32_t W = space_.width();
+  const auto unit = [](double v) { return uint32_t(std::llround(std::min(std::max(v, 0.0), 4294967295.0))); };
+  CostMap out{space_, std::vector<uint32_t>(size_t(space_.area()), unit(missing_density_))};
+  for (const Entry& e : entries_) {
+    const Rect& r = e.sat.packets();
+    const uint64_t* t = e.sat.table();
+    const size_t s = e.sat.stride();
+    for (int32_t j = 0; j < r.height(); ++j)
+      for (int32_t i = 0; i < r.width(); ++i) {
+        const uint64_t c = t[size_t(j + 1) * s + size_t(i + 1)] - t[size_t(j) * s + size_t(i + 1)] -
+                           t[size_t(j + 1) * s + size_t(i)] + t[size_t(j) * s + size_t(i)];
+        out.cost[size_t(r.y0 + j - space_.y0) * size_t(W) + size_t(r.x0 + i - space_.x0)] = unit(double(c) * e.perf);
+      }
+  }
+  return out;
+}
+
 }  // namespace tessera

@@ -118,6 +118,10 @@ class SatArray {
   // a binary search rejects the SATs that start at or beyond r.x1. Requires finalize().
   double cost(const Rect& r) const;
 
+  // The normalised cost of every packet of the space, as one map (rounded to whole units,
+  // at most 2^32 - 1): what the reprojection (lb/reproject.h) starts from. Requires finalize().
+  CostMap cost_map() const;
+
   struct Entry {
     Sat sat;
     double perf;  // single-core performance coefficient of the originating node

@@ -831,6 +831,12 @@ CAF_TEST(check_tile and check_nodes reject impossible tiles and node lists) {
     other.cost.assign(9, 1);
     Sat::from_cost_map(other).serialize_into(t.sat);  // a SAT of other packets
   }));
+  // Depths for the balancer's reprojection: none, or 4 bytes for each of the task's packets.
+  TileResult deep = ok;
+  deep.depth.assign(size_t(cm.packets.area()) * 4, 0xff);  // any float (here NaN) is taken
+  CAF_CHECK_EQUAL(check_tile(deep, 7, task, pl, kSize, kSize), "");
+  CAF_CHECK(bad([&](TileResult& t) { t.depth.assign(size_t(cm.packets.area()) * 4 - 1, 0); }));
+  CAF_CHECK(bad([&](TileResult& t) { t.depth.assign(size_t(cm.packets.area()) * 4 + 4, 0); }));
   // A progressive still's tiles carry their radiance: 12 bytes a pixel, finite, not negative.
   CAF_CHECK(!check_tile(ok, 7, task, pl, kSize, kSize, true).empty());  // asked for and missing
   TileResult lit = ok;

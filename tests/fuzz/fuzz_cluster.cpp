@@ -22,9 +22,10 @@
 #include <caf/error.hpp>
 
 #include "actors/messages.h"
-#include "actors/checks.h"
 #include "actors/node.h"
 #include "actors/checks.h"
+#include "lb/reproject.h"
+#include "lb/sat.h"
 
 using namespace tessera;
 
@@ -46,6 +47,25 @@ void check(const TileResult& t, size_t i, PacketLayout layout) {
   if (bad.empty() && t.rgba.size() != size_t(kTasks[i % 2].area()) * 4) {
     std::fprintf(stderr, "check_tile passed a tile with %zu bytes of pixels\n", t.rgba.size());
     std::abort();
+  }
+  // What the master's tiler does with an accepted tile's SAT and depths: decode the depths and
+  // carry the cost into a turned camera (any float in them must be safe).
+  if (bad.empty() && !t.sat.empty() && !t.depth.empty()) {
+    Sat sat = Sat::deserialize(t.sat);
+    SatArray arr(packet_space(kWidth, kHeight, layout));
+    arr.add(sat);
+    arr.finalize();
+    Camera a, b;
+    b.to_world = Mat4::rotate({0, 1, 0}, 0.1f);
+    const Rect space = arr.packet_space();
+    PacketPoints pts{space, std::vector<float>(size_t(space.area()) * 4, -1.0f)};
+    if (!decode_depths(t.depth.data(), t.depth.size(), sat.packets(), ViewRays::of(a, kWidth, kHeight), layout, pts)) {
+      std::fprintf(stderr, "check_tile passed depths that do not decode\n");
+      std::abort();
+    }
+    ReprojectStats st;
+    CostMap m = reproject(arr.cost_map(), pts, ViewRays::of(b, kWidth, kHeight), layout, &st);
+    if (m.packets != space || m.cost.size() != size_t(space.area())) std::abort();
   }
 }
 

@@ -6,8 +6,10 @@
 // inputs of issue 16 that abort inside Embree (mesh transforms that are singular or nearly
 // so, a camera scaled by 1e19, a glTF node scaled to zero): the render target must survive them.
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <string>
 
 #include <caf/binary_serializer.hpp>
@@ -261,6 +263,12 @@ TileResult tile(const Rect& pixels, PacketLayout layout) {
                   (pixels.y1 + layout.h - 1) / layout.h};
   for (int32_t i = 0; i < cost.packets.area(); ++i) cost.cost.push_back(uint32_t(100 + i));
   t.sat = Sat::from_cost_map_serial(cost).serialize();
+  // Depths for the balancer's reprojection: a wall, one sky packet, one unknown.
+  std::vector<float> depth(cost.cost.size(), 20.0f);
+  depth[0] = std::numeric_limits<float>::infinity();
+  depth[1] = std::numeric_limits<float>::quiet_NaN();
+  t.depth.resize(depth.size() * 4);
+  std::memcpy(t.depth.data(), depth.data(), t.depth.size());
   t.kernel_ms = 1.5;
   t.rendering_ms = 2;
   t.sat_ms = 0.1;

@@ -6,6 +6,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
+#include <limits>
 #include <set>
 
 #include "lb/reproject.h"
@@ -315,4 +317,103 @@ TEST_CASE("A cut gives the unprojected map back, and the tiling from it is sound
   ReprojectStats none;
   CHECK(reproject(cost, PacketPoints{}, ViewRays::of(a.cam, W, H), a.layout, &none).cost == cost.cost);
   CHECK(none.cut);
+}
+
+TEST_CASE("Depths on the wire put each packet's point back on its ray, and any float is safe", "[reproject]") {
+  const Frame a = render_view(look({0, 0, 0}, {0, 0, -1}, kFov));
+  const ViewRays va = ViewRays::of(a.cam, W, H);
+  const std::vector<uint8_t> wire = encode_depths(a.r.points, va);
+  REQUIRE(wire.size() == a.r.cost.cost.size() * 4);
+  const Rect space = a.r.cost.packets;
+  PacketPoints back{space, std::vector<float>(size_t(space.area()) * 4, -1.0f)};
+  REQUIRE(decode_depths(wire.data(), wire.size(), space, va, a.layout, back));
+  // Each decoded point projects to its packet's centre at the depth the exact point had.
+  for (int32_t py = space.y0; py < space.y1; ++py)
+    for (int32_t px = space.x0; px < space.x1; ++px) {
+      const size_t i = size_t(py) * size_t(space.width()) + size_t(px);
+      const float* p = &a.r.points.xyzw[i * 4];
+      const float* q = &back.xyzw[i * 4];
+      REQUIRE(q[3] == p[3]);
+      float x0, y0, d0, x1, y1, d1;
+      REQUIRE(va.project(p, x0, y0, d0));
+      REQUIRE(va.project(q, x1, y1, d1));
+      CHECK(std::fabs(d1 - d0) <= 1e-4f * d0);
+      CHECK(std::fabs(x1 - (float(px) + 0.5f) * float(a.layout.w)) < 1e-2f);
+      CHECK(std::fabs(y1 - (float(py) + 0.5f) * float(a.layout.h)) < 1e-2f);
+    }
+  // Carried through a turn from the decoded points, the map is the exact points' map but for
+  // sub-packet shifts: within 0.5 packets of where the geometry says (the linear costs of the
+  // turn test above).
+  const float yaw = 4 * kPi / 180;
+  const Camera b = look({0, 0, 0}, {std::sin(yaw), 0.02f, -std::cos(yaw)}, kFov);
+  CostMap cost = a.r.cost;
+  for (int32_t py = 0; py < cost.packets.y1; ++py)
+    for (int32_t px = 0; px < cost.packets.x1; ++px) cost.cost[size_t(py) * cost.packets.x1 + px] = uint32_t(1000 + 100 * px);
+  ReprojectStats st;
+  const CostMap moved = reproject(cost, back, ViewRays::of(b, W, H), a.layout, &st);
+  CHECK_FALSE(st.cut);
+  int checked = 0, close = 0;
+  for (int32_t ty = 0; ty < moved.packets.y1; ++ty)
+    for (int32_t tx = 0; tx < moved.packets.x1; ++tx) {
+      const Truth t = brute_force(a, b, a.layout, tx, ty);
+      if (t.unseen || t.surfaces != 1) continue;
+      ++checked;
+      close += std::fabs((double(moved.at(tx, ty)) - 1000) / 100 - (t.mean_x / a.layout.w - 0.5)) <= 0.5;
+    }
+  INFO(checked << " wall packets, " << close << " within 0.5 packets");
+  CHECK(checked > moved.packets.area() * 6 / 10);
+  CHECK(close >= checked * 95 / 100);
+
+  // Hostile or broken depths: negative, zero, NaN, -inf and huge values give "nothing known" or
+  // a far point, +inf the sky; a wrong size or a rectangle outside the map writes nothing.
+  const float odd[] = {-1.0f, 0.0f, std::numeric_limits<float>::quiet_NaN(), -std::numeric_limits<float>::infinity(),
+                       3.4e38f, std::numeric_limits<float>::infinity(), 1e-30f, 7.0f};
+  const Rect row{0, 0, 8, 1};
+  std::vector<uint8_t> bytes(sizeof odd);
+  std::memcpy(bytes.data(), odd, sizeof odd);
+  PacketPoints into{space, std::vector<float>(size_t(space.area()) * 4, -1.0f)};
+  REQUIRE(decode_depths(bytes.data(), bytes.size(), row, va, a.layout, into));
+  const float want_w[] = {-1, -1, -1, -1, -1, 0, 1, 1};
+  for (int i = 0; i < 8; ++i) CHECK(into.xyzw[size_t(i) * 4 + 3] == want_w[i]);
+  for (float v : into.xyzw) CHECK(std::isfinite(v));
+  CHECK_FALSE(decode_depths(bytes.data(), bytes.size() - 1, row, va, a.layout, into));
+  CHECK_FALSE(decode_depths(bytes.data(), bytes.size(), Rect{space.x1 - 4, 0, space.x1 + 4, 1}, va, a.layout, into));
+  ReprojectStats hs;
+  const CostMap safe = reproject(cost, into, ViewRays::of(b, W, H), a.layout, &hs);
+  CHECK(safe.cost.size() == size_t(space.area()));
+}
+
+TEST_CASE("Carried in blocks of packets, the cost lands within a block of where it belongs", "[reproject]") {
+  const Frame a = render_view(look({0, 0, 0}, {0, 0, -1}, kFov));
+  const float yaw = 4 * kPi / 180;
+  const Camera b = look({0, 0, 0}, {std::sin(yaw), 0.02f, -std::cos(yaw)}, kFov);
+  CostMap cost = a.r.cost;
+  for (int32_t py = 0; py < cost.packets.y1; ++py)
+    for (int32_t px = 0; px < cost.packets.x1; ++px) cost.cost[size_t(py) * cost.packets.x1 + px] = uint32_t(1000 + 100 * px);
+  // Under the same camera the total is kept (up to rounding a block's cost over its packets).
+  ReprojectStats same_st;
+  const CostMap same = reproject_blocks(cost, a.r.points, ViewRays::of(a.cam, W, H), a.layout, 2, &same_st);
+  CHECK_FALSE(same_st.cut);
+  CHECK(std::fabs(double(same.total()) - double(cost.total())) < 0.001 * double(cost.total()));
+  // After the turn, each packet reads a position within a block (2 packets) of the truth.
+  ReprojectStats st;
+  const CostMap moved = reproject_blocks(cost, a.r.points, ViewRays::of(b, W, H), a.layout, 2, &st);
+  CHECK_FALSE(st.cut);
+  REQUIRE(moved.packets == cost.packets);
+  int checked = 0, close = 0;
+  for (int32_t ty = 0; ty < moved.packets.y1; ++ty)
+    for (int32_t tx = 0; tx < moved.packets.x1; ++tx) {
+      const Truth t = brute_force(a, b, a.layout, tx, ty);
+      if (t.unseen || t.surfaces != 1) continue;
+      ++checked;
+      close += std::fabs((double(moved.at(tx, ty)) - 1000) / 100 - (t.mean_x / a.layout.w - 0.5)) <= 1.5;
+    }
+  INFO(checked << " wall packets, " << close << " within 1.5 packets; " << st.filled << " blocks filled");
+  CHECK(checked > moved.packets.area() * 6 / 10);
+  CHECK(close >= checked * 95 / 100);
+  // block 1 is reproject() itself; a turn of 180 degrees is a cut, the map comes back.
+  ReprojectStats cut_st;
+  const CostMap back = reproject_blocks(cost, a.r.points, ViewRays::of(look({0, 0, 0}, {0, 0, 1}, kFov), W, H), a.layout, 2, &cut_st);
+  CHECK(cut_st.cut);
+  CHECK(back.cost == cost.cost);
 }
