@@ -115,7 +115,8 @@ export async function loadGltf(body, url, fetchBinary) {
     };
   });
 
-  const result = { meshes: [], lights: [], camera: null, url };
+  // undrawn: primitives that are not drawn (points and lines), counted for one warning.
+  const result = { meshes: [], lights: [], camera: null, url, undrawn: 0 };
   const lightDefs = (json.extensions && json.extensions.KHR_lights_punctual && json.extensions.KHR_lights_punctual.lights) || [];
   function visit(ni, parent) {
     const node = json.nodes[ni];
@@ -130,7 +131,7 @@ export async function loadGltf(body, url, fetchBinary) {
       const mesh = json.meshes[node.mesh];
       mesh.primitives.forEach((p, k) => {
         const mode = p.mode ?? 4;
-        if (mode !== 4 && mode !== 5) return;  // points and lines are not drawn
+        if (mode !== 4 && mode !== 5) { result.undrawn++; return; }  // points, lines and fans are not drawn
         const at = p.attributes;
         if (at.POSITION === undefined) return;
         let indices = p.indices !== undefined ? accessor(p.indices) : null;

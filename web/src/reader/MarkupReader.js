@@ -30,6 +30,26 @@ function inlineStyle(el) {
   return out;
 }
 
+// Mesh types of XML3D that are not drawn (a warning, not an error).
+const UNDRAWN_TYPES = new Set(['points', 'lines', 'linestrips']);
+const PERSPECTIVE = 'urn:xml3d:view:perspective';
+const PROJECTIVE = 'urn:xml3d:view:projective';
+
+// The vertical field of view of a projective view's projectionMatrix (a float4x4 entry,
+// column-major like every XML3D matrix) when it is a centred perspective projection, as
+// gluPerspective and three.js make them: m[5] = 1 / tan(fovY / 2), no off-axis terms (m[8],
+// m[9]), w = -z (m[11] = -1, m[15] = 0). Such a view is the perspective view with that fovY
+// (the width follows the canvas, as for every view here). Otherwise null.
+export function projectiveFovY(entry) {
+  const m = entry && entry.value !== undefined ? entry.value : entry;
+  if (!m || m.length !== 16) return null;
+  const zero = (v) => Math.abs(v) < 1e-6;
+  if (!(m[5] > 0 && m[0] > 0) || !zero(m[8]) || !zero(m[9]) || Math.abs(m[11] + 1) > 1e-6 || !zero(m[15])) return null;
+  if (!zero(m[1]) || !zero(m[2]) || !zero(m[3]) || !zero(m[4]) || !zero(m[6]) || !zero(m[7]) || !zero(m[12]) || !zero(m[13])) return null;
+  const fov = 2 * Math.atan(1 / m[5]);
+  return fov > 0 && fov < Math.PI ? fov : null;
+}
+
 export class MarkupReader {
   // resources: a Resources (or anything with get(url) and urlOfDocument(doc)).
   // computedStyle(el): optional, e.g. window.getComputedStyle.
@@ -93,6 +113,7 @@ export class MarkupReader {
           display: cs.display || inline.display, visibility: cs.visibility || inline.visibility,
           transform: cs.transform && cs.transform !== 'none' ? cs.transform : inline.transform,
           material: inline.material,
+          'z-index': cs.zIndex && cs.zIndex !== 'auto' ? cs.zIndex : inline['z-index'],
           computed: !!cs.visibility,  // computed visibility already holds what is inherited
         };
       } catch { /* fall through */ }
@@ -280,6 +301,9 @@ export class MarkupReader {
       const w = local ? M.multiply(world, local) : world;
       const visible = inheritVisible && visibility !== 'hidden' && visibility !== 'collapse';
       const mat = el.getAttribute('material') || style.material || materialRef;
+      const z = style['z-index'];
+      if ((tag === 'mesh' || tag === 'model') && z && z !== 'auto')
+        this.warn(el, `${this.describe(el)} z-index: ${z} is ignored: the scene is drawn in one depth order (no render bins)`);
       switch (tag) {
         case 'mesh': this.readMesh(el, w, mat, visible); break;
         case 'model': this.readModel(el, w, mat, visible); break;
@@ -361,7 +385,10 @@ export class MarkupReader {
       return;
     }
     if (g.type !== 'triangles' && g.type !== 'tristrips') {
-      this.error(el, `${what} type="${g.type}" is not drawn (triangles and tristrips are)`);
+      // Points and lines are valid XML3D that this library does not draw: a warning. Any other
+      // type is not XML3D at all: an error.
+      if (UNDRAWN_TYPES.has(g.type)) this.warn(el, `${this.describe(el)} type="${g.type}" is not drawn: only triangles and tristrips are`);
+      else this.error(el, `${what} type="${g.type}" is not drawn (triangles and tristrips are)`);
       return;
     }
     positions = this.floats(positions);
@@ -457,6 +484,9 @@ export class MarkupReader {
     const fallback = this.materialParams(materialRef, el);
     if (r.gltf) {
       const g = r.gltf;
+      if (g.undrawn > 0)
+        this.warn(el, `${this.describe(el)} src="${src}": ${g.undrawn} glTF primitive${g.undrawn > 1 ? 's' : ''} of points, lines or triangle fans ` +
+          `not drawn: only triangles and triangle strips are`);
       g.meshes.forEach((p, i) => {
         const o = overrides.get(p.name);
         let mat;
@@ -581,6 +611,15 @@ export class MarkupReader {
       cam.toWorld = active.world;
       const d = this.collect(active.el);
       cam.fovY = first(d.get('fovVertical'), Math.PI / 4);
+      const model = (active.el.getAttribute('model') || PERSPECTIVE).trim();
+      if (model === PROJECTIVE) {
+        const fov = projectiveFovY(d.get('projectionMatrix'));
+        if (fov !== null) cam.fovY = fov;
+        else this.warn(active.el, `${this.describe(active.el)} model="${PROJECTIVE}": its projectionMatrix is not a ` +
+          `centred perspective projection (missing, off-axis or orthographic); drawn as a perspective view with fovVertical ${+cam.fovY.toFixed(4)}`);
+      } else if (model !== PERSPECTIVE) {
+        this.warn(active.el, `${this.describe(active.el)} model="${model}" is not a known view model; drawn as ${PERSPECTIVE}`);
+      }
       const fx = d.get('fovHorizontal');
       if (fx && fx.value.length) cam.fovX = fx.value[0];
       cam.near = first(d.get('near'), null);

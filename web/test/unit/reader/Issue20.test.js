@@ -166,3 +166,74 @@ test('the page logs each unsupported-markup warning once with console.warn, acro
   assert.equal(logged[0][1].id, 'm', 'the element itself is logged too');
   assert.equal(handler.warnings.length, 1);
 });
+
+// Item 10: what the client cannot show gets one warning naming the element; nothing is dropped
+// without a word. Points and lines are valid XML3D (a warning, no red status line); a type that
+// is not XML3D stays an error.
+test('points and lines meshes, z-index and unknown view models give one warning each that names the element', () => {
+  const { scene } = read(`<xml3d view="#v">
+      <view id="v" model="urn:xml3d:view:orthographic"></view>
+      <mesh id="pts" type="points">${TRI}</mesh><mesh id="ln" type="lines">${TRI}</mesh>
+      <mesh id="ls" type="linestrips">${TRI}</mesh><mesh id="ln2" type="lines">${TRI}</mesh>
+      <mesh id="top" style="z-index: 2">${TRI}</mesh><mesh id="flat" style="z-index: auto">${TRI}</mesh>
+      <mesh id="quads" type="quads">${TRI}</mesh></xml3d>`);
+  assert.deepEqual(scene.warnings.map((w) => w.message), [
+    '<mesh id="pts"> type="points" is not drawn: only triangles and tristrips are',
+    '<mesh id="ln"> type="lines" is not drawn: only triangles and tristrips are',
+    '<mesh id="ls"> type="linestrips" is not drawn: only triangles and tristrips are',
+    '<mesh id="ln2"> type="lines" is not drawn: only triangles and tristrips are',
+    '<mesh id="top"> z-index: 2 is ignored: the scene is drawn in one depth order (no render bins)',
+    '<view id="v"> model="urn:xml3d:view:orthographic" is not a known view model; drawn as urn:xml3d:view:perspective',
+  ]);
+  assert.deepEqual(scene.warnings.map((w) => w.element.id), ['pts', 'ln', 'ls', 'ln2', 'top', 'v']);
+  assert.deepEqual([...scene.meshes.values()].map((m) => m.element.id), ['top', 'flat'], 'the triangle meshes are drawn');
+  assert.deepEqual(scene.errors.map((e) => e.message), ['<mesh id="quads"> type="quads" is not drawn (triangles and tristrips are)']);
+});
+
+test('a projective view with a centred perspective projectionMatrix is drawn with its field of view', () => {
+  // gluPerspective(fovY = 0.6, aspect 2, near 1, far 100), column-major.
+  const f = 1 / Math.tan(0.3), a = 2, n = 1, far = 100;
+  const P = [f / a, 0, 0, 0, 0, f, 0, 0, 0, 0, (far + n) / (n - far), -1, 0, 0, (2 * far * n) / (n - far), 0];
+  const { scene } = read(`<xml3d><view id="p" model="urn:xml3d:view:projective">
+      <float4x4 name="projectionMatrix">${P.join(' ')}</float4x4></view><mesh>${TRI}</mesh></xml3d>`);
+  near(scene.camera.fovY, 0.6);
+  assert.deepEqual(scene.warnings, []);
+  assert.deepEqual(scene.errors, []);
+  // Off-axis (m[8] != 0), orthographic (m[11] = 0, m[15] = 1) and missing matrices: a warning,
+  // and the view's fovVertical (default pi/4).
+  const offAxis = [...P]; offAxis[8] = 0.2;
+  const ortho = [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, -0.02, 0, 0, 0, -1, 1];
+  for (const m of [offAxis, ortho, null]) {
+    const body = m ? `<float4x4 name="projectionMatrix">${m.join(' ')}</float4x4>` : '';
+    const { scene: s } = read(`<xml3d><view id="q" model="urn:xml3d:view:projective">${body}</view><mesh>${TRI}</mesh></xml3d>`);
+    near(s.camera.fovY, Math.PI / 4);
+    assert.equal(s.warnings.length, 1);
+    assert.match(s.warnings[0].message, /^<view id="q"> model="urn:xml3d:view:projective": its projectionMatrix is not a centred perspective projection/);
+    assert.deepEqual(s.errors, []);
+  }
+});
+
+test('glTF primitives of points or lines in a model give one warning naming the model', async () => {
+  const pos = new Float32Array([0, 0, 0, 1, 0, 0, 0, 1, 0]);
+  const gltf = {
+    asset: { version: '2.0' }, scene: 0, scenes: [{ nodes: [0] }], nodes: [{ mesh: 0 }],
+    meshes: [{ primitives: [{ attributes: { POSITION: 0 } }, { attributes: { POSITION: 0 }, mode: 1 }, { attributes: { POSITION: 0 }, mode: 0 }] }],
+    accessors: [{ bufferView: 0, componentType: 5126, count: 3, type: 'VEC3' }],
+    bufferViews: [{ buffer: 0, byteOffset: 0, byteLength: 36 }],
+    buffers: [{ uri: 'data:application/octet-stream;base64,' + Buffer.from(pos.buffer).toString('base64'), byteLength: 36 }],
+  };
+  const fetch = async (url) => ({ ok: true, status: 200, json: async () => gltf, arrayBuffer: async () => new ArrayBuffer(0), text: async () => JSON.stringify(gltf), url });
+  let loaded;
+  const done = new Promise((r) => (loaded = r));
+  const resources = new Resources({ fetch, onLoad: () => loaded() });
+  const doc = page('<xml3d><model id="g" src="m/lines.gltf"></model></xml3d>');
+  const reader = new MarkupReader({ resources });
+  reader.read(doc.querySelector('xml3d'));
+  await done;
+  const scene = reader.read(doc.querySelector('xml3d'));
+  assert.equal(scene.meshes.size, 1, 'the triangles are drawn');
+  assert.deepEqual(scene.warnings.map((w) => w.message),
+    ['<model id="g"> src="m/lines.gltf": 2 glTF primitives of points, lines or triangle fans not drawn: only triangles and triangle strips are']);
+  assert.equal(scene.warnings[0].element.id, 'g');
+  assert.deepEqual(scene.errors, []);
+});
