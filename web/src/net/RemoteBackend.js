@@ -11,14 +11,11 @@ import { JpegDisplay, S3tcDisplay, MjpegDisplay } from './FrameDisplay.js';
 import { hasS3TC } from './Features.js';
 import { readRenderSettings, refineStatus } from './RenderSettings.js';
 import { accessToken, withToken, redact } from './AccessToken.js';
+import { pageBackground } from './PageBackground.js';
 
+// The sky's colour: what the page shows behind the element (PageBackground.js).
 function cssColor(doc, el) {
-  const c = doc.defaultView.getComputedStyle(el).backgroundColor || '';
-  const m = /rgba?\(([^)]*)\)/.exec(c);
-  if (!m) return [0, 0, 0];
-  const v = m[1].split(/[\s,/]+/).map(Number);
-  if (v.length > 3 && v[3] === 0) return [0, 0, 0];
-  return [v[0] / 255, v[1] / 255, v[2] / 255];
+  return pageBackground(el, (e) => doc.defaultView.getComputedStyle(e));
 }
 
 const int = (el, name, def) => {
