@@ -88,7 +88,7 @@ void finish_frame(self_ptr self, std::vector<TileResult>&& tiles, std::vector<do
   meta.render_end_ns = steady_ns();
   std::string error;
   SatReport rep{meta.seq, meta.width, meta.height, st.layout.w, st.layout.h, {}, {}, {}, {}};
-  if (st.batch.hit_points) rep.camera = pack_camera(st.cur.scene.scene->camera());
+  if (st.batch.hit_points && st.cur.scene.scene) rep.camera = pack_camera(st.cur.scene.scene->camera());
   std::vector<TileResult> shown;
   std::vector<Json> per_node;
   double max_norm = 0, sum_norm = 0;
@@ -223,7 +223,7 @@ void render_batch(self_ptr self) {
     return recover(self, std::move(r));
   }
   TaskRequest req{meta.seq, meta.width, meta.height, st.layout.w, st.layout.h, {}};
-  if (batch.hit_points) req.camera = pack_camera(st.cur.scene.scene->camera());
+  if (batch.hit_points && st.cur.scene.scene) req.camera = pack_camera(st.cur.scene.scene->camera());
   self->request(st.a.tiler, caf::infinite, tasks_atom::value, req).then([=](TaskList& tl) {
     auto& st = self->state;
     st.cur.meta.tiling_ms = tl.tiling_ms;

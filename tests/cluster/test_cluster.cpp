@@ -61,7 +61,7 @@ TEST_CASE("Two worker processes render for a master; a killed worker's tiles are
   CHECK(m.p->err_count("\"cluster_frame\"") >= 4);  // per-node figures of every frame
   // The workers return their packets' depths, and the master tiles frame 81 from frame 80's
   // cost carried into its camera (frames 40 and 80 may be cuts: the loop moved far).
-  CHECK(m.p->err_count("\"predictor\": \"area\"") == 1);
+  CHECK(m.p->err_count("\"predictor\": \"area\"") >= 1);  // the first frame
   CHECK(m.p->err_count("\"predictor\": \"reprojected\"") >= 1);
   CHECK(m.p->err_count("\"predictor\": \"previous_frame\"") == 0);
   CHECK(w1.p->err_count("\"worker_opened\"") == 1);
