@@ -9,6 +9,7 @@
 #include <cstring>
 #include <limits>
 #include <set>
+#include <utility>
 
 #include "lb/reproject.h"
 #include "lb/tiler.h"
@@ -124,6 +125,29 @@ Truth brute_force(const Frame& from, const Camera& to, PacketLayout layout, int3
     t.mean_y /= seen;
   }
   return t;
+}
+
+// Costs that encode the old packet's x: 1000 + 100 x.
+CostMap x_costs(const Frame& f) {
+  CostMap m = f.r.cost;
+  for (int32_t py = 0; py < m.packets.y1; ++py)
+    for (int32_t px = 0; px < m.packets.x1; ++px) m.cost[size_t(py) * m.packets.x1 + px] = uint32_t(1000 + 100 * px);
+  return m;
+}
+
+// Of the packets of `moved` (x_costs carried from frame a into camera b) that see the wall in
+// both views: how many, and how many read an old x within `tolerance` packets of where their
+// pixels really come from (the brute force).
+std::pair<int, int> wall_packets_near(const CostMap& moved, const Frame& a, const Camera& b, double tolerance) {
+  int checked = 0, close = 0;
+  for (int32_t ty = 0; ty < moved.packets.y1; ++ty)
+    for (int32_t tx = 0; tx < moved.packets.x1; ++tx) {
+      const Truth t = brute_force(a, b, a.layout, tx, ty);
+      if (t.unseen || t.surfaces != 1) continue;
+      ++checked;
+      close += std::fabs((double(moved.at(tx, ty)) - 1000) / 100 - (t.mean_x / a.layout.w - 0.5)) <= tolerance;
+    }
+  return {checked, close};
 }
 
 // Every packet a cost of its own, so a value names the packet it came from.
@@ -346,20 +370,11 @@ TEST_CASE("Depths on the wire put each packet's point back on its ray, and any f
   // turn test above).
   const float yaw = 4 * kPi / 180;
   const Camera b = look({0, 0, 0}, {std::sin(yaw), 0.02f, -std::cos(yaw)}, kFov);
-  CostMap cost = a.r.cost;
-  for (int32_t py = 0; py < cost.packets.y1; ++py)
-    for (int32_t px = 0; px < cost.packets.x1; ++px) cost.cost[size_t(py) * cost.packets.x1 + px] = uint32_t(1000 + 100 * px);
+  const CostMap cost = x_costs(a);
   ReprojectStats st;
   const CostMap moved = reproject(cost, back, ViewRays::of(b, W, H), a.layout, &st);
   CHECK_FALSE(st.cut);
-  int checked = 0, close = 0;
-  for (int32_t ty = 0; ty < moved.packets.y1; ++ty)
-    for (int32_t tx = 0; tx < moved.packets.x1; ++tx) {
-      const Truth t = brute_force(a, b, a.layout, tx, ty);
-      if (t.unseen || t.surfaces != 1) continue;
-      ++checked;
-      close += std::fabs((double(moved.at(tx, ty)) - 1000) / 100 - (t.mean_x / a.layout.w - 0.5)) <= 0.5;
-    }
+  const auto [checked, close] = wall_packets_near(moved, a, b, 0.5);
   INFO(checked << " wall packets, " << close << " within 0.5 packets");
   CHECK(checked > moved.packets.area() * 6 / 10);
   CHECK(close >= checked * 95 / 100);
@@ -387,9 +402,7 @@ TEST_CASE("Carried in blocks of packets, the cost lands within a block of where 
   const Frame a = render_view(look({0, 0, 0}, {0, 0, -1}, kFov));
   const float yaw = 4 * kPi / 180;
   const Camera b = look({0, 0, 0}, {std::sin(yaw), 0.02f, -std::cos(yaw)}, kFov);
-  CostMap cost = a.r.cost;
-  for (int32_t py = 0; py < cost.packets.y1; ++py)
-    for (int32_t px = 0; px < cost.packets.x1; ++px) cost.cost[size_t(py) * cost.packets.x1 + px] = uint32_t(1000 + 100 * px);
+  const CostMap cost = x_costs(a);
   // Under the same camera the total is kept (up to rounding a block's cost over its packets).
   ReprojectStats same_st;
   const CostMap same = reproject_blocks(cost, a.r.points, ViewRays::of(a.cam, W, H), a.layout, 2, &same_st);
@@ -400,14 +413,7 @@ TEST_CASE("Carried in blocks of packets, the cost lands within a block of where 
   const CostMap moved = reproject_blocks(cost, a.r.points, ViewRays::of(b, W, H), a.layout, 2, &st);
   CHECK_FALSE(st.cut);
   REQUIRE(moved.packets == cost.packets);
-  int checked = 0, close = 0;
-  for (int32_t ty = 0; ty < moved.packets.y1; ++ty)
-    for (int32_t tx = 0; tx < moved.packets.x1; ++tx) {
-      const Truth t = brute_force(a, b, a.layout, tx, ty);
-      if (t.unseen || t.surfaces != 1) continue;
-      ++checked;
-      close += std::fabs((double(moved.at(tx, ty)) - 1000) / 100 - (t.mean_x / a.layout.w - 0.5)) <= 1.5;
-    }
+  const auto [checked, close] = wall_packets_near(moved, a, b, 1.5);
   INFO(checked << " wall packets, " << close << " within 1.5 packets; " << st.filled << " blocks filled");
   CHECK(checked > moved.packets.area() * 6 / 10);
   CHECK(close >= checked * 95 / 100);
