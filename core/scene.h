@@ -88,6 +88,8 @@ struct Light {
   float cutoff = kPi / 4;      // spot: half-angle in radians
   float softness = 0.0f;       // spot: 0 = hard edge, 1 = fades over the whole cone
   bool on = true;
+  bool cast_shadow = true;     // false: no shadow rays, it reaches every surface facing it
+                               // (XML3D's castShadow, default false in markup; glTF lights cast)
 };
 
 struct Camera {

@@ -270,7 +270,8 @@ struct ClientEncoder {
     w.u32(s.id);
     w.u8(uint8_t(l.type));
     w.u8(l.on ? 1 : 0);
-    w.u16(0);
+    w.u8(l.cast_shadow ? 1 : 0);
+    w.u8(0);
     w.vec3(l.color);
     w.f32(l.intensity);
     w.vec3(l.position);
@@ -847,8 +848,7 @@ class ClientDecoder {
     SetLight s;
     Light& l = s.light;
     s.id = r.u32();
-    uint8_t type = r.u8(), on = r.u8();
-    uint16_t res = r.u16();
+    uint8_t type = r.u8(), on = r.u8(), cast_shadow = r.u8(), res = r.u8();
     l.color = r.vec3();
     l.intensity = r.f32();
     l.position = r.vec3();
@@ -856,9 +856,12 @@ class ClientDecoder {
     l.attenuation = r.vec3();
     l.cutoff = r.f32();
     l.softness = r.f32();
-    if (!c.id(s.id, "id") || !c.enumeration(type, wire::enum_max::light_type, "type") || !c.flag(on, "on") || !c.reserved(res)) return false;
+    if (!c.id(s.id, "id") || !c.enumeration(type, wire::enum_max::light_type, "type") || !c.flag(on, "on") ||
+        !c.flag(cast_shadow, "cast_shadow") || !c.reserved(res))
+      return false;
     l.type = Light::Type(type);
     l.on = on != 0;
+    l.cast_shadow = cast_shadow != 0;
     if (!c.non_negative(l.color, "color") || !c.range(l.intensity, wire::light::intensity, "intensity") ||
         !c.finite(l.position, "position") || !c.finite(l.direction, "direction") ||
         !c.non_negative(l.attenuation, "attenuation") || !c.range(l.cutoff, wire::light::cutoff, "cutoff") ||

@@ -368,6 +368,7 @@ void RayTracer::Impl::sync(const Scene& scene, std::vector<std::string>& warning
     const float cos_inner = std::cos(l.cutoff * (1.0f - std::fmin(std::fmax(l.softness, 0.0f), 1.0f)));
     c.hard_edge = !(cos_inner > c.cos_outer);
     c.inv_edge = c.hard_edge ? 0.0f : 1.0f / (cos_inner - c.cos_outer);
+    c.cast_shadow = l.cast_shadow;
     light_consts.push_back(c);
   }
   shade_mats.clear();

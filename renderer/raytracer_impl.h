@@ -246,6 +246,7 @@ struct RayTracer::Impl {
     Vec3 position, direction, to_light, radiance, attenuation;
     float cos_outer = 0, inv_edge = 0;  // spot: smoothstep from cos_outer over 1 / inv_edge
     bool hard_edge = true;
+    bool cast_shadow = true;  // false: no shadow rays for it (Light::cast_shadow)
   };
   std::vector<LightConst> light_consts;
   Camera camera;

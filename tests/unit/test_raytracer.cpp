@@ -484,6 +484,42 @@ TEST_CASE("alpha-masked cut-outs are transparent to camera rays and cast no shad
   }
 }
 
+// XML3D's castShadow: a light that does not cast shadows reaches every surface facing it and
+// traces no shadow rays; casting, the same light leaves the back quad dark behind the front one.
+TEST_CASE("a light with cast_shadow false lights what another surface hides from it, with no shadow rays", "[raytracer][shadow]") {
+  const int W = 101, H = 101;
+  Scene scene;
+  scene.set_resolution(W, H);
+  scene.set_environment(plain_env({0, 0, 0}, {0.2f, 0.2f, 0.2f}));
+  scene.set_material(1, diffuse({1, 0, 0}));
+  scene.set_material(2, diffuse({0, 1, 0}));
+  add_object(scene, 100, quad({-1, -1, 0}, {2, 0, 0}, {0, 2, 0}), 1);
+  add_object(scene, 200, quad({-4, -4, -1}, {8, 0, 0}, {0, 8, 0}), 2);
+  Light sun = directional({1, 0, -1});  // its shadow falls one unit to +x on the back quad
+  scene.set_light(1, sun);
+  const Camera cam = look({0, 0, 5}, {0, 0, 0}, 60 * kDeg);
+  scene.set_camera(cam);
+  float fx, fy;
+  project(cam, W, H, {1.5f, 0, -1}, fx, fy);  // beside the front quad, in its shadow
+  const int x = int(std::lround(fx)), y = int(std::lround(fy));
+  const int lit = int(std::lround(255 * (0.2f + std::sqrt(0.5f)))), dark = int(std::lround(255 * 0.2f));
+  RayTracer rt;
+  TaskResult casting, open;
+  render_full(rt, scene, no_ao(), nullptr, &casting);
+  CHECK(std::abs(px(casting.image, x, y).g - dark) <= 1);
+  CHECK(casting.rays.shadow > 0);
+  sun.cast_shadow = false;
+  scene.set_light(1, sun);
+  render_full(rt, scene, no_ao(), nullptr, &open);
+  CHECK(std::abs(px(open.image, x, y).g - lit) <= 1);
+  CHECK(open.rays.shadow == 0);
+  // Everywhere else the two images agree: only shadows changed.
+  int differ = 0;
+  for (int32_t j = 0; j < H; ++j)
+    for (int32_t i = 0; i < W; ++i) differ += px(open.image, i, j).g != px(casting.image, i, j).g && px(casting.image, i, j).g != dark;
+  CHECK(differ == 0);
+}
+
 // ---------------------------------------------------------------------------------------
 // Refraction: Snell offset through a tilted slab, total internal reflection.
 // ---------------------------------------------------------------------------------------

@@ -182,7 +182,7 @@ struct ClientJs {
   std::string operator()(const SetLight& s) {
     const Light& l = s.light;
     return Obj{}.f("type", q("light")).f("id", num(s.id)).f("lightType", q(name(l.type))).f("on", boolean(l.on))
-        .f("color", vec3(l.color)).f("intensity", num(l.intensity)).f("position", vec3(l.position))
+        .f("castShadow", boolean(l.cast_shadow)).f("color", vec3(l.color)).f("intensity", num(l.intensity)).f("position", vec3(l.position))
         .f("direction", vec3(l.direction)).f("attenuation", vec3(l.attenuation)).f("cutoff", num(l.cutoff))
         .f("softness", num(l.softness)).str();
   }
@@ -546,13 +546,14 @@ void valid_messages() {
     point.light.direction = {0, 0, 0};  // unused by point lights
     point.light.position = {4294967296.0f, -4294967296.0f, 0};
     off.light.on = false;
+    off.light.cast_shadow = false;
     off.light.attenuation = {0, 0, 0};  // unused by directional lights
     off.light.position = {kMaxF, -kMaxF, 0};
     lo.light.color = {0, 0, 0}, lo.light.intensity = 0, lo.light.softness = 0, lo.light.cutoff = kDenorm;
     hi.light.intensity = wire::light::intensity.hi, hi.light.cutoff = wire::light::cutoff.hi, hi.light.softness = 1;
     hi.light.direction = {1e18f, 0, 0};
     hi.id = kMaxU32;
-    client("lights: every type, on and off, ranges at both ends", {light(Light::Type::spot), point, off, lo, hi});
+    client("lights: every type, on and off, casting shadows or not, ranges at both ends", {light(Light::Type::spot), point, off, lo, hi});
   }
   client("removes of every kind", {Remove{RecordType::buffer, 1}, Remove{RecordType::texture, 2},
                                    Remove{RecordType::material, 3}, Remove{RecordType::mesh, 4},
@@ -954,7 +955,8 @@ void client_records() {
     bad_client("light: id 0", put<uint32_t>(l, kB + at::id, 0), ErrorCode::bad_id);
     bad_client("light: type 3", put<uint8_t>(l, kB + at::type, 3), ErrorCode::bad_enum);
     bad_client("light: on 2", put<uint8_t>(l, kB + at::on, 2), ErrorCode::bad_enum);
-    bad_client("light: reserved", put<uint16_t>(l, kB + at::reserved, 1), ErrorCode::bad_reserved);
+    bad_client("light: cast_shadow 2", put<uint8_t>(l, kB + at::cast_shadow, 2), ErrorCode::bad_enum);
+    bad_client("light: reserved", put<uint8_t>(l, kB + at::reserved, 1), ErrorCode::bad_reserved);
     bad_client("light: color negative", put(l, kB + at::color + 4, -0.1f), ErrorCode::out_of_range);
     bad_client("light: intensity negative", put(l, kB + at::intensity, -1.0f), ErrorCode::out_of_range);
     bad_client("light: intensity beyond its range", put(l, kB + at::intensity, std::nextafter(intensity.hi, kInf)),

@@ -135,7 +135,8 @@ function encodeClientRecord(w, r) {
       break;
     case 'light':
       at = w.begin(RecordType.light);
-      w.u32(r.id); w.u8(index(LightType, r.lightType, 'light type')); w.u8(r.on === false ? 0 : 1); w.u16(0);
+      w.u32(r.id); w.u8(index(LightType, r.lightType, 'light type')); w.u8(r.on === false ? 0 : 1);
+      w.u8(r.castShadow === false ? 0 : 1); w.u8(0);
       w.vec3(r.color); w.f32(r.intensity ?? 1); w.vec3(r.position); w.vec3(r.direction); w.vec3(r.attenuation);
       w.f32(r.cutoff); w.f32(r.softness);
       break;
@@ -483,12 +484,13 @@ function decodeClientRecord(c, op, r, state) {
     }
     case 'light': {
       c.length(r.left(), spec.fixed);
-      const id = r.u32(), type = r.u8(), on = r.u8(), res = r.u16();
-      const rec = { type: name, id, lightType: null, on: null, color: r.vec3(), intensity: r.f32(), position: r.vec3(),
+      const id = r.u32(), type = r.u8(), on = r.u8(), castShadow = r.u8(), res = r.u8();
+      const rec = { type: name, id, lightType: null, on: null, castShadow: null, color: r.vec3(), intensity: r.f32(), position: r.vec3(),
         direction: r.vec3(), attenuation: r.vec3(), cutoff: r.f32(), softness: r.f32() };
       c.id(id, 'id');
       rec.lightType = c.enumeration(type, 'type');
       rec.on = c.flag(on, 'on');
+      rec.castShadow = c.flag(castShadow, 'cast_shadow');
       c.reserved(res);
       c.nonNegative(rec.color, 'color'); c.range(rec.intensity, 'intensity'); c.finite(rec.position, 'position');
       c.finite(rec.direction, 'direction'); c.nonNegative(rec.attenuation, 'attenuation');

@@ -22,7 +22,7 @@ export function wireLight(l) {
   let attenuation = nonNeg(l.attenuation);
   if (l.type !== 'directional' && !attenuation.some((v) => v > 0)) attenuation = [0, 0, 1];
   return {
-    type: 'light', id: l.id, lightType: l.type, on: !!l.on, color: nonNeg(l.color), intensity: clamp(l.intensity ?? 1, 0, 1e30),
+    type: 'light', id: l.id, lightType: l.type, on: !!l.on, castShadow: !!l.castShadow, color: nonNeg(l.color), intensity: clamp(l.intensity ?? 1, 0, 1e30),
     position: l.position, direction, attenuation, cutoff: clamp(l.cutoff, 1e-4, Math.PI), softness: clamp(l.softness, 0, 1),
   };
 }

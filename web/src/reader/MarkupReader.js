@@ -498,7 +498,7 @@ export class MarkupReader {
       });
       g.lights.forEach((l, i) => this.addLight(el, `gltf:${i}`, l.type, M.multiply(world, l.matrix), {
         color: l.color, attenuation: l.attenuation, cutoff: l.cutoff, softness: l.softness,
-        position: [0, 0, 0], direction: [0, 0, -1], on: visible,
+        position: [0, 0, 0], direction: [0, 0, -1], on: visible, castShadow: true,  // glTF lights cast, as on the node
       }));
       if (g.camera) this.gltfCamera = { toWorld: M.multiply(world, g.camera.toWorld), fovY: g.camera.fovY };
       return;
@@ -576,6 +576,7 @@ export class MarkupReader {
       cutoff: first(d.get('cutoffAngle'), Math.PI / 4),
       softness: first(d.get('softness'), 0),
       on: on && !!first(d.get('on'), 1),
+      castShadow: !!first(d.get('castShadow'), 0),  // XML3D: false unless the light says so
     });
   }
 
@@ -590,6 +591,7 @@ export class MarkupReader {
       cutoff,
       softness: spotSoftness(cutoff, p.softness),
       on: p.on,
+      castShadow: !!p.castShadow,
     };
     this.scene.lights.set(light.id, light);
   }

@@ -11,7 +11,8 @@
 // meshes:    id -> {id, element, positions, normals, texcoords, colors, indices (buffer ids, 0 = none),
 //                   material, transform (column-major Float32Array(16), object to world), visible}
 // lights:    id -> {id, element, type: 'point'|'directional'|'spot', color, intensity, position,
-//                   direction (world), attenuation [c, l, q], cutoff (rad), softness, on}
+//                   direction (world), attenuation [c, l, q], cutoff (rad), softness, on,
+//                   castShadow (XML3D castShadow, default false; glTF lights true)}
 // camera:    {element, toWorld, fovY, fovX|null, near|null, far|null}
 // environment: {ambient, background, exposure, linear: false}  (XML3D: colours used as given)
 

@@ -21,7 +21,7 @@ const CLIENT = [
     shininess: 0.2, emissiveColor: [0, 0.1, 0], ambientIntensity: 0.3, opacity: 0.75, diffuseTexture: 9, specularTexture: 0,
     emissiveTexture: 0, reflection: 0.1, refraction: 0.9, ior: 1.5, alphaCutoff: 0.5 },
   { type: 'mesh', id: 11, positions: 7, normals: 0, texcoords: 0, indices: 8, material: 10, transform: scale, visible: false },
-  { type: 'light', id: 12, lightType: 'spot', on: true, color: [1, 0.5, 0.25], intensity: 1, position: [1, 2, 3], direction: [0, -1, 0],
+  { type: 'light', id: 12, lightType: 'spot', on: true, castShadow: false, color: [1, 0.5, 0.25], intensity: 1, position: [1, 2, 3], direction: [0, -1, 0],
     attenuation: [1, 0, 0.1], cutoff: 0.4, softness: 0.5 },
   { type: 'remove', what: 'mesh', id: 5 },
   { type: 'render', frame: 42 },
@@ -48,6 +48,7 @@ test('client records decode back to what was encoded', () => {
   assert.ok(Math.abs(recs[7].ior - 1.5) < 1e-6);
   assert.equal(recs[8].visible, false);
   assert.equal(recs[9].lightType, 'spot');
+  assert.equal(recs[9].castShadow, false);
   assert.deepEqual(recs[10], { type: 'remove', what: 'mesh', id: 5 });
   assert.deepEqual(recs[11], { type: 'render', frame: 42 });
   assert.deepEqual(recs[12], { type: 'refine', samples: 64 });

@@ -23,6 +23,7 @@ test('the first diff sends every entry, data before the meshes that use it', () 
   assert.equal(mat.refraction, 0.5);
   assert.ok(Math.abs(mat.ior - 1.33) < 1e-6);
   assert.equal(recs.find((r) => r.type === 'environment').linear, false);
+  assert.equal(recs.find((r) => r.type === 'light').castShadow, false, "XML3D's default: no shadows");
   // Everything encodes and decodes under the protocol's rules.
   const wire = recs.filter((r) => r.type !== 'texture');
   assert.equal(decodeClient(encodeClient(wire)).length, wire.length);

@@ -160,6 +160,17 @@ test('lights: defaults per model, world-space position and direction', () => {
   nearArr(byId.s.attenuation, [0, 0, 1]);
   assert.equal(byId.off.on, false);
   assert.equal(byId.d.on, true);
+  // XML3D's castShadow defaults to false.
+  for (const l of scene.lights.values()) assert.equal(l.castShadow, false);
+});
+
+test('lights: castShadow true makes a light cast shadows, and the node is told so', () => {
+  const doc = page(`<xml3d><light id="yes"><bool name="castShadow">true</bool></light>
+    <light id="no"><bool name="castShadow">false</bool></light><light id="default"></light></xml3d>`);
+  const scene = new MarkupReader().read(doc.querySelector('xml3d'));
+  const byId = Object.fromEntries([...scene.lights.values()].map((l) => [l.element.id, l]));
+  assert.deepEqual([byId.yes.castShadow, byId.no.castShadow, byId.default.castShadow], [true, false, false]);
+  assert.deepEqual(scene.errors, []);
 });
 
 test('value elements: bool, int, and numbers mixed with junk are reported', () => {
@@ -295,6 +306,7 @@ test('glTF 2.0 model: primitives with baked node matrices, materials and KHR lig
   near(mat.refractionCoefficient, 1); near(mat.refractionIndex, 1.33);
   const light = only(scene.lights);
   assert.equal(light.type, 'directional');
+  assert.equal(light.castShadow, true, 'glTF lights cast shadows, as when the node loads the file');
   nearArr(light.color, [2, 2, 2]);
 });
 
