@@ -12,6 +12,13 @@ view (a view the scene's author chose, inside the scene):
                        scene), with a 30-degree look to the right on the way, and back: 120
                        frames, closed. Pavilion: 8.6 m in 2 s; living room and kitchen: 1.2 m.
 
+  pavilion-door.json   a walk through the pavilion's entrance, the gap between a glass wall
+                       and the marble wall under the roof: from the terrace beside the pool
+                       (x = -4.5, z = 3) into the room beyond (x = 3.5), 8 m in 3 s looking
+                       ahead, and back (180 frames). The walls hide most of the room until the
+                       camera is through, then the sides open up. The path (clear of the
+                       chairs and the pool) was chosen from renders at eye level along it.
+
 Same JSON format as the shared loops. Deterministic: run it again and the files do not change.
 Usage: bench/make_camera_loops.py [SCENES_DIR] [OUT_DIR]
 """
@@ -72,6 +79,20 @@ def walk(first):
     return path + path[-2:0:-1]
 
 
+# Doors walked through, per scene: from, to (eye height 1.7 m). Only the pavilion has one here.
+DOORS = {"pavilion": ([-4.5, 1.7, 3.0], [3.5, 1.7, 3.0])}
+
+
+def door(start, end):
+    ahead = sub(end, start)
+    n = 3 * FPS
+    path = []
+    for i in range(n + 1):
+        eye = add(start, scale(ahead, ease(i / n)))
+        path.append(frame(eye, add(eye, ahead)))
+    return path + path[-2:0:-1]
+
+
 def main():
     scenes = sys.argv[1] if len(sys.argv) > 1 else os.path.join(os.path.dirname(__file__), "..", "..", "shared", "scenes")
     out = sys.argv[2] if len(sys.argv) > 2 else os.path.join(os.path.dirname(__file__), "..", "tests", "data", "camera-loops")
@@ -79,7 +100,10 @@ def main():
     for sc in SCENES:
         shared = json.load(open(os.path.join(scenes, sc, "camera-loop.json")))
         first = shared["frames"][0]
-        for name, frames in (("turn90", turn90(first)), ("walk", walk(first))):
+        loops = [("turn90", turn90(first)), ("walk", walk(first))]
+        if sc in DOORS:
+            loops.append(("door", door(*DOORS[sc])))
+        for name, frames in loops:
             path = os.path.join(out, f"{sc}-{name}.json")
             with open(path, "w") as f:
                 json.dump({"fovY_deg": shared["fovY_deg"], "frames": frames}, f, indent=1)
