@@ -49,21 +49,18 @@ std::string check_tile(const TileResult& t, uint32_t frame, const Rect& expected
   if (!std::isfinite(t.kernel_ms) || t.kernel_ms < 0 || !std::isfinite(t.rendering_ms) || t.rendering_ms < 0 ||
       !std::isfinite(t.sat_ms) || t.sat_ms < 0)
     return "impossible timings";
+  // The packets the task covers (its pixel rectangle, rounded out to packets).
+  const Rect want = pixels_to_packets(expected, layout);
   if (!t.sat.empty()) {
     std::string err;
     auto sat = Sat::try_deserialize(t.sat.data(), t.sat.size(), &err);
     if (!sat) return "cost SAT: " + err;
-    // The packets the task covers (its pixel rectangle, rounded out to packets).
-    Rect want{expected.x0 / layout.w, expected.y0 / layout.h, (expected.x1 + layout.w - 1) / layout.w,
-              (expected.y1 + layout.h - 1) / layout.h};
     if (!(sat->packets() == want) || !packet_space(width, height, layout).contains(sat->packets()))
       return "cost SAT over packets " + str(sat->packets()) + " for task packets " + str(want);
   }
   // Depths: one float per packet of the task, or none. Their values are not checked: the
   // tiler reads any float safely (lb/reproject.h, decode_depths).
   if (!t.depth.empty()) {
-    const Rect want{expected.x0 / layout.w, expected.y0 / layout.h, (expected.x1 + layout.w - 1) / layout.w,
-                    (expected.y1 + layout.h - 1) / layout.h};
     if (t.depth.size() != size_t(want.area()) * 4)
       return "tile " + str(expected) + " with " + std::to_string(t.depth.size()) + " bytes of depths, expected " +
              std::to_string(size_t(want.area()) * 4);

@@ -227,8 +227,9 @@ void render_batch(self_ptr self) {
   self->request(st.a.tiler, caf::infinite, tasks_atom::value, req).then([=](TaskList& tl) {
     auto& st = self->state;
     st.cur.meta.tiling_ms = tl.tiling_ms;
-    st.tiling = TaskList{tl.frame, {}, tl.tiling_ms, tl.from_sats, tl.predictor, tl.reproject_ms, tl.reproject_cpu_ms, tl.filled};
     for (size_t k = 0; k < tl.tasks.size() && k < st.used.size(); ++k) st.batch.tasks[st.used[k]] = tl.tasks[k];
+    tl.tasks.clear();  // copied into the batch; the rest says how they were made
+    st.tiling = std::move(tl);
     st.cur.meta.nodes = uint32_t(st.used.size());
     if (st.cur.scene.scene != st.sent) {  // the session's scene object (changed in place between frames)
       st.sent = st.cur.scene.scene;

@@ -5,25 +5,16 @@
 #include <cmath>
 #include <optional>
 
-#include <time.h>
-
 #include <caf/all.hpp>
 
 #include "actors/node.h"
 #include "lb/reproject.h"
 #include "lb/sat.h"
 #include "lb/tiler.h"
+#include "renderer/disturbance.h"  // thread_cpu_ns
 
 namespace tessera {
 namespace {
-
-// This thread's CPU time: the reprojection's own cost, apart from time the thread was
-// preempted (a dedicated master shares its core with other work).
-double thread_cpu_ms() {
-  timespec ts{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return double(ts.tv_sec) * 1e3 + double(ts.tv_nsec) * 1e-6;
-}
 
 struct tiler_state {
   std::vector<double> coefficients;
@@ -108,7 +99,9 @@ tiler_actor::behavior_type tiler_impl(tiler_actor::stateful_pointer<tiler_state>
         Camera cam;
         if (use && !st.points.xyzw.empty() && req.camera != st.camera && unpack_camera(req.camera, cam)) {
           auto t_rep = std::chrono::steady_clock::now();
-          const double cpu0 = thread_cpu_ms();
+          // The thread's CPU time too: the carry's own cost, apart from preemption (a dedicated
+          // master shares its core with other work).
+          const uint64_t cpu0 = thread_cpu_ns();
           ReprojectStats rs;
           // Large frames are carried in blocks of packets (lb/reproject.h, reproject_blocks): at
           // most about 16k items, under a millisecond or so of one core.
@@ -127,7 +120,7 @@ tiler_actor::behavior_type tiler_impl(tiler_actor::stateful_pointer<tiler_state>
             out.filled = rs.filled;
           }
           out.reproject_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t_rep).count();
-          out.reproject_cpu_ms = thread_cpu_ms() - cpu0;
+          out.reproject_cpu_ms = double(thread_cpu_ns() - cpu0) * 1e-6;
         }
         for (const Rect& r : tile(sats, space, st.coefficients))
           out.tasks.push_back(packets_to_pixels(r, layout, req.width, req.height));

@@ -44,5 +44,9 @@ inline Rect packets_to_pixels(const Rect& packets, PacketLayout p, int32_t width
   return intersect({packets.x0 * p.w, packets.y0 * p.h, packets.x1 * p.w, packets.y1 * p.h},
                    {0, 0, width, height});
 }
+// The packets a pixel rectangle touches (its edges rounded out to whole packets).
+inline Rect pixels_to_packets(const Rect& pixels, PacketLayout p) {
+  return {pixels.x0 / p.w, pixels.y0 / p.h, (pixels.x1 + p.w - 1) / p.w, (pixels.y1 + p.h - 1) / p.h};
+}
 
 }  // namespace tessera

@@ -77,8 +77,7 @@ double balance(const std::vector<Rect>& pixel_tasks, const CostMap& truth) {
   arr.finalize();
   double worst = 0, sum = 0;
   for (const Rect& t : pixel_tasks) {
-    const Rect p{t.x0 / kLayout.w, t.y0 / kLayout.h, (t.x1 + kLayout.w - 1) / kLayout.w, (t.y1 + kLayout.h - 1) / kLayout.h};
-    const double c = arr.cost(p);
+    const double c = arr.cost(pixels_to_packets(t, kLayout));
     worst = std::max(worst, c);
     sum += c;
   }

@@ -259,8 +259,7 @@ TileResult tile(const Rect& pixels, PacketLayout layout) {
   t.pixels = pixels;
   t.rgba.assign(size_t(pixels.area()) * 4, 128);
   CostMap cost;
-  cost.packets = {pixels.x0 / layout.w, pixels.y0 / layout.h, (pixels.x1 + layout.w - 1) / layout.w,
-                  (pixels.y1 + layout.h - 1) / layout.h};
+  cost.packets = pixels_to_packets(pixels, layout);
   for (int32_t i = 0; i < cost.packets.area(); ++i) cost.cost.push_back(uint32_t(100 + i));
   t.sat = Sat::from_cost_map_serial(cost).serialize();
   // Depths for the balancer's reprojection: a wall, one sky packet, one unknown.
