@@ -1,5 +1,6 @@
 // tessera loadtest --scene S.gltf --camera-loop L.json [--clients N] [--display jpeg|s3tc|mjpeg]
 //                  [--seconds S | --frames F] [--warmup K] [--size W H] [--ao A] [--quality Q] [--host H --port P [--token T]] [--threads T]
+//                  [--tls [--tls-ca F] | --tls-cert C --tls-key K]
 // Uploads the scene from N simultaneous WebSocket clients; each replays the camera loop with two
 // render requests outstanding. Once every client has received K frames (all connected and
 // streaming), a common window of S seconds opens; the frames each client receives inside it
@@ -33,6 +34,7 @@ struct FrameRecord {
   protocol::FrameTimings t;
   size_t bytes = 0;
   double received_ms = 0;  // since the common window opened
+  double latency_ms = 0;   // from sending the frame's camera and request to receiving the frame
 };
 
 int run(const std::vector<std::string>& argv) {
@@ -41,12 +43,17 @@ int run(const std::vector<std::string>& argv) {
     std::puts("tessera loadtest --scene S.gltf --camera-loop L.json [--clients N] [--display jpeg|s3tc|mjpeg]\n"
               "                 [--seconds S | --frames F] [--warmup K] [--size W H] [--ao A] [--quality Q]\n"
               "                 [--host H --port P [--token T]] [--threads T]\n"
+              "                 [--tls [--tls-ca F] | --tls-cert C --tls-key K]\n"
               "Frames per second over a common window of S seconds (default 20) that opens once every client\n"
               "has received K frames (default 2). --frames F: the window closes instead once every client has\n"
               "received F frames after its K warm-up frames (frame numbers K..K+F-1, the camera loop's frames\n"
               "of those indices), so runs on different trees render the same frames. mjpeg: frames counted from the WebSocket's Frame records\n"
               "(timings, empty payload); the JPEG goes to /mjpeg/NAME, which nobody reads here. --token: the access\n"
-              "token for a node that asks for one (tessera token; sent as ?access_token=).");
+              "token for a node that asks for one (tessera token; sent as ?access_token=). --tls: wss:// to the node at\n"
+              "--port (its certificate verified against --tls-ca F when given). --tls-cert/--tls-key: the in-process\n"
+              "node serves WSS with them, and the clients connect over TLS. latency_ms: from sending a frame's camera\n"
+              "and render request to receiving the frame (two requests outstanding, so it includes the wait behind\n"
+              "the frame before it).");
     return 0;
   }
   int threads = 0;
@@ -62,7 +69,12 @@ int run(const std::vector<std::string>& argv) {
   std::string host = args.str("--host", "127.0.0.1");
   long port = args.integer("--port", -1);
   const std::string token = args.str("--token");
+  bool tls = args.flag("--tls");
+  const std::string tls_ca = args.str("--tls-ca"), tls_cert = args.str("--tls-cert"), tls_key = args.str("--tls-key");
   args.finish();
+  if (tls_cert.empty() != tls_key.empty()) throw std::invalid_argument("--tls-cert and --tls-key go together");
+  if (!tls_cert.empty() && port >= 0) throw std::invalid_argument("--tls-cert/--tls-key are for the in-process node (no --port)");
+  if (!tls_cert.empty()) tls = true;
   if (clients < 1 || clients > 64 || seconds < 1 || warmup < 1 || frames_wanted < 0)
     throw std::invalid_argument("--clients 1..64, --seconds >= 1, --warmup >= 1, --frames >= 0");
   if (display != "jpeg" && display != "s3tc" && display != "mjpeg")
@@ -81,6 +93,8 @@ int run(const std::vector<std::string>& argv) {
     settings->log = [](const Event&) {};
     ServerOptions o = cfg->server_options();
     o.max_clients = size_t(clients);
+    o.tls_cert = tls_cert;
+    o.tls_key = tls_key;
     sys = std::make_unique<caf::actor_system>(*cfg);
     server = std::make_unique<Server>(*sys, settings, o);
     server->start();
@@ -95,12 +109,15 @@ int run(const std::vector<std::string>& argv) {
   std::vector<double> upload_ms(size_t(clients), 0);
   std::vector<protocol::Stats> last_stats(static_cast<size_t>(clients));  // the node's own figures
   std::vector<std::string> errors;
+  std::vector<std::string> tls_sessions(static_cast<size_t>(clients));
   std::atomic<int> ready{0}, finished{0}, complete{0};  // complete: clients with their --frames
   std::atomic<bool> stop{false};
   auto client_main = [&](int ci) {
     WsClient ws;
+    if (tls) ws.use_tls(tls_ca);
     std::string err;
     bool counted_ready = false;
+    std::vector<Clock::time_point> sent_at;  // by frame number
     auto fail = [&](const std::string& e) {
       std::lock_guard<std::mutex> l(mu);
       errors.push_back("client " + std::to_string(ci) + ": " + e);
@@ -109,6 +126,7 @@ int run(const std::vector<std::string>& argv) {
       std::string resource = display == "mjpeg" ? "/ws?session=loadtest" + std::to_string(ci) : "/ws";
       if (!token.empty()) resource += (display == "mjpeg" ? "&access_token=" : "?access_token=") + token;
       if (!ws.connect(host, uint16_t(port), resource, &err)) return fail(err);
+      tls_sessions[size_t(ci)] = ws.tls_session();
       protocol::Handshake hs;
       hs.display = display == "s3tc" ? protocol::DisplayKind::s3tc
                                       : display == "mjpeg" ? protocol::DisplayKind::mjpeg : protocol::DisplayKind::jpeg;
@@ -123,6 +141,7 @@ int run(const std::vector<std::string>& argv) {
       int got = 0;
       auto request = [&] {
         size_t k = size_t(sent) % setup.loop.frames.size();
+        sent_at.push_back(Clock::now());
         ws.send(protocol::encode(std::vector<protocol::ClientRecord>{protocol::SetCamera{setup.loop.camera(k)},
                                                                      protocol::RenderRequest{sent}}));
         ++sent;
@@ -150,7 +169,9 @@ int run(const std::vector<std::string>& argv) {
           last = now;
           if (frames_wanted > 0 && got >= warmup + frames_wanted) continue;  // requested ahead: not counted
           if (got == 0) upload_ms[size_t(ci)] = std::chrono::duration<double, std::milli>(now - t_up).count();
-          received[size_t(ci)].push_back({now, FrameRecord{ci, f->frame, f->timings, msg->size(), 0}});
+          const double latency =
+              f->frame < sent_at.size() ? std::chrono::duration<double, std::milli>(now - sent_at[f->frame]).count() : 0;
+          received[size_t(ci)].push_back({now, FrameRecord{ci, f->frame, f->timings, msg->size(), 0, latency}});
           if (++got == warmup && !counted_ready) {
             counted_ready = true;
             ++ready;
@@ -194,12 +215,14 @@ int run(const std::vector<std::string>& argv) {
       }
     fps[size_t(c)] = window_s > 0 ? double(n) / window_s : 0;
   }
-  std::vector<double> pipeline, encode, rendering, kernel, bytes, sat, tiling;
+  std::vector<double> pipeline, encode, rendering, kernel, bytes, sat, tiling, latency;
   for (auto& f : all) {
     std::printf("{\"client\": %d, \"frame\": %u, \"kernel_ms\": %.3f, \"rendering_ms\": %.3f, \"sat_ms\": %.3f, "
-                "\"tiling_ms\": %.3f, \"encode_ms\": %.3f, \"pipeline_ms\": %.3f, \"bytes\": %zu, \"received_ms\": %.3f}\n",
+                "\"tiling_ms\": %.3f, \"encode_ms\": %.3f, \"pipeline_ms\": %.3f, \"bytes\": %zu, \"received_ms\": %.3f, "
+                "\"latency_ms\": %.3f}\n",
                 f.client, f.frame, f.t.kernel_ms, f.t.rendering_ms, f.t.sat_ms, f.t.tiling_ms, f.t.encode_ms,
-                f.t.pipeline_ms, f.bytes, f.received_ms);
+                f.t.pipeline_ms, f.bytes, f.received_ms, f.latency_ms);
+    latency.push_back(f.latency_ms);
     pipeline.push_back(f.t.pipeline_ms);
     encode.push_back(f.t.encode_ms);
     rendering.push_back(f.t.rendering_ms);
@@ -223,13 +246,15 @@ int run(const std::vector<std::string>& argv) {
               "\"ao\": %d, \"window_s\": %.3f, \"frames_in_window\": %zu, \"fps_per_client\": [%s], \"fps_total\": %.3f, "
               "\"median_rendering_ms\": %.3f, \"median_kernel_ms\": %.3f, \"median_sat_ms\": %.3f, "
               "\"median_tiling_ms\": %.3f, \"median_encode_ms\": %.3f, \"median_pipeline_ms\": %.3f, "
+              "\"median_latency_ms\": %.3f, \"p90_latency_ms\": %.3f, "
               "\"median_bytes\": %.0f, \"node_bytes_per_frame\": %.0f, \"median_upload_ms\": %.1f, \"errors\": %zu, \"scene\": %s, "
-              "\"triangles\": %zu, \"node\": \"%s\", \"cpu\": %s, \"threads\": %d}\n",
+              "\"triangles\": %zu, \"node\": \"%s\", \"tls\": %s, \"cpu\": %s, \"threads\": %d}\n",
               clients, display.c_str(), quality, W, H, ao, window_s, all.size(), per.c_str(), total_fps, median(rendering),
-              median(kernel), median(sat), median(tiling), median(encode), median(pipeline), median(bytes), median(node_bytes),
-              median(upload_ms), errors.size(), json_str(setup.scene_path).c_str(),
-              setup.loaded.scene.triangle_count(), server ? "in-process" : "external", json_str(cpu_model()).c_str(),
-              threads);
+              median(kernel), median(sat), median(tiling), median(encode), median(pipeline), median(latency),
+              percentile(latency, 0.9), median(bytes), median(node_bytes), median(upload_ms), errors.size(),
+              json_str(setup.scene_path).c_str(), setup.loaded.scene.triangle_count(), server ? "in-process" : "external",
+              tls ? json_str(tls_sessions[0].empty() ? "yes" : tls_sessions[0]).c_str() : "false",
+              json_str(cpu_model()).c_str(), threads);
   return errors.empty() ? 0 : 1;
 }
 

@@ -33,7 +33,8 @@ const char* kHelp =
     "max-node-bytes (memory budget over all clients, 0: half the physical memory), max-mjpeg-per-session,\n"
     "max-mjpeg-viewers. Admission (docs/operations.md): token-key (key file of signed access tokens, see\n"
     "`tessera token`), token-file (static tokens, one per line), allowed-origins (default [\"self\",\n"
-    "\"loopback\"]), require-origin, max-connections-per-ip.\n"
+    "\"loopback\"]), require-origin, max-connections-per-ip. TLS: tls-cert and tls-key (PEM files) make the\n"
+    "port HTTPS and WSS only (TLS 1.2+; scripts/tls-cert.sh makes a self-signed pair for local use).\n"
     "Cluster (docs/operations.md): [--cluster-port P] publishes this node to parents; [--children H:P,H:P]\n"
     "names its children; [--no-render] makes it a hub or dedicated master; [--no-http] serves no clients.\n"
     "INI: cluster-port, cluster-host, children, render, http, name, task-timeout-ms, reconnect-ms,\n"
@@ -170,8 +171,12 @@ int run(const std::vector<std::string>& argv) {
               "\"render\": %s, \"web_root\": %s, \"scene\": %s, \"max_clients\": %d, \"render_threads\": %d, "
               "\"cpu\": %s, \"renderer\": %s, \"rasterizer\": %s, \"max_node_bytes\": %llu, "
               "\"handshake_timeout_ms\": %u, \"admission\": %s}\n",
-              server ? json_str("http://" + opts.host + ":" + std::to_string(server->port()) + "/").c_str() : "null",
-              server ? json_str("ws://" + opts.host + ":" + std::to_string(server->port()) + "/ws").c_str() : "null",
+              server ? json_str(std::string(opts.tls() ? "https" : "http") + "://" + opts.host + ":" +
+                                std::to_string(server->port()) + "/").c_str()
+                     : "null",
+              server ? json_str(std::string(opts.tls() ? "wss" : "ws") + "://" + opts.host + ":" +
+                                std::to_string(server->port()) + "/ws").c_str()
+                     : "null",
               published >= 0 ? json_str(cfg.cluster_host + ":" + std::to_string(published)).c_str() : "null",
               json_str(settings->name).c_str(), kids.c_str(), cfg.renders ? "true" : "false",
               json_str(opts.web_root).c_str(), json_str(cfg.scene).c_str(), cfg.max_clients,

@@ -50,5 +50,7 @@ std::vector<double> parse_number_list(const std::string& option, const std::stri
 // JSON string escaping for the figures we print.
 std::string json_str(const std::string& s);
 double median(std::vector<double> v);
+// The value below which a fraction q of v lies (nearest rank; 0 when empty).
+double percentile(std::vector<double> v, double q);
 
 }  // namespace tessera::app

@@ -88,6 +88,8 @@ NodeConfig::NodeConfig() {
   custom_options_.add(string_option(scene, "tessera", "scene", "glTF scene given to clients that connect with an empty scene"));
   custom_options_.add(string_option(token_key, "tessera", "token-key", "key file of signed access tokens (tessera token); a token is then required"));
   custom_options_.add(string_option(token_file, "tessera", "token-file", "static access tokens, one per line; a token is then required"));
+  custom_options_.add(string_option(tls_cert, "tessera", "tls-cert", "PEM certificate (chain) of the port: HTTPS and WSS only (with tls-key)"));
+  custom_options_.add(string_option(tls_key, "tessera", "tls-key", "PEM private key of tls-cert"));
   custom_options_.add(string_option(cluster_host, "tessera", "cluster-host", "address of the cluster port (0.0.0.0: all interfaces)"));
   custom_options_.add(string_option(name, "tessera", "name", "this node's name in node lists and logs (default host:cluster-port)"));
   custom_options_.add(string_list_option(
@@ -185,6 +187,10 @@ ServerOptions NodeConfig::server_options() const {
   o.max_mjpeg_per_session = size_t(max_mjpeg_per_session);
   o.max_mjpeg_viewers = size_t(max_mjpeg_viewers);
   set_admission(o);
+  if (tls_cert.empty() != tls_key.empty())
+    throw std::invalid_argument("tessera.tls-cert and tessera.tls-key go together: give both (HTTPS and WSS) or neither");
+  o.tls_cert = tls_cert;
+  o.tls_key = tls_key;
   return o;
 }
 

@@ -41,6 +41,8 @@ struct NodeConfig : caf::actor_system_config {
   // Session admission (docs/operations.md, "Admission"): who may open sessions and streams.
   std::string token_key;    // key file of signed access tokens ("": none)
   std::string token_file;   // static access tokens, one per line ("": none)
+  std::string tls_cert;     // PEM certificate (chain) of HTTPS/WSS on the port ("": plain HTTP)
+  std::string tls_key;      // its PEM private key
   std::vector<std::string> allowed_origins{"self", "loopback"};  // page origins ("*": any)
   bool require_origin = false;     // refuse WebSocket requests without an Origin header (non-browsers)
   int max_connections_per_ip = 0;  // WebSocket connections per client address (0: no limit)

@@ -7,7 +7,7 @@ find_package(ZLIB REQUIRED)
 find_package(libjpeg-turbo REQUIRED)
 find_package(websocketpp REQUIRED)
 find_package(Catch2 2 REQUIRED)
-find_package(OpenSSL REQUIRED COMPONENTS Crypto)  # HMAC-SHA256 of access tokens (net/admission.h)
+find_package(OpenSSL REQUIRED COMPONENTS Crypto SSL)  # access tokens (net/admission.h), HTTPS/WSS (net/tls.h)
 
 # CAF 0.17.6: no CMake config and no .pc file.
 find_path(CAF_INCLUDE_DIR caf/all.hpp REQUIRED)

@@ -13,6 +13,10 @@
 #include <cstring>
 #include <filesystem>
 
+#include <openssl/ssl.h>
+
+#include "net/tls.h"
+
 namespace tessera::http {
 
 namespace fs = std::filesystem;
@@ -220,23 +224,88 @@ int connect_to(const std::string& host, uint16_t port) {
   return fd;
 }
 
-// Reads more bytes into buf; false on EOF, error or deadline.
-bool read_some(int fd, std::string& buf, Clock::time_point deadline) {
-  auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()).count();
-  if (left <= 0) return false;
-  pollfd p{fd, POLLIN, 0};
-  if (::poll(&p, 1, int(left)) <= 0) return false;
-  char tmp[65536];
-  ssize_t n = ::recv(fd, tmp, sizeof tmp, 0);
-  if (n <= 0) return false;
-  buf.append(tmp, size_t(n));
-  return true;
-}
+// One client connection: a TCP socket, with TLS over it when asked for. The socket stays
+// blocking; every wait is a poll() against the caller's deadline.
+class Stream {
+ public:
+  ~Stream() {
+    if (ssl_) SSL_free(ssl_);
+    if (fd_ >= 0) ::close(fd_);
+  }
+  // False and *error when the connection or the TLS handshake fails.
+  bool open(const std::string& host, uint16_t port, const ClientTls& tls, Clock::time_point deadline,
+            std::string* error) {
+    fd_ = connect_to(host, port);
+    if (fd_ < 0) return fail(error, "cannot connect");
+    if (!tls.on) return true;
+    // A blocking SSL_connect or SSL_read waits at most until the deadline.
+    auto left = std::chrono::duration_cast<std::chrono::microseconds>(deadline - Clock::now()).count();
+    timeval tv{time_t(std::max<long long>(left, 1000) / 1000000), suseconds_t(std::max<long long>(left, 1000) % 1000000)};
+    ::setsockopt(fd_, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
+    ::setsockopt(fd_, SOL_SOCKET, SO_SNDTIMEO, &tv, sizeof tv);
+    try {
+      ctx_ = tls::client_context(tls.ca_file);
+    } catch (const std::exception& e) {
+      return fail(error, e.what());
+    }
+    ssl_ = SSL_new(ctx_.get());
+    if (!ssl_) return fail(error, tls::last_error("SSL_new failed"));
+    SSL_set_fd(ssl_, fd_);
+    SSL_set_tlsext_host_name(ssl_, host.c_str());
+    if (!tls.ca_file.empty()) tls::expect_host(ssl_, host);
+    while (true) {
+      int r = SSL_connect(ssl_);
+      if (r == 1) return true;
+      int e = SSL_get_error(ssl_, r);
+      if ((e != SSL_ERROR_WANT_READ && e != SSL_ERROR_WANT_WRITE) || !wait(e == SSL_ERROR_WANT_WRITE, deadline))
+        return fail(error, "TLS handshake: " + tls::last_error("failed"));
+    }
+  }
+  bool write_all(const std::string& data) {
+    if (!ssl_) return ::send(fd_, data.data(), data.size(), MSG_NOSIGNAL) == ssize_t(data.size());
+    return SSL_write(ssl_, data.data(), int(data.size())) == int(data.size());
+  }
+  // Reads more bytes into buf; false on EOF, error or deadline.
+  bool read_some(std::string& buf, Clock::time_point deadline) {
+    char tmp[65536];
+    if (!ssl_) {
+      if (!wait(false, deadline)) return false;
+      ssize_t n = ::recv(fd_, tmp, sizeof tmp, 0);
+      if (n <= 0) return false;
+      buf.append(tmp, size_t(n));
+      return true;
+    }
+    while (true) {
+      if (SSL_pending(ssl_) == 0 && !wait(false, deadline)) return false;
+      int n = SSL_read(ssl_, tmp, int(sizeof tmp));
+      if (n > 0) {
+        buf.append(tmp, size_t(n));
+        return true;
+      }
+      int e = SSL_get_error(ssl_, n);
+      if (e != SSL_ERROR_WANT_READ && e != SSL_ERROR_WANT_WRITE) return false;  // closed or failed
+    }
+  }
 
-bool send_request(int fd, const std::string& host, const std::string& target, const std::string& method = "GET",
-                  const std::string& extra = "") {
-  std::string req = method + " " + target + " HTTP/1.1\r\nHost: " + host + "\r\nConnection: close\r\n" + extra + "\r\n";
-  return ::send(fd, req.data(), req.size(), MSG_NOSIGNAL) == ssize_t(req.size());
+ private:
+  bool wait(bool for_write, Clock::time_point deadline) {
+    auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()).count();
+    if (left <= 0) return false;
+    pollfd p{fd_, short(for_write ? POLLOUT : POLLIN), 0};
+    return ::poll(&p, 1, int(left)) > 0;
+  }
+  static bool fail(std::string* error, const std::string& why) {
+    if (error) *error = why;
+    return false;
+  }
+  int fd_ = -1;
+  tls::CtxPtr ctx_;
+  SSL* ssl_ = nullptr;
+};
+
+std::string request_text(const std::string& host, const std::string& target, const std::string& method = "GET",
+                         const std::string& extra = "") {
+  return method + " " + target + " HTTP/1.1\r\nHost: " + host + "\r\nConnection: close\r\n" + extra + "\r\n";
 }
 
 std::string header_value(const std::string& head, const std::string& name) {
@@ -262,19 +331,20 @@ std::optional<std::string> Response::header(const std::string& name) const {
   return header_value(head, key);
 }
 
-std::optional<Response> get(const std::string& host, uint16_t port, const std::string& target, int timeout_ms) {
-  return request(host, port, "GET", target, "", timeout_ms);
+std::optional<Response> get(const std::string& host, uint16_t port, const std::string& target, int timeout_ms,
+                            const ClientTls& tls) {
+  return request(host, port, "GET", target, "", timeout_ms, tls);
 }
 
 std::optional<Response> request(const std::string& host, uint16_t port, const std::string& method,
-                                const std::string& target, const std::string& extra_headers, int timeout_ms) {
-  int fd = connect_to(host, port);
-  if (fd < 0) return std::nullopt;
+                                const std::string& target, const std::string& extra_headers, int timeout_ms,
+                                const ClientTls& tls) {
   auto deadline = Clock::now() + std::chrono::milliseconds(timeout_ms);
+  Stream stream;
+  if (!stream.open(host, port, tls, deadline, nullptr)) return std::nullopt;
   std::string buf;
-  if (!send_request(fd, host, target, method, extra_headers)) { ::close(fd); return std::nullopt; }
-  while (read_some(fd, buf, deadline)) {}
-  ::close(fd);
+  if (!stream.write_all(request_text(host, target, method, extra_headers))) return std::nullopt;
+  while (stream.read_some(buf, deadline)) {}
   auto he = buf.find("\r\n\r\n");
   if (buf.compare(0, 5, "HTTP/") != 0 || he == std::string::npos) return std::nullopt;
   Response r;
@@ -286,40 +356,38 @@ std::optional<Response> request(const std::string& host, uint16_t port, const st
 }
 
 bool read_mjpeg(const std::string& host, uint16_t port, const std::string& target, size_t parts,
-                std::vector<std::vector<uint8_t>>& out, std::string* error, int timeout_ms) {
-  auto fail = [&](const std::string& e, int fd) {
-    if (fd >= 0) ::close(fd);
+                std::vector<std::vector<uint8_t>>& out, std::string* error, int timeout_ms, const ClientTls& tls) {
+  auto fail = [&](const std::string& e) {
     if (error) *error = e;
     return false;
   };
-  int fd = connect_to(host, port);
-  if (fd < 0) return fail("cannot connect", -1);
   auto deadline = Clock::now() + std::chrono::milliseconds(timeout_ms);
-  if (!send_request(fd, host, target)) return fail("cannot send the request", fd);
+  Stream stream;
+  if (!stream.open(host, port, tls, deadline, error)) return false;
+  if (!stream.write_all(request_text(host, target))) return fail("cannot send the request");
   std::string buf;
   size_t he;
   while ((he = buf.find("\r\n\r\n")) == std::string::npos)
-    if (!read_some(fd, buf, deadline)) return fail("no response header", fd);
+    if (!stream.read_some(buf, deadline)) return fail("no response header");
   std::string head = buf.substr(0, he + 2);
-  if (std::atoi(buf.c_str() + buf.find(' ') + 1) != 200) return fail("status: " + head.substr(0, head.find('\r')), fd);
+  if (std::atoi(buf.c_str() + buf.find(' ') + 1) != 200) return fail("status: " + head.substr(0, head.find('\r')));
   std::string ct = header_value(head, "content-type");
   auto bp = ct.find("boundary=");
-  if (ct.find("multipart/x-mixed-replace") != 0 || bp == std::string::npos) return fail("content type: " + ct, fd);
+  if (ct.find("multipart/x-mixed-replace") != 0 || bp == std::string::npos) return fail("content type: " + ct);
   std::string boundary = "--" + ct.substr(bp + 9);
   buf.erase(0, he + 4);
   while (out.size() < parts) {
     size_t b, ph;
     while ((b = buf.find(boundary)) == std::string::npos || (ph = buf.find("\r\n\r\n", b)) == std::string::npos)
-      if (!read_some(fd, buf, deadline)) return fail("stream ended after " + std::to_string(out.size()) + " parts", fd);
+      if (!stream.read_some(buf, deadline)) return fail("stream ended after " + std::to_string(out.size()) + " parts");
     std::string part_head = buf.substr(b + boundary.size(), ph + 2 - b - boundary.size());
     long len = std::atol(header_value(part_head, "content-length").c_str());
-    if (len <= 0) return fail("part without Content-Length", fd);
+    if (len <= 0) return fail("part without Content-Length");
     while (buf.size() < ph + 4 + size_t(len))
-      if (!read_some(fd, buf, deadline)) return fail("part truncated", fd);
+      if (!stream.read_some(buf, deadline)) return fail("part truncated");
     out.emplace_back(buf.begin() + long(ph + 4), buf.begin() + long(ph + 4 + size_t(len)));
     buf.erase(0, ph + 4 + size_t(len));
   }
-  ::close(fd);
   return true;
 }
 

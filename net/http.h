@@ -57,16 +57,25 @@ struct Response {
   // The value of header `name` (case-insensitive); nullopt when absent.
   std::optional<std::string> header(const std::string& name) const;
 };
+// HTTPS instead of HTTP (net/tls.h). ca_file "": any certificate is taken (a self-signed test
+// node); else the server's must chain to it and name the host.
+struct ClientTls {
+  bool on = false;
+  std::string ca_file;
+};
+
 // GET http://host:port/target; nullopt on connection failure or timeout.
-std::optional<Response> get(const std::string& host, uint16_t port, const std::string& target, int timeout_ms = 5000);
+std::optional<Response> get(const std::string& host, uint16_t port, const std::string& target, int timeout_ms = 5000,
+                            const ClientTls& tls = {});
 // Any method, with extra header lines ("Range: bytes=0-9\r\n"); reads until the server closes.
 std::optional<Response> request(const std::string& host, uint16_t port, const std::string& method,
                                 const std::string& target, const std::string& extra_headers = "",
-                                int timeout_ms = 5000);
+                                int timeout_ms = 5000, const ClientTls& tls = {});
 
 // Reads `parts` JPEG parts from a multipart/x-mixed-replace stream (MJPEG), then closes.
 // False and *error on failure or timeout.
 bool read_mjpeg(const std::string& host, uint16_t port, const std::string& target, size_t parts,
-                std::vector<std::vector<uint8_t>>& out, std::string* error, int timeout_ms = 10000);
+                std::vector<std::vector<uint8_t>>& out, std::string* error, int timeout_ms = 10000,
+                const ClientTls& tls = {});
 
 }  // namespace tessera::http

@@ -17,22 +17,28 @@
 
 #include <caf/all.hpp>
 
-#include <websocketpp/config/asio_no_tls.hpp>
+#include <websocketpp/config/asio.hpp>  // asio (plain) and asio_tls
 #include <websocketpp/server.hpp>
 
 #include "net/http.h"
+#include "net/tls.h"
 
 namespace tessera {
 
-using WsServer = websocketpp::server<websocketpp::config::asio>;
 using websocketpp::connection_hdl;
+
+// Everything below is a template over websocketpp's config: websocketpp::config::asio (plain
+// HTTP and WebSocket) or websocketpp::config::asio_tls (HTTPS and WSS, ServerOptions::tls_*).
+// A connection's get_raw_socket() is its TCP socket either way, get_socket() the stream its
+// bytes go through (the TCP socket, or the TLS stream over it).
 
 namespace {
 
 // One MJPEG viewer: the HTTP connection's response is deferred and its socket written
 // directly; a slow viewer gets the latest frame (older pending ones are replaced).
-struct MjpegStream : std::enable_shared_from_this<MjpegStream> {
-  WsServer::connection_ptr con;
+template <class Config>
+struct MjpegStream : std::enable_shared_from_this<MjpegStream<Config>> {
+  typename websocketpp::server<Config>::connection_ptr con;
   std::atomic<size_t>* live = nullptr;  // the server's count of open streams
   bool writing = false, dead = false;
   std::shared_ptr<const std::vector<uint8_t>> current, pending;
@@ -55,8 +61,8 @@ struct MjpegStream : std::enable_shared_from_this<MjpegStream> {
                   "\r\n\r\n";
     static const std::string part_end = std::string("\r\n--") + kBoundary + "\r\n";
     std::vector<asio::const_buffer> bufs{asio::buffer(part_header), asio::buffer(*current), asio::buffer(part_end)};
-    auto self = shared_from_this();
-    asio::async_write(con->get_raw_socket(), bufs, [self](const asio::error_code& ec, size_t) {
+    auto self = this->shared_from_this();
+    asio::async_write(con->get_socket(), bufs, [self](const asio::error_code& ec, size_t) {
       self->writing = false;
       if (ec) { self->shutdown(); return; }
       self->write_next();
@@ -65,8 +71,8 @@ struct MjpegStream : std::enable_shared_from_this<MjpegStream> {
   // A viewer that goes away is noticed at once (its slot is free), not at the next frame.
   std::array<char, 512> discard;
   void watch_eof() {
-    auto self = shared_from_this();
-    con->get_raw_socket().async_read_some(asio::buffer(discard), [self](const asio::error_code& ec, size_t) {
+    auto self = this->shared_from_this();
+    con->get_socket().async_read_some(asio::buffer(discard), [self](const asio::error_code& ec, size_t) {
       if (ec) { self->shutdown(); return; }
       if (!self->dead) self->watch_eof();
     });
@@ -77,8 +83,8 @@ struct MjpegStream : std::enable_shared_from_this<MjpegStream> {
                   "\r\nCache-Control: no-cache, no-store\r\nPragma: no-cache\r\nConnection: close\r\n\r\n--" +
                   kBoundary + "\r\n";
     writing = true;
-    auto self = shared_from_this();
-    asio::async_write(con->get_raw_socket(), asio::buffer(part_header), [self](const asio::error_code& ec, size_t) {
+    auto self = this->shared_from_this();
+    asio::async_write(con->get_socket(), asio::buffer(part_header), [self](const asio::error_code& ec, size_t) {
       self->writing = false;
       if (ec) { self->shutdown(); return; }
       self->write_next();
@@ -110,25 +116,49 @@ constexpr uint16_t kCloseBadToken = 4401;
 
 // The client's address (remote) or the address it connected to, as text ("" when the socket
 // is gone).
-std::string socket_address(const WsServer::connection_ptr& con, bool remote) {
+template <class ConnectionPtr>
+std::string socket_address(const ConnectionPtr& con, bool remote) {
   asio::error_code ec;
   auto& socket = con->get_raw_socket();
   auto ep = remote ? socket.remote_endpoint(ec) : socket.local_endpoint(ec);
   return ec ? "" : admission::plain_address(ep.address().to_string());
 }
-std::string peer_address(const WsServer::connection_ptr& con) { return socket_address(con, true); }
-std::string local_address(const WsServer::connection_ptr& con) { return socket_address(con, false); }
+template <class ConnectionPtr>
+std::string peer_address(const ConnectionPtr& con) { return socket_address(con, true); }
+template <class ConnectionPtr>
+std::string local_address(const ConnectionPtr& con) { return socket_address(con, false); }
 
 }  // namespace
 
-struct Server::Impl : std::enable_shared_from_this<Server::Impl> {
+// What Server reads of its endpoint, whichever the config.
+struct Server::Impl {
+  virtual ~Impl() = default;
+  virtual void start() = 0;
+  virtual void stop() = 0;
+  std::atomic<uint16_t> bound_port{0};
+  std::atomic<size_t> count{0};
+  std::atomic<uint64_t> queued{0};    // sum of the connections' backlogs
+  std::atomic<size_t> viewers{0};     // open MJPEG streams
+};
+
+namespace {
+
+template <class Config>
+struct Sink;
+
+template <class Config>
+struct Endpoint final : Server::Impl, std::enable_shared_from_this<Endpoint<Config>> {
+  using WsServer = websocketpp::server<Config>;
+  using connection_ptr = typename WsServer::connection_ptr;
+  using message_ptr = typename WsServer::message_ptr;
+  static constexpr bool kTls = std::is_same_v<Config, websocketpp::config::asio_tls>;
+
   caf::actor_system& sys;
   std::shared_ptr<const NodeSettings> settings;
   ServerOptions opts;
   WsServer ws;
+  std::shared_ptr<asio::ssl::context> tls_context;  // kTls: every connection's (one per node)
   std::thread thread;
-  std::atomic<uint16_t> bound_port{0};
-  std::atomic<size_t> count{0};
   std::atomic<uint64_t> next_id{0};
   bool running = false;
 
@@ -139,7 +169,7 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl> {
   };
   struct Conn {
     session_actor session;
-    std::shared_ptr<struct Sink> sink;
+    std::shared_ptr<Sink<Config>> sink;
     bool closing = false;   // closed by the node: no longer holds a client slot
     std::deque<Out> out;    // at most one frame, and the records after it (order kept)
     size_t out_bytes = 0;
@@ -150,12 +180,10 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl> {
   };
   // Touched only on the network thread.
   std::map<connection_hdl, std::shared_ptr<Conn>, std::owner_less<connection_hdl>> conns;
-  std::atomic<uint64_t> queued{0};    // sum of the connections' backlogs
-  std::atomic<size_t> viewers{0};     // open MJPEG streams
   std::unique_ptr<asio::steady_timer> poll;  // flushes waiting frames (websocketpp has no send-complete callback)
   bool poll_armed = false;
   std::set<std::string> tokens;
-  std::map<std::string, std::vector<std::shared_ptr<MjpegStream>>> mjpeg;
+  std::map<std::string, std::vector<std::shared_ptr<MjpegStream<Config>>>> mjpeg;
   std::map<std::string, std::shared_ptr<const std::vector<uint8_t>>> last_mjpeg;  // a viewer that opens late starts with it
   std::set<connection_hdl, std::owner_less<connection_hdl>> pending_opens;  // validated, not yet opened
   // Admission (net/admission.h): WebSocket connections per client address, counted from the
@@ -166,20 +194,22 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl> {
   // reason, since a page learns nothing of a refused upgrade (no status, no body).
   std::map<connection_hdl, Refusal, std::owner_less<connection_hdl>> refusing;
 
-  Impl(caf::actor_system& s, std::shared_ptr<const NodeSettings> st, ServerOptions o)
+  Endpoint(caf::actor_system& s, std::shared_ptr<const NodeSettings> st, ServerOptions o)
       : sys(s), settings(std::move(st)), opts(std::move(o)), per_address(opts.max_connections_per_ip) {}
+
+  void start() override;
+  void stop() override;
 
   void log(Event e) { node_log(*settings, std::move(e)); }
   void on_open(connection_hdl h);
   void on_close(connection_hdl h);
   bool on_validate(connection_hdl h);
-  std::optional<Refusal> check_origin(const WsServer::connection_ptr& con, const char* endpoint,
-                                      const std::string& address);
-  std::optional<Refusal> check_token(const WsServer::connection_ptr& con, const char* endpoint,
-                                     const std::string& address);
+  std::optional<Refusal> check_origin(const connection_ptr& con, const char* endpoint, const std::string& address);
+  std::optional<Refusal> check_token(const connection_ptr& con, const char* endpoint, const std::string& address);
   std::optional<Refusal> check_capacity(const std::string& address);
   void release_address(connection_hdl h);
-  void on_message(connection_hdl h, WsServer::message_ptr msg);
+  void on_message(connection_hdl h, message_ptr msg);
+  void on_fail(connection_hdl h);
   void on_http(connection_hdl h);
   void enqueue(connection_hdl h, std::shared_ptr<const std::vector<uint8_t>> msg, bool frame);
   void flush(connection_hdl h, Conn& c);
@@ -209,16 +239,18 @@ struct Server::Impl : std::enable_shared_from_this<Server::Impl> {
 };
 
 // The session's way back to its client; posts everything onto the network thread.
+template <class Config>
 struct Sink : ClientSink {
-  std::weak_ptr<Server::Impl> impl;
+  using Impl = Endpoint<Config>;
+  std::weak_ptr<Impl> impl;
   connection_hdl hdl;
   std::string tok;
   std::atomic<bool> open{true};
 
-  void post(std::function<void(Server::Impl&)> f) {
+  void post(std::function<void(Impl&)> f) {
     auto i = impl.lock();
     if (!i || !open) return;
-    std::weak_ptr<Server::Impl> w = i;
+    std::weak_ptr<Impl> w = i;
     i->ws.get_io_service().post([w, f = std::move(f)] {
       if (auto i = w.lock()) f(*i);
     });
@@ -227,17 +259,17 @@ struct Sink : ClientSink {
   void send(std::vector<uint8_t> message) override {
     auto p = std::make_shared<const std::vector<uint8_t>>(std::move(message));
     auto h = hdl;
-    post([h, p](Server::Impl& i) { i.enqueue(h, p, false); });
+    post([h, p](Impl& i) { i.enqueue(h, p, false); });
   }
   void send_frame(std::vector<uint8_t> message) override {
     auto p = std::make_shared<const std::vector<uint8_t>>(std::move(message));
     auto h = hdl;
-    post([h, p](Server::Impl& i) { i.enqueue(h, p, true); });
+    post([h, p](Impl& i) { i.enqueue(h, p, true); });
   }
   uint32_t frames_dropped() const override { return dropped; }
   void send_mjpeg(std::shared_ptr<const std::vector<uint8_t>> jpeg) override {
     auto t = tok;
-    post([t, jpeg](Server::Impl& i) {
+    post([t, jpeg](Impl& i) {
       if (!i.tokens.count(t)) return;  // the session's client has gone
       i.last_mjpeg[t] = jpeg;
       auto it = i.mjpeg.find(t);
@@ -250,7 +282,7 @@ struct Sink : ClientSink {
   void close(const std::string& reason) override {
     auto h = hdl;
     std::string r = reason.substr(0, 120);  // close reasons are limited to 123 bytes
-    post([h, r](Server::Impl& i) {
+    post([h, r](Impl& i) {
       auto it = i.conns.find(h);
       if (it != i.conns.end()) i.close_conn(h, *it->second, websocketpp::close::status::policy_violation, r);
     });
@@ -265,7 +297,8 @@ struct Sink : ClientSink {
 // the newest frame waits here and replaces an older waiting one (counted as dropped); the
 // records sent after a waiting frame wait behind it, so the client sees them in order. A
 // client costs at most three frames: one being written, one queued behind it, one waiting.
-void Server::Impl::enqueue(connection_hdl h, std::shared_ptr<const std::vector<uint8_t>> msg, bool frame) {
+template <class Config>
+void Endpoint<Config>::enqueue(connection_hdl h, std::shared_ptr<const std::vector<uint8_t>> msg, bool frame) {
   auto it = conns.find(h);
   if (it == conns.end() || it->second->closing) return;
   Conn& c = *it->second;
@@ -289,7 +322,8 @@ void Server::Impl::enqueue(connection_hdl h, std::shared_ptr<const std::vector<u
   flush(h, c);
 }
 
-void Server::Impl::flush(connection_hdl h, Conn& c) {
+template <class Config>
+void Endpoint<Config>::flush(connection_hdl h, Conn& c) {
   websocketpp::lib::error_code ec;
   auto con = ws.get_con_from_hdl(h, ec);
   if (ec || c.closing) return;
@@ -316,7 +350,8 @@ void Server::Impl::flush(connection_hdl h, Conn& c) {
   if (backlog > 0) arm_poll();
 }
 
-void Server::Impl::arm_poll() {
+template <class Config>
+void Endpoint<Config>::arm_poll() {
   if (poll_armed || !poll) return;
   poll_armed = true;
   poll->expires_after(std::chrono::milliseconds(2));
@@ -331,7 +366,8 @@ void Server::Impl::arm_poll() {
   });
 }
 
-void Server::Impl::close_conn(connection_hdl h, Conn& c, websocketpp::close::status::value code,
+template <class Config>
+void Endpoint<Config>::close_conn(connection_hdl h, Conn& c, websocketpp::close::status::value code,
                               const std::string& reason) {
   if (c.closing) return;
   // The records already queued (the fatal error record) go out before the close frame; a
@@ -357,7 +393,8 @@ void Server::Impl::close_conn(connection_hdl h, Conn& c, websocketpp::close::sta
 // and closes at once with 4401 and the reason, which is all a page can read), the node's
 // capacity (503) and the session name (400). Every refusal logs one `rejected` event, never
 // the token or the query string it came in.
-bool Server::Impl::on_validate(connection_hdl h) {
+template <class Config>
+bool Endpoint<Config>::on_validate(connection_hdl h) {
   auto con = ws.get_con_from_hdl(h);
   const std::string target = con->get_resource();
   if (http::target_path(target) != "/ws") {
@@ -405,8 +442,9 @@ bool Server::Impl::on_validate(connection_hdl h) {
   return true;
 }
 
-std::optional<Refusal> Server::Impl::check_origin(const WsServer::connection_ptr& con, const char* endpoint,
-                                                  const std::string& address) {
+template <class Config>
+std::optional<Refusal> Endpoint<Config>::check_origin(const connection_ptr& con, const char* endpoint,
+                                                      const std::string& address) {
   const std::string origin = con->get_request_header("Origin");
   if (opts.origins.allows(origin, local_address(con), bound_port)) return std::nullopt;
   const char* reason = origin.empty() ? "origin required" : "origin not allowed";
@@ -414,8 +452,9 @@ std::optional<Refusal> Server::Impl::check_origin(const WsServer::connection_ptr
   return Refusal{websocketpp::http::status_code::forbidden, reason};
 }
 
-std::optional<Refusal> Server::Impl::check_token(const WsServer::connection_ptr& con, const char* endpoint,
-                                                 const std::string& address) {
+template <class Config>
+std::optional<Refusal> Endpoint<Config>::check_token(const connection_ptr& con, const char* endpoint,
+                                                     const std::string& address) {
   using admission::Verdict;
   const admission::TokenCheck c =
       opts.tokens.check(http::query_param(con->get_resource(), kTokenParam), int64_t(std::time(nullptr)));
@@ -431,7 +470,8 @@ std::optional<Refusal> Server::Impl::check_token(const WsServer::connection_ptr&
   return Refusal{websocketpp::http::status_code::unauthorized, reason, kCloseBadToken};
 }
 
-std::optional<Refusal> Server::Impl::check_capacity(const std::string& address) {
+template <class Config>
+std::optional<Refusal> Endpoint<Config>::check_capacity(const std::string& address) {
   if (opts.max_connections_per_ip == 0 || per_address.count(address) < opts.max_connections_per_ip) return std::nullopt;
   log(Event(Ev::rejected, "too many connections from this address")
           .with("address", address)
@@ -441,14 +481,16 @@ std::optional<Refusal> Server::Impl::check_capacity(const std::string& address) 
                      " (max-connections-per-ip)"};
 }
 
-void Server::Impl::release_address(connection_hdl h) {
+template <class Config>
+void Endpoint<Config>::release_address(connection_hdl h) {
   auto it = counted.find(h);
   if (it == counted.end()) return;
   per_address.remove(it->second);
   counted.erase(it);
 }
 
-void Server::Impl::on_open(connection_hdl h) {
+template <class Config>
+void Endpoint<Config>::on_open(connection_hdl h) {
   pending_opens.erase(h);
   if (auto r = refusing.find(h); r != refusing.end()) {  // no session: closed with the reason
     websocketpp::lib::error_code ec;
@@ -456,8 +498,8 @@ void Server::Impl::on_open(connection_hdl h) {
     return;
   }
   auto con = ws.get_con_from_hdl(h);
-  auto sink = std::make_shared<Sink>();
-  sink->impl = shared_from_this();
+  auto sink = std::make_shared<Sink<Config>>();
+  sink->impl = this->shared_from_this();
   sink->hdl = h;
   sink->tok = http::query_param(con->get_resource(), "session");
   if (!sink->tok.empty()) tokens.insert(sink->tok);
@@ -470,7 +512,8 @@ void Server::Impl::on_open(connection_hdl h) {
   recount();
 }
 
-void Server::Impl::on_close(connection_hdl h) {
+template <class Config>
+void Endpoint<Config>::on_close(connection_hdl h) {
   pending_opens.erase(h);
   refusing.erase(h);
   release_address(h);
@@ -488,7 +531,23 @@ void Server::Impl::on_close(connection_hdl h) {
   recount();
 }
 
-void Server::Impl::on_message(connection_hdl h, WsServer::message_ptr msg) {
+// A connection that ended before it was a WebSocket or an HTTP exchange. With TLS, one whose
+// handshake failed (a plain HTTP or WebSocket client on the HTTPS port, an old protocol
+// version, a client that does not trust the certificate) is a refusal, logged as such.
+template <class Config>
+void Endpoint<Config>::on_fail(connection_hdl h) {
+  if constexpr (kTls) {
+    websocketpp::lib::error_code ec;
+    auto con = ws.get_con_from_hdl(h, ec);
+    namespace sock = websocketpp::transport::asio::socket;
+    if (!ec && con->get_ec() == sock::make_error_code(sock::error::tls_handshake_failed))
+      log(Event(Ev::rejected, "TLS handshake failed").with("address", peer_address(con)));
+  }
+  on_close(h);
+}
+
+template <class Config>
+void Endpoint<Config>::on_message(connection_hdl h, message_ptr msg) {
   auto it = conns.find(h);
   if (it == conns.end() || it->second->closing) return;
   const std::string& p = msg->get_payload();
@@ -496,11 +555,10 @@ void Server::Impl::on_message(connection_hdl h, WsServer::message_ptr msg) {
   caf::anon_send(it->second->session, client_atom::value, std::vector<uint8_t>(p.begin(), p.end()));
 }
 
-namespace {
-
 // Sets a response's status, headers and body. HEAD gets the same headers (Content-Length of
 // the body a GET would get) and no body.
-void respond(WsServer::connection_ptr con, bool head, websocketpp::http::status_code::value status,
+template <class ConnectionPtr>
+void respond(const ConnectionPtr& con, bool head, websocketpp::http::status_code::value status,
              const std::string& body, const char* content_type = "text/plain; charset=utf-8") {
   con->set_status(status);
   con->replace_header("Content-Type", content_type);
@@ -509,9 +567,8 @@ void respond(WsServer::connection_ptr con, bool head, websocketpp::http::status_
   con->replace_header("Content-Length", std::to_string(body.size()));
 }
 
-}  // namespace
-
-void Server::Impl::on_http(connection_hdl h) {
+template <class Config>
+void Endpoint<Config>::on_http(connection_hdl h) {
   namespace sc = websocketpp::http::status_code;
   auto con = ws.get_con_from_hdl(h);
   const std::string target = con->get_resource();
@@ -559,7 +616,7 @@ void Server::Impl::on_http(connection_hdl h) {
       return;
     }
     con->defer_http_response();
-    auto s = std::make_shared<MjpegStream>();
+    auto s = std::make_shared<MjpegStream<Config>>();
     s->con = con;
     s->live = &viewers;
     ++viewers;
@@ -611,13 +668,13 @@ void Server::Impl::on_http(connection_hdl h) {
   con->replace_header("Cache-Control", "no-cache");
 }
 
-Server::Server(caf::actor_system& sys, std::shared_ptr<const NodeSettings> settings, ServerOptions options)
-    : impl_(std::make_shared<Impl>(sys, std::move(settings), std::move(options))) {}
-
-Server::~Server() { stop(); }
-
-void Server::start() {
-  Impl& i = *impl_;
+template <class Config>
+void Endpoint<Config>::start() {
+  Endpoint& i = *this;
+  if constexpr (kTls) {  // before anything binds: a bad certificate or key ends the start
+    tls_context = std::make_shared<asio::ssl::context>(tls::server_context(opts.tls_cert, opts.tls_key).release());
+    i.ws.set_tls_init_handler([ctx = tls_context](connection_hdl) { return ctx; });
+  }
   i.ws.clear_access_channels(websocketpp::log::alevel::all);
   i.ws.clear_error_channels(websocketpp::log::elevel::all);
   i.ws.init_asio();
@@ -633,8 +690,8 @@ void Server::start() {
   i.ws.set_validate_handler([&i](connection_hdl h) { return i.on_validate(h); });
   i.ws.set_open_handler([&i](connection_hdl h) { i.on_open(h); });
   i.ws.set_close_handler([&i](connection_hdl h) { i.on_close(h); });
-  i.ws.set_fail_handler([&i](connection_hdl h) { i.on_close(h); });
-  i.ws.set_message_handler([&i](connection_hdl h, WsServer::message_ptr m) { i.on_message(h, m); });
+  i.ws.set_fail_handler([&i](connection_hdl h) { i.on_fail(h); });
+  i.ws.set_message_handler([&i](connection_hdl h, message_ptr m) { i.on_message(h, m); });
   i.ws.set_http_handler([&i](connection_hdl h) { i.on_http(h); });
   asio::error_code ec;
   auto addr = asio::ip::make_address(i.opts.host, ec);
@@ -654,8 +711,9 @@ void Server::start() {
   });
 }
 
-void Server::stop() {
-  Impl& i = *impl_;
+template <class Config>
+void Endpoint<Config>::stop() {
+  Endpoint& i = *this;
   if (!i.running) return;
   i.running = false;
   std::promise<void> done;
@@ -688,6 +746,19 @@ void Server::stop() {
   i.count = 0;
 }
 
+}  // namespace
+
+Server::Server(caf::actor_system& sys, std::shared_ptr<const NodeSettings> settings, ServerOptions options) {
+  if (options.tls())
+    impl_ = std::make_shared<Endpoint<websocketpp::config::asio_tls>>(sys, std::move(settings), std::move(options));
+  else
+    impl_ = std::make_shared<Endpoint<websocketpp::config::asio>>(sys, std::move(settings), std::move(options));
+}
+
+Server::~Server() { stop(); }
+
+void Server::start() { impl_->start(); }
+void Server::stop() { impl_->stop(); }
 uint16_t Server::port() const { return impl_->bound_port; }
 size_t Server::sessions() const { return impl_->count; }
 uint64_t Server::queued_bytes() const { return impl_->queued; }

@@ -4,6 +4,7 @@
 //                        one session actor per connection;
 //   /mjpeg/NAME          the MJPEG stream of session NAME (multipart/x-mixed-replace);
 //   everything else      static files from the web root (the web client and demo pages).
+// Over HTTPS and WSS when ServerOptions names a certificate (net/tls.h), else plain.
 // websocketpp lives only in server.cpp (and in the client, net/ws_client.cpp).
 #include <cstdint>
 #include <memory>
@@ -31,6 +32,10 @@ struct ServerOptions {
   admission::TokenPolicy tokens;        // none configured: no access token asked for
   admission::OriginPolicy origins = admission::OriginPolicy::parse({"self", "loopback"});
   size_t max_connections_per_ip = 0;  // WebSocket connections per client address (0: no limit)
+  // HTTPS and WSS on the port (net/tls.h): a PEM certificate (chain) and its key; both empty:
+  // plain HTTP and WebSocket. With TLS the port speaks nothing else.
+  std::string tls_cert, tls_key;
+  bool tls() const { return !tls_cert.empty() || !tls_key.empty(); }
 };
 
 class Server {
@@ -40,7 +45,8 @@ class Server {
   Server(const Server&) = delete;
   Server& operator=(const Server&) = delete;
 
-  // Binds and starts the network thread; throws std::runtime_error when it cannot bind.
+  // Binds and starts the network thread; throws std::runtime_error when it cannot bind or
+  // cannot load the TLS certificate or key.
   void start();
   // Closes every connection, ends every session and joins the network thread.
   void stop();

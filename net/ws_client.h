@@ -19,6 +19,10 @@ class WsClient {
   WsClient(const WsClient&) = delete;
   WsClient& operator=(const WsClient&) = delete;
 
+  // Before connect: wss:// instead of ws://. ca_file "": any certificate is taken (a node with
+  // a self-signed one); else the node's must chain to a certificate in ca_file and name the
+  // host given to connect.
+  void use_tls(const std::string& ca_file = "");
   // ws://host:port + resource (e.g. "/ws"). False and *error (e.g. "HTTP 503") on failure.
   // `headers` go with the upgrade request (e.g. {"Origin", "http://127.0.0.1:8080"}, as a
   // browser sends it; without one the client is no browser).
@@ -34,6 +38,8 @@ class WsClient {
   uint16_t close_code() const;
   std::string close_reason() const;
   int http_status() const;
+  // The protocol and cipher of an open TLS connection ("TLSv1.3 TLS_AES_256_GCM_SHA384"); "" without TLS.
+  std::string tls_session() const;
   void close();   // close handshake
   void abort();   // drops the TCP connection without a close handshake (a crashed client)
 

@@ -15,6 +15,7 @@
 #include <chrono>
 #include <cstdio>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <optional>
 #include <string>
@@ -307,4 +308,52 @@ TEST_CASE("tessera token makes tokens that a node with the same token-key admits
   CHECK(bad.err().find("tessera.token-key: the key in " + key_file) != std::string::npos);
   CHECK(bad.err().find("short-key") == std::string::npos);
   std::remove(key_file.c_str());
+}
+
+TEST_CASE("tessera serve with tls-cert and tls-key serves HTTPS and WSS only; one without the other is an error",
+          "[e2e]") {
+  char tmpl[] = "/tmp/tessera-serve-tls-XXXXXX";
+  REQUIRE(mkdtemp(tmpl));
+  const std::string dir = tmpl;
+  REQUIRE(std::system(("scripts/tls-cert.sh " + dir + " >/dev/null").c_str()) == 0);
+  {
+    Process p(serve({"--port", "0", "--tessera.tls-cert=" + dir + "/node.crt", "--tessera.tls-key=" + dir + "/node.key"}));
+    auto line = p.first_line(30000);
+    INFO("stderr: " << p.err());
+    REQUIRE(line);
+    const std::string key = "\"listening\": \"https://127.0.0.1:";
+    REQUIRE(line->find(key) != std::string::npos);
+    CHECK(line->find("\"websocket\": \"wss://127.0.0.1:") != std::string::npos);
+    const uint16_t port = uint16_t(std::stoi(line->substr(line->find(key) + key.size())));
+    auto page = http::get("127.0.0.1", port, "/", 5000, {true, dir + "/node.crt"});
+    REQUIRE(page);
+    CHECK(page->status == 200);
+    CHECK_FALSE(http::get("127.0.0.1", port, "/", 3000));  // plain HTTP gets nothing
+    ProtoClient c;
+    c.ws.use_tls(dir + "/node.crt");
+    std::string error;
+    REQUIRE(c.ws.connect("127.0.0.1", port, "/ws", &error));
+    CHECK(c.handshake(protocol::DisplayKind::jpeg, 64, 48));
+    p.signal(SIGTERM);
+    REQUIRE(p.wait(15000));
+    CHECK(p.err_count("\"rejected\": \"TLS handshake failed\"") == 1);
+  }
+  for (const std::string& only : {"--tessera.tls-cert=" + dir + "/node.crt", "--tessera.tls-key=" + dir + "/node.key"}) {
+    Process p(serve({"--port", "0", only}));
+    auto status = p.wait(15000);
+    REQUIRE(status);
+    CHECK(WEXITSTATUS(*status) != 0);
+    INFO("stderr: " << p.err());
+    CHECK(p.err().find("tessera.tls-cert and tessera.tls-key go together") != std::string::npos);
+  }
+  {
+    Process p(serve({"--port", "0", "--tessera.tls-cert=" + dir + "/node.key", "--tessera.tls-key=" + dir + "/node.key"}));
+    auto status = p.wait(15000);
+    REQUIRE(status);
+    CHECK(WEXITSTATUS(*status) != 0);
+    INFO("stderr: " << p.err());
+    CHECK(p.err().find("tls-cert " + dir + "/node.key: cannot load a PEM certificate") != std::string::npos);
+    CHECK(p.out().find("listening") == std::string::npos);
+  }
+  std::filesystem::remove_all(dir);
 }

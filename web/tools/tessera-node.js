@@ -36,7 +36,7 @@ export function startNode(bin, { args = [], threads = 0 } = {}) {
       if (nl < 0 || node.info) return;
       try { node.info = JSON.parse(out.slice(0, nl)); } catch (e) { fail(`unexpected first line: ${out.slice(0, nl)}`); return; }
       const u = new URL(node.info.listening);
-      Object.assign(node, { host: u.hostname, port: Number(u.port), base: `http://${u.hostname}:${u.port}` });
+      Object.assign(node, { host: u.hostname, port: Number(u.port), base: `${u.protocol}//${u.hostname}:${u.port}` });
       proc.removeAllListeners('exit');
       resolve(node);
     });

@@ -1,4 +1,4 @@
-// Server rendering backend: <xml3d server="host:port" renderer="raytracer" display="jpeg|s3tc|mjpeg"
+// Server rendering backend: <xml3d server="[wss://]host:port" renderer="raytracer" display="jpeg|s3tc|mjpeg"
 // nodes="N" sync-rate="30" jpeg-quality="85" ao-samples="0" max-depth="4" refine-samples="64"
 // frame-budget="33" token="...">
 // (RenderSettings.js; the access token also from the page's #tessera-token=..., AccessToken.js).
@@ -12,6 +12,16 @@ import { hasS3TC } from './Features.js';
 import { readRenderSettings, refineStatus } from './RenderSettings.js';
 import { accessToken, withToken, redact } from './AccessToken.js';
 import { pageBackground } from './PageBackground.js';
+
+// The node's host:port and whether to use TLS (wss:// and https://) from the server attribute:
+// "wss://h:p" or "https://h:p" ask for TLS, "ws://h:p" or "http://h:p" for none, a bare "h:p"
+// follows the page (a page served over https can open only secure sockets).
+export function nodeAddress(server, pageProtocol) {
+  const m = /^(wss|ws|https|http):\/\//i.exec(server.trim());
+  const host = server.trim().slice(m ? m[0].length : 0).replace(/[/?#].*$/, '');
+  const secure = m ? /^(wss|https)$/i.test(m[1]) : pageProtocol === 'https:';
+  return { host, secure };
+}
 
 // The sky's colour: what the page shows behind the element (PageBackground.js).
 function cssColor(doc, el) {
@@ -34,9 +44,8 @@ export class RemoteBackend {
     }
     if (display === 's3tc' && !hasS3TC()) display = 'jpeg';
     this.display = display;
-    const host = server.replace(/^wss?:\/\//, '').replace(/\/.*$/, '');
+    const { host, secure } = nodeAddress(server, doc.defaultView.location.protocol);
     const session = Math.random().toString(36).slice(2) + Date.now().toString(36);
-    const secure = doc.defaultView.location.protocol === 'https:';
     const token = accessToken(x, doc.defaultView);
     this.host = host;
     this.url = withToken(`${secure ? 'wss' : 'ws'}://${host}/ws?session=${session}`, token);

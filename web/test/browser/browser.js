@@ -9,12 +9,14 @@ import { startStaticServer } from '../../tools/static-server.js';
 export const CHROMIUM = process.env.CHROMIUM || '/usr/bin/chromium';
 export const hasChromium = () => fs.existsSync(CHROMIUM);
 
-export async function launch() {
+// `args`: further chromium switches (e.g. --ignore-certificate-errors for a node with a
+// self-signed certificate).
+export async function launch({ args = [] } = {}) {
   const userDataDir = fs.mkdtempSync(path.join(os.tmpdir(), 'tessera-chromium-'));
   const context = await chromium.launchPersistentContext(userDataDir, {
     executablePath: CHROMIUM, headless: true,
     args: ['--no-sandbox', '--disable-gpu', '--disable-background-networking', '--disable-component-update',
-      '--disable-sync', '--no-first-run', '--use-angle=swiftshader', '--enable-unsafe-swiftshader'],
+      '--disable-sync', '--no-first-run', '--use-angle=swiftshader', '--enable-unsafe-swiftshader', ...args],
     viewport: { width: 400, height: 300 },
   });
   const server = await startStaticServer();

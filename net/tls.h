@@ -1,0 +1,46 @@
+#pragma once
+// TLS for the node's one port (HTTPS and WSS; docs/operations.md, "TLS"): the OpenSSL
+// contexts of the server (net/server.cpp) and of our own clients (net/ws_client.cpp, the
+// HTTP client of net/http.h). Plain OpenSSL, no websocketpp: websocketpp's asio TLS config
+// adopts the context made here.
+//
+// The server's policy: TLS 1.2 and 1.3 only; for TLS 1.2 only ECDHE key exchange with AEAD
+// ciphers (AES-GCM, ChaCha20-Poly1305), as Mozilla's "intermediate" profile without its
+// finite-field DHE suites; no compression, no renegotiation.
+#include <memory>
+#include <string>
+
+typedef struct ssl_ctx_st SSL_CTX;
+
+namespace tessera::tls {
+
+struct CtxDeleter {
+  void operator()(SSL_CTX* ctx) const;
+};
+using CtxPtr = std::unique_ptr<SSL_CTX, CtxDeleter>;
+
+// The TLS 1.2 cipher list of the server (TLS 1.3 suites are OpenSSL's, all AEAD).
+extern const char* const kServerCiphers12;
+
+// A server context from a PEM certificate (chain: the leaf first) and its PEM private key.
+// Throws std::runtime_error naming the file and OpenSSL's reason when a file is missing,
+// unreadable, not PEM, or the key does not belong to the certificate.
+CtxPtr server_context(const std::string& cert_file, const std::string& key_file);
+
+// A client context with the same protocol floor. ca_file empty: the peer's certificate is
+// not verified (tests and load tests against a self-signed node); else it must chain to a
+// certificate in ca_file, and the host name is checked by the caller (verify_host).
+CtxPtr client_context(const std::string& ca_file);
+
+// Makes a verifying client's handshake also check that the certificate names `host` (a DNS
+// name, or an IP address against the certificate's IP entries). `ssl` is the connection's SSL*.
+void expect_host(void* ssl, const std::string& host);
+
+// OpenSSL's error queue as one line (and cleared); `fallback` when empty.
+std::string last_error(const std::string& fallback);
+
+// "TLSv1.3 TLS_AES_256_GCM_SHA384" of an established connection's SSL* (void* to keep
+// OpenSSL's headers out of the callers).
+std::string describe_session(const void* ssl);
+
+}  // namespace tessera::tls
