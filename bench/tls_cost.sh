@@ -7,19 +7,25 @@
 # at the end, per client count, the TLS/plain ratio of each figure's median over the pairs.
 # Compare only as ratios within one run: the machine is shared. Target: fps within 3%.
 # Usage: bench/tls_cost.sh [TESSERA] [PAIRS] [SECONDS]   (default build/app/tessera, 3 pairs, 10 s)
+#        TESSERA may be a command with arguments (a loader and the binary), unquoted.
 #        TESSERA_AB_WIDTH=640 TESSERA_AB_HEIGHT=360 bench/tls_cost.sh ...   (frames of another size)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 BIN=${1:-build/app/tessera}; PAIRS=${2:-3}; SECS=${3:-10}
 W=${TESSERA_AB_WIDTH:-1280}; H=${TESSERA_AB_HEIGHT:-720}
-S=../shared/scenes/pavilion
-out=$(mktemp); certs=$(mktemp -d)
-trap 'rm -rf "$out" "$certs"' EXIT
-scripts/tls-cert.sh "$certs" > /dev/null
+S=${SCENE:-../shared/scenes/pavilion}
+out=$(mktemp); certs=${TLS_DIR:-}  # TLS_DIR: node.crt and node.key made before (a machine without the openssl CLI)
+if [[ -z $certs ]]; then
+  certs=$(mktemp -d)
+  trap 'rm -rf "$out" "$certs"' EXIT
+  scripts/tls-cert.sh "$certs" > /dev/null
+else
+  trap 'rm -f "$out"' EXIT
+fi
 run() {
   local tag=$1 clients=$2 line extra=()
   [[ $tag == tls ]] && extra=(--tls-cert "$certs/node.crt" --tls-key "$certs/node.key")
-  line=$("$BIN" loadtest --scene $S/scene.gltf --camera-loop $S/camera-loop.json --size "$W" "$H" \
+  line=$($BIN loadtest --scene $S/scene.gltf --camera-loop $S/camera-loop.json --size "$W" "$H" \
          --clients "$clients" --display jpeg --seconds "$SECS" --warmup 2 "${extra[@]}" 2> /dev/null | grep '"summary": true')
   python3 -c 'import json,sys; d=json.loads(sys.argv[3]); print(json.dumps({"transport": sys.argv[1], "clients": int(sys.argv[2]), "fps_total": d["fps_total"], "latency_ms": d["median_latency_ms"], "p90_latency_ms": d["p90_latency_ms"], "pipeline_ms": d["median_pipeline_ms"], "bytes": d["median_bytes"], "tls": d["tls"], "errors": d["errors"]}))' \
     "$tag" "$clients" "$line" | tee -a "$out"

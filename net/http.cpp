@@ -251,7 +251,9 @@ class Stream {
     ssl_ = SSL_new(ctx_.get());
     if (!ssl_) return fail(error, tls::last_error("SSL_new failed"));
     SSL_set_fd(ssl_, fd_);
-    SSL_set_tlsext_host_name(ssl_, host.c_str());
+    in6_addr ip{};
+    const bool literal = inet_pton(AF_INET, host.c_str(), &ip) == 1 || inet_pton(AF_INET6, host.c_str(), &ip) == 1;
+    if (!literal) SSL_set_tlsext_host_name(ssl_, host.c_str());  // SNI names hosts, never addresses (RFC 6066)
     if (!tls.ca_file.empty()) tls::expect_host(ssl_, host);
     while (true) {
       int r = SSL_connect(ssl_);
