@@ -487,7 +487,9 @@ export class MarkupReader {
       if (g.undrawn > 0)
         this.warn(el, `${this.describe(el)} src="${src}": ${g.undrawn} glTF primitive${g.undrawn > 1 ? 's' : ''} of points, lines or triangle fans ` +
           `not drawn: only triangles and triangle strips are`);
+      const pick = parsePick(el.getAttribute('pick'));
       g.meshes.forEach((p, i) => {
+        if (pick && !pickSelects(pick, { name: p.name, classes: new Set() })) return;
         const o = overrides.get(p.name);
         let mat;
         if (o && o.getAttribute('material')) mat = this.buildMaterial(this.materialParams(o.getAttribute('material'), o), null, o);
@@ -503,60 +505,121 @@ export class MarkupReader {
       if (g.camera) this.gltfCamera = { toWorld: M.multiply(world, g.camera.toWorld), fovY: g.camera.fovY };
       return;
     }
-    if (r.element && localName(r.element) === 'asset') { this.readAsset(el, r.element, world, fallback, overrides, visible); return; }
-    if (r.element) { this.error(el, `<model> src points at <${localName(r.element)}>, not <asset> or a glTF file`); return; }
+    if (r.element && ['asset', 'model'].includes(localName(r.element))) {
+      this.drawAssetTable(el, this.assetTable(el, null, []), world, fallback, visible, new Set());
+      return;
+    }
+    if (r.element) { this.error(el, `<model> src points at <${localName(r.element)}>, not <asset>, <model> or a glTF file`); return; }
     this.error(el, '<model> src is not an asset');
   }
 
-  readAsset(model, asset, world, fallback, overrides, visible) {
-    const named = new Map();
-    const meshes = [];
-    const gather = (a, depth) => {
-      if (depth > 8) return;
-      const base = a.getAttribute('src');
-      if (base) {
-        const r = this.resolve(base, a);
-        if (r.element && localName(r.element) === 'asset') gather(r.element, depth + 1);
+  // ---- assets (XML3D spec "Assets"; docs/web-client.md "Assets") ------------------------
+  // An <asset> or <model> is read into a table: its entries (<assetdata>/<assetmesh>; entries
+  // of the same name are one entry, each element a later "post" that adds or overrides data,
+  // material, transform or type), its sub-tables (nested <asset> elements; named ones are
+  // merged by name) and its pick filter. A `src` naming another asset or model copies that
+  // table first, so the element's own children extend and override it: a <model>'s
+  // <assetmesh name=...> children are posts like any other. Returns the table; errors go to
+  // the element that caused them.
+  assetTable(el, parent, chain) {
+    const t = newTable(el, parent);
+    if (chain.includes(el) || chain.length > 16) {
+      this.error(el, `<${localName(el)}${el.id ? ` id="${el.id}"` : ''}> src: cyclic asset reference`);
+      return t;
+    }
+    chain = [...chain, el];
+    let pick = parsePick(el.getAttribute('pick'));
+    const src = el.getAttribute('src');
+    if (src) {
+      const r = this.resolve(src, el);
+      if (r.error) this.error(el, `<${localName(el)}> src: ${r.error}`);
+      else if (r.element && ['asset', 'model'].includes(localName(r.element))) {
+        const from = this.assetTable(r.element, null, chain);
+        copyTable(t, from);
+        pick = pick && from.pick ? intersectPick(pick, from.pick) : (pick || from.pick);
+      } else if (!r.pending) {
+        this.error(el, `<${localName(el)}> src="${src}" is not an <asset> or <model>` +
+          (r.gltf ? ' (a glTF file is instantiated by <model src> only)' : ''));
       }
-      for (const ch of a.children) {
-        const t = localName(ch);
-        if (t === 'assetdata' && ch.getAttribute('name')) named.set(ch.getAttribute('name'), ch);
-        else if (t === 'assetmesh' && !meshes.includes(ch)) meshes.push(ch);
-        else if (t === 'asset') gather(ch, depth + 1);
+    }
+    t.pick = pick;
+    if (el.getAttribute('material')) t.material = { ref: el.getAttribute('material'), el };
+    if (localName(el) === 'asset') {
+      const local = this.localMatrix(el, this.style(el));
+      if (local) t.transform = local;
+    }
+    const matchPosts = [];
+    for (const ch of el.children) {
+      const tag = localName(ch);
+      if (tag === 'asset') { mergeSubTable(t, this.assetTable(ch, t, chain)); continue; }
+      if (tag !== 'assetdata' && tag !== 'assetmesh') continue;
+      const name = ch.getAttribute('name');
+      const match = ch.getAttribute('match');
+      if (!name && match) { matchPosts.push({ filter: parsePick(match), post: ch, mesh: tag === 'assetmesh' }); continue; }
+      if (name && match) this.warn(ch, `${this.describe(ch)} has both name and match: match is ignored`);
+      let e = name ? t.named.get(name) : null;
+      if (!e) {
+        e = newEntry(name, t);
+        t.entries.push(e);
+        if (name) t.named.set(name, e);
       }
-    };
-    gather(asset, 0);
-    const dataOf = (el, seen = new Set()) => {
-      const out = new Map();
-      for (const inc of (el.getAttribute('includes') || '').split(/\s+/).filter((s) => s)) {
-        const d = named.get(inc);
-        if (!d) { this.error(el, `includes "${inc}": no assetdata with that name`); continue; }
-        if (seen.has(d)) continue;
-        seen.add(d);
-        for (const [k, v] of dataOf(d, seen)) out.set(k, v);
-      }
-      for (const [k, v] of this.collect(el)) out.set(k, v);
+      addPost(e, ch);
+    }
+    // match="name, .class" elements are posts of every entry of their kind that they select.
+    for (const m of matchPosts)
+      for (const e of t.entries)
+        if ((e.type !== null) === m.mesh && pickSelects(m.filter, e)) addPost(e, m.post);
+    return t;
+  }
+
+  // The data of an entry: per post, in order, the entries its `includes` names (a name in the
+  // same table; "parent.name", "sub.name", "parent.sub.name" through the tables), then the
+  // post's own data; later wins.
+  entryData(e, stack = []) {
+    const out = new Map();
+    if (stack.includes(e)) {
+      this.error(e.posts[e.posts.length - 1], `includes: recursive include of "${e.name}"`);
       return out;
-    };
-    meshes.forEach((am) => {
-      const name = am.getAttribute('name');
-      const o = name && overrides.get(name);
-      const style = this.style(am);
-      if (style.display === 'none') return;
-      const local = this.localMatrix(am, style);
-      const w = local ? M.multiply(world, local) : world;
-      const data = dataOf(am);
-      if (o) for (const [k, v] of this.collect(o)) data.set(k, v);
-      const matRef = (o && o.getAttribute('material')) || am.getAttribute('material');
-      const params = matRef ? this.materialParams(matRef, am) : fallback;
-      const mat = this.buildMaterial(params, new Map([...data].filter(([k]) => MATERIAL_PARAMS.has(k))), am);
-      // Keyed by model and asset mesh: several models may instantiate the same asset.
-      this.addGeometry(am, model, this.ids.of(model, am), {
+    }
+    stack = [...stack, e];
+    for (const post of e.posts) {
+      for (const inc of (post.getAttribute('includes') || '').split(/[\s,]+/).filter((x) => x)) {
+        const target = resolveInclude(e.table, inc);
+        if (target.error) { this.error(post, `includes "${inc}": ${target.error}`); continue; }
+        for (const [k, v] of this.entryData(target.entry, stack)) out.set(k, v);
+      }
+      for (const [k, v] of this.collect(post)) out.set(k, v);
+    }
+    return out;
+  }
+
+  // Draws the meshes of a table that its pick filter selects, then its sub-tables, each under
+  // its own transform. `model` is the <model> element: events and picking report it, and mesh
+  // ids are keyed by it and the entry's first element (a path when that repeats in the model).
+  drawAssetTable(model, t, world, fallback, visible, used, path = '') {
+    const w = t.transform ? M.multiply(world, t.transform) : world;
+    t.entries.forEach((e, i) => {
+      if (e.type === null || (t.pick && !pickSelects(t.pick, e))) return;
+      const last = e.posts[e.posts.length - 1];
+      if (this.style(last).display === 'none') return;
+      let local = null;
+      for (const post of e.posts) local = this.localMatrix(post, this.style(post)) || local;
+      const data = this.entryData(e);
+      let matPost = null;
+      for (const post of e.posts) if (post.getAttribute('material')) matPost = post;
+      let matRef = matPost && { ref: matPost.getAttribute('material'), el: matPost };
+      for (let up = t; !matRef && up; up = up.parent) matRef = up.material;
+      const params = matRef ? this.materialParams(matRef.ref, matRef.el) : fallback;
+      const mat = this.buildMaterial(params, new Map([...data].filter(([k]) => MATERIAL_PARAMS.has(k))), last);
+      const key = used.has(e.posts[0]) ? `${path}/${i}` : e.posts[0];
+      used.add(e.posts[0]);
+      this.addGeometry(last, model, this.ids.of(model, key), {
         positions: data.get('position'), normals: data.get('normal'), texcoords: data.get('texcoord'),
         colors: data.get('color'), indices: data.get('index'), vertexCount: data.get('vertexCount'),
-        type: (am.getAttribute('type') || 'triangles').trim(),
-      }, w, mat, visible);
+        type: e.type,
+      }, local ? M.multiply(w, local) : w, mat, visible);
     });
+    t.subs.forEach((sub, i) => this.drawAssetTable(model, sub, w, fallback, visible, used, `${path}/${sub.name || ''}#${i}`));
   }
 
   // ---- lights -------------------------------------------------------------------------
@@ -646,6 +709,101 @@ export function spotSoftness(cutoff, softness) {
   if (softness >= 0 && softness <= 1) return softness;
   const inner = Math.acos(Math.min(1, Math.max(-1, Math.cos(cutoff * (1 - softness)))));  // 0..pi
   return inner < cutoff ? 1 - inner / cutoff : 0;
+}
+
+// ---- asset tables (MarkupReader.assetTable) --------------------------------------------
+const newTable = (el, parent) => ({
+  el, name: el.getAttribute('name') || null, parent, entries: [], named: new Map(), subs: [], namedSubs: new Map(),
+  pick: null, material: null, transform: null,
+});
+const newEntry = (name, table) => ({ name, table, posts: [], type: null, classes: new Set() });
+function addPost(e, el) {
+  e.posts.push(el);
+  if (localName(el) === 'assetmesh') e.type = (el.getAttribute('type') || 'triangles').trim();
+  for (const c of (el.getAttribute('class') || '').split(/\s+/)) if (c) e.classes.add(c);
+}
+// Copies `from` (a src asset's table) into the empty table `t`: entries and sub-tables become
+// t's own (re-parented), the material and transform carry over.
+function copyTable(t, from) {
+  for (const e of from.entries) {
+    const c = { ...e, table: t, posts: [...e.posts], classes: new Set(e.classes) };
+    t.entries.push(c);
+    if (c.name) t.named.set(c.name, c);
+  }
+  for (const sub of from.subs) mergeSubTable(t, cloneTable(sub, t));
+  if (from.material) t.material = from.material;
+  if (from.transform) t.transform = from.transform;
+}
+function cloneTable(from, parent) {
+  const t = newTable(from.el, parent);
+  t.name = from.name;
+  t.pick = from.pick;
+  copyTable(t, from);
+  return t;
+}
+// A sub-table joins `t`; one with the name of an existing sub-table extends it instead (its
+// entries' posts after the existing ones, so they override).
+function mergeSubTable(t, sub) {
+  const into = sub.name && t.namedSubs.get(sub.name);
+  if (!into) {
+    sub.parent = t;
+    t.subs.push(sub);
+    if (sub.name) t.namedSubs.set(sub.name, sub);
+    return;
+  }
+  for (const e of sub.entries) {
+    const have = e.name && into.named.get(e.name);
+    if (have) { for (const p of e.posts) addPost(have, p); continue; }
+    const c = { ...e, table: into, posts: [...e.posts], classes: new Set(e.classes) };
+    into.entries.push(c);
+    if (c.name) into.named.set(c.name, c);
+  }
+  for (const s of sub.subs) mergeSubTable(into, cloneTable(s, into));
+  if (sub.material) into.material = sub.material;
+  if (sub.transform) into.transform = sub.transform;
+  if (sub.pick) into.pick = into.pick ? intersectPick(into.pick, sub.pick) : sub.pick;
+}
+// pick="a, b, .cls.other, *" (and match=...): entry names, class sets (an entry whose classes
+// include all of one set) or everything. null when the attribute is absent.
+export function parsePick(value) {
+  if (value === null || value === undefined) return null;
+  const f = { all: false, names: new Set(), classes: [] };
+  for (const part of value.split(',').map((x) => x.trim()).filter((x) => x)) {
+    if (part === '*') f.all = true;
+    else if (part.startsWith('.')) f.classes.push(part.split('.').filter((x) => x));
+    else f.names.add(part);
+  }
+  return f;
+}
+function pickSelects(f, e) {
+  if (f.all) return true;
+  if (e.classes.size && f.classes.some((set) => set.every((c) => e.classes.has(c)))) return true;
+  return !!e.name && f.names.has(e.name);
+}
+function intersectPick(a, b) {
+  const key = (set) => [...set].sort().join('.');
+  const bClasses = new Set(b.classes.map(key));
+  return {
+    all: a.all && b.all,
+    names: a.all ? new Set(b.names) : b.all ? new Set(a.names) : new Set([...a.names].filter((n) => b.names.has(n))),
+    classes: a.all ? b.classes : b.all ? a.classes : a.classes.filter((set) => bClasses.has(key(set))),
+  };
+}
+// "name", "parent.name", "sub.name", "parent.sub.name": the entry an includes names, from table t.
+function resolveInclude(t, path) {
+  const segs = path.split('.');
+  for (const seg of segs.slice(0, -1)) {
+    if (seg === 'parent') {
+      if (!t.parent) return { error: 'the asset has no parent asset' };
+      t = t.parent;
+    } else {
+      const sub = t.namedSubs.get(seg);
+      if (!sub) return { error: `no nested asset named "${seg}"` };
+      t = sub;
+    }
+  }
+  const entry = t.named.get(segs[segs.length - 1]);
+  return entry ? { entry } : { error: 'no assetdata with that name' };
 }
 
 // Stable numeric ids (from 1) for elements and their sub-parts, and for typed arrays. A sub-part

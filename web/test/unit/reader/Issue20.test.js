@@ -237,3 +237,100 @@ test('glTF primitives of points or lines in a model give one warning naming the 
   assert.equal(scene.warnings[0].element.id, 'g');
   assert.deepEqual(scene.errors, []);
 });
+
+// Item 6: nested and derived assets.
+const SQUARE = '<float3 name="position">-1 -1 0 1 -1 0 1 1 0 -1 1 0</float3><int name="index">0 1 2 0 2 3</int>';
+const MATS = `<material id="red" model="urn:xml3d:material:matte"><float3 name="diffuseColor">1 0 0</float3></material>
+  <material id="blue" model="urn:xml3d:material:matte"><float3 name="diffuseColor">0 0 1</float3></material>`;
+const xyz = (m) => [m.transform[12], m.transform[13], m.transform[14]];
+
+test('nested named assets: includes reaches parent.name and sub.name, and a nested asset has its own transform', () => {
+  const { scene } = read(`<xml3d><defs>
+    <asset id="car"><assetdata name="shape">${SQUARE}</assetdata>
+      <assetmesh name="body" includes="wheels.rim"></assetmesh>
+      <asset name="wheels" style="transform: translateY(-2px)">
+        <assetdata name="rim" includes="parent.shape"><float3 name="normal">0 0 1 0 0 1 0 0 1 0 0 1</float3></assetdata>
+        <assetmesh name="front" includes="rim" style="transform: translateX(1px)"></assetmesh>
+        <assetmesh name="back" includes="parent.shape, rim" style="transform: translateX(-1px)"></assetmesh>
+      </asset></asset></defs>
+    <model id="m" src="#car"></model></xml3d>`);
+  assert.deepEqual(scene.errors, []);
+  const ms = [...scene.meshes.values()];
+  assert.equal(ms.length, 3);
+  assert.deepEqual(ms.map(xyz), [[0, 0, 0], [1, -2, 0], [-1, -2, 0]]);
+  assert.ok(ms.every((m) => m.positions && m.normals && m.indices), 'positions, normals and indices through the includes');
+  assert.ok(ms.every((m) => m.element.id === 'm'), 'the model is what events and picking report');
+});
+
+test('a model whose src is another model takes its asset and overrides, and adds its own', () => {
+  const doc = page(`<xml3d><defs>${MATS}
+    <asset id="a"><assetdata name="geo">${SQUARE}</assetdata>
+      <assetmesh name="one" includes="geo"></assetmesh>
+      <assetmesh name="two" includes="geo" style="transform: translateX(3px)"></assetmesh></asset></defs>
+    <model id="base" src="#a"><assetmesh name="two" material="#blue"></assetmesh></model>
+    <model id="derived" src="#base" style="transform: translateY(5px)"><assetmesh name="one" material="#red"></assetmesh></model></xml3d>`);
+  const reader = new MarkupReader();
+  const scene = reader.read(doc.querySelector('xml3d'));
+  assert.deepEqual(scene.errors, []);
+  const ms = [...scene.meshes.values()];
+  assert.deepEqual(ms.map((m) => m.element.id), ['base', 'base', 'derived', 'derived']);
+  const colour = (m) => scene.materials.get(m.material).diffuseColor;
+  assert.deepEqual(colour(ms[1]), [0, 0, 1], 'base: two is blue');
+  assert.deepEqual(colour(ms[2]), [1, 0, 0], 'derived: one is red');
+  assert.deepEqual(colour(ms[3]), [0, 0, 1], 'derived keeps the base model\'s override of two');
+  assert.deepEqual(ms.map(xyz), [[0, 0, 0], [3, 0, 0], [0, 5, 0], [3, 5, 0]], 'the asset mesh transform survives the override');
+  assert.deepEqual([...reader.read(doc.querySelector('xml3d')).meshes.keys()], [...scene.meshes.keys()], 'ids are stable');
+});
+
+test('pick on a model draws only the named or classed asset meshes; pick on both model and src model intersects', () => {
+  const { scene } = read(`<xml3d><defs>
+    <asset id="a"><assetdata name="geo">${SQUARE}</assetdata>
+      <assetmesh name="one" includes="geo" class="glass front"></assetmesh>
+      <assetmesh name="two" includes="geo" class="glass"></assetmesh>
+      <assetmesh name="three" includes="geo"></assetmesh></asset></defs>
+    <model id="byName" src="#a" pick="one, three"></model>
+    <model id="byClass" src="#a" pick=".glass.front"></model>
+    <model id="all" src="#a" pick="*"></model>
+    <model id="narrow" src="#byName" pick="three, two"></model>
+    <model id="none" src="#a" pick="four"></model></xml3d>`);
+  assert.deepEqual(scene.errors, []);
+  const drawn = (id) => [...scene.meshes.values()].filter((m) => m.element.id === id).length;
+  assert.deepEqual(['byName', 'byClass', 'all', 'narrow', 'none'].map(drawn), [2, 1, 3, 1, 0]);
+});
+
+test('match posts apply to every selected entry; a nested asset of the same name extends the src one', () => {
+  const { scene } = read(`<xml3d><defs>${MATS}
+    <material id="green" model="urn:xml3d:material:matte"><float3 name="diffuseColor">0 1 0</float3></material>
+    <asset id="a"><assetdata name="geo">${SQUARE}</assetdata>
+      <assetmesh name="one" includes="geo" class="paint"></assetmesh>
+      <assetmesh name="two" includes="geo"></assetmesh>
+      <asset name="sub"><assetmesh name="inner" includes="parent.geo"></assetmesh></asset></asset></defs>
+    <model id="m" src="#a"><assetmesh match=".paint" material="#green"></assetmesh>
+      <asset name="sub"><assetmesh name="inner" material="#blue" style="transform: translateZ(-4px)"></assetmesh></asset></model></xml3d>`);
+  assert.deepEqual(scene.errors, []);
+  const ms = [...scene.meshes.values()];
+  assert.equal(ms.length, 3);
+  const colour = (m) => scene.materials.get(m.material).diffuseColor;
+  assert.deepEqual(colour(ms[0]), [0, 1, 0], 'match=".paint" gave one its material');
+  assert.notDeepEqual(colour(ms[1]), [0, 1, 0], 'two has no class paint');
+  assert.deepEqual(colour(ms[2]), [0, 0, 1], 'the model\'s sub asset overrides the src asset\'s entry');
+  assert.deepEqual(xyz(ms[2]), [0, 0, -4]);
+  assert.ok(ms[2].positions, 'its data still comes through parent.geo');
+});
+
+test('cyclic asset src and bad includes are errors on their elements, and nothing hangs', () => {
+  const { scene } = read(`<xml3d><defs>
+    <asset id="loop1" src="#loop2"><assetdata name="geo">${SQUARE}</assetdata><assetmesh name="x" includes="geo"></assetmesh></asset>
+    <asset id="loop2" src="#loop1"></asset>
+    <asset id="b"><assetmesh id="bad" name="y" includes="parent.geo"></assetmesh>
+      <assetmesh id="bad2" name="z" includes="nosub.geo"></assetmesh>
+      <assetdata name="p" includes="q"></assetdata><assetdata name="q" includes="p"></assetdata>
+      <assetmesh id="rec" name="w" includes="p">${SQUARE}</assetmesh></asset></defs>
+    <model id="m1" src="#loop1"></model><model id="m2" src="#b"></model></xml3d>`);
+  const msgs = scene.errors.map((e) => e.message).join('\n');
+  assert.match(msgs, /cyclic asset reference/);
+  assert.match(msgs, /includes "parent.geo": the asset has no parent asset/);
+  assert.match(msgs, /includes "nosub.geo": no nested asset named "nosub"/);
+  assert.match(msgs, /recursive include/);
+  assert.equal([...scene.meshes.values()].filter((m) => m.element.id === 'm1').length, 1, 'the asset still draws once');
+});
