@@ -27,6 +27,12 @@
 
 namespace tessera {
 
+// The application identifier of CAF's BASP handshake (the setting middleman.app-identifiers):
+// CAF refuses a peer that names another. CAF's default, "generic-caf-app", would tell whoever
+// connects which framework this is; this names the program and nothing else. (Over mutual TLS
+// no part of the handshake reaches a peer without a certificate of the cluster CA.)
+inline constexpr const char* kCafAppIdentifier = "tessera";
+
 // Parent -> node: open a worker for one session on this node's sub-tree.
 struct OpenRequest {
   uint64_t session = 0;

@@ -38,6 +38,7 @@ const char* event_name(Ev kind) {
     case Ev::worker_closed: return "worker_closed";
     case Ev::open_refused: return "open_refused";
     case Ev::heap_trimmed: return "heap_trimmed";
+    case Ev::cluster_security: return "cluster_security";
     case Ev::converged: return "converged";
     case Ev::closed_slow_client: return "closed_slow_client";
     case Ev::rejected: return "rejected";

@@ -31,6 +31,8 @@ enum class Ev : uint8_t {
   update_failed, ended, bad_batch, orphaned,
   // The node actor (actors/node_actor.cpp): scope {"node": name}.
   child_connected, child_unreachable, child_lost, worker_opened, worker_closed, open_refused, heap_trimmed,
+  // A cluster node at start (app/cmd_serve.cpp): scope {"node": name}; "mutual_tls" or "none".
+  cluster_security,
   // The server (net/server.cpp): no scope.
   closed_slow_client, rejected, network_thread_error,
   // A session: its still reached its refine target and rendering stopped.

@@ -59,6 +59,12 @@ struct NodeSettings {
                                               // from its parent's chunks; a larger one breaks
                                               // its scene until a reset update replaces it
   caf::weak_actor_ptr node;           // this process's node actor (none: a single node)
+  bool cluster_tls = false;           // children are reached over mutual TLS, through CAF's OpenSSL
+                                      // module (the process loaded it; docs/operations.md)
+  // Why CAF's handshake with the child at host:port was cut off, in words ("": not known): the
+  // node logs it with child_unreachable. Blocking (a TLS handshake of its own): the node actor
+  // calls it on a thread of its own. Set by tessera serve (app/cluster_tls.h); none: not asked.
+  std::function<std::string(const std::string& host, uint16_t port)> diagnose_link;
   // --- Resource bounds (docs/operations.md, "Resource bounds") ---
   // Samples per pixel a still refines to after each requested frame, for a client that does
   // not say (protocol record refine); 0 or 1: no refinement.
@@ -113,7 +119,8 @@ encoder_actor spawn_encoder(caf::actor_system& sys, bool detached);
 display_actor spawn_display(caf::actor_system& sys, std::shared_ptr<ClientSink> sink, encoder_actor encoder,
                             std::shared_ptr<const NodeSettings> settings, uint64_t session_id);
 // The node actor of this process (cluster_protocol.h): connects to settings->children over
-// CAF's middleman (when loaded), reconnects lost ones, and opens workers for sessions.
+// CAF's middleman (when loaded; over its OpenSSL module when settings->cluster_tls), reconnects
+// lost ones, and opens workers for sessions.
 node_actor spawn_node(caf::actor_system& sys, std::shared_ptr<const NodeSettings> settings);
 // A subtree (subtree_protocol.h). `parent` is watched: when it goes down the subtree ends.
 // A root (source set) renders the session's scene on the session's renderer; a worker builds

@@ -8,6 +8,7 @@
 #include <caf/all.hpp>
 #include <caf/io/middleman.hpp>
 #include <caf/io/middleman_actor.hpp>
+#include <caf/openssl/manager.hpp>
 
 #include "actors/checks.h"
 #include "actors/node.h"
@@ -34,6 +35,9 @@ struct node_state {
 };
 using node_ptr = node_actor::stateful_pointer<node_state>;
 
+// Asks a link's diagnosis (NodeSettings::diagnose_link) of a probe actor.
+using diagnose_atom = caf::atom_constant<caf::atom("diagnose")>;
+
 void node_event(node_ptr self, Event e) {
   e.scope = {{"node", self->state.settings->name}};
   node_log(*self->state.settings, std::move(e));
@@ -42,8 +46,18 @@ void node_event(node_ptr self, Event e) {
 void connect_child(node_ptr self, size_t i) {
   auto& c = self->state.children[i];
   if (c.node || c.connecting || !self->system().has_middleman()) return;
+  const bool tls = self->state.settings->cluster_tls;
+  if (tls && !self->system().has_openssl_manager()) {
+    if (!c.reported)
+      node_event(self, Event(Ev::child_unreachable, c.name)
+                           .with("reason", "mutual TLS is configured but CAF's OpenSSL module is not loaded"));
+    c.reported = true;
+    return;
+  }
   c.connecting = true;
-  auto mm = self->system().middleman().actor_handle();
+  // Over TLS: CAF's OpenSSL middleman actor (a scribe with an SSL session on the same BASP
+  // broker); never the plain one, whose connection a TLS child would not answer.
+  auto mm = tls ? self->system().openssl_manager().actor_handle() : self->system().middleman().actor_handle();
   self->request(mm, std::chrono::seconds(5), caf::connect_atom::value, c.host, c.port)
       .then(
           [=](const caf::node_id&, caf::strong_actor_ptr& p, const std::set<std::string>&) {
@@ -57,10 +71,35 @@ void connect_child(node_ptr self, size_t i) {
           },
           [=](caf::error& e) {
             auto& c = self->state.children[i];
-            c.connecting = false;
-            if (!c.reported)
-              node_event(self, Event(Ev::child_unreachable, c.name).with("reason", self->system().render(e)));
+            const bool first = !c.reported;
             c.reported = true;
+            Event unreachable = Event(Ev::child_unreachable, c.name).with("reason", self->system().render(e));
+            auto diagnose = self->state.settings->diagnose_link;
+            const bool cut = e == caf::sec::disconnect_during_handshake || e == caf::sec::cannot_connect_to_node;
+            if (!first || !diagnose || !cut) {
+              c.connecting = false;
+              if (first) node_event(self, std::move(unreachable));
+              return;
+            }
+            // CAF says only that its handshake was cut off (or, over TLS, that it could not
+            // connect); the usual cause is TLS on one side and not the other, or another CA.
+            // A TLS handshake of the node's own says which, on a thread of its own (once per
+            // outage); the child counts as connecting until then.
+            auto probe = self->system().spawn<caf::detached + caf::hidden>(
+                [diagnose, host = c.host, port = c.port](caf::event_based_actor* a) -> caf::behavior {
+                  return {[=](diagnose_atom) {
+                    a->quit();
+                    return diagnose(host, port);
+                  }};
+                });
+            auto report = [=](const std::string& why) {
+              self->state.children[i].connecting = false;
+              Event e = unreachable;
+              if (!why.empty()) e.with("tls", why);
+              node_event(self, std::move(e));
+            };
+            self->request(probe, std::chrono::seconds(15), diagnose_atom::value)
+                .then([=](std::string& why) { report(why); }, [=](caf::error&) { report(""); });
           });
 }
 

@@ -10,6 +10,7 @@
 
 #include <caf/all.hpp>
 #include <caf/io/all.hpp>
+#include <caf/openssl/publish.hpp>
 
 #include "app/command.h"
 #include "app/common.h"
@@ -37,7 +38,9 @@ const char* kHelp =
     "port HTTPS and WSS only (TLS 1.2+; scripts/tls-cert.sh makes a self-signed pair for local use).\n"
     "Cluster (docs/operations.md): [--cluster-port P] publishes this node to parents; [--children H:P,H:P]\n"
     "names its children; [--no-render] makes it a hub or dedicated master; [--no-http] serves no clients.\n"
-    "INI: cluster-port, cluster-host, children, render, http, name, task-timeout-ms, reconnect-ms,\n"
+    "INI: cluster-port, cluster-host (default 127.0.0.1), children, render, http, name, task-timeout-ms,\n"
+    "reconnect-ms, cluster-tls-cert, cluster-tls-key, cluster-tls-ca (mutual TLS between nodes, all three\n"
+    "or none: scripts/cluster-certs.sh makes them),\n"
     "max-workers, keepalive-misses, reproject (default true: the balancer carries the last frame's cost\n"
     "into the new camera with the workers' per-packet depths; false: the paper's previous-frame map).\n"
     "--renderer: 'client' (default) renders each session with the renderer its handshake asks for (the\n"
@@ -122,7 +125,9 @@ int run(const std::vector<std::string>& argv) {
   }
   if (no_render) cfg.renders = false;
   if (no_http) cfg.http = false;
-  if (cfg.cluster()) cfg.load<caf::io::middleman>();
+  // CAF's middleman for a cluster node, over its OpenSSL module with the node's certificates
+  // (checked now: a bad file is a start-up error, not a crash on CAF's network thread later).
+  const std::vector<std::string> cluster_warnings = cfg.load_cluster_modules();
   std::unique_ptr<tbb::global_control> limit;
   if (cfg.render_threads > 0)
     limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, size_t(cfg.render_threads));
@@ -148,12 +153,17 @@ int run(const std::vector<std::string>& argv) {
       node = spawn_node(sys, settings);
       settings->node = caf::actor_cast<caf::weak_actor_ptr>(node);
       if (cfg.cluster_port >= 0) {
-        auto p = sys.middleman().publish(node, uint16_t(cfg.cluster_port), cfg.cluster_host.c_str(), true);
+        // With TLS only CAF's OpenSSL module listens: every connection starts with the TLS
+        // handshake, and a peer without a certificate of the cluster CA gets nothing of CAF's.
+        const uint16_t at = uint16_t(cfg.cluster_port);
+        auto p = cfg.cluster_tls() ? caf::openssl::publish(node, at, cfg.cluster_host.c_str(), true)
+                                   : sys.middleman().publish(node, at, cfg.cluster_host.c_str(), true);
         if (!p)
           throw std::invalid_argument("cannot publish the node on " + cfg.cluster_host + ":" +
                                       std::to_string(cfg.cluster_port) + ": " + sys.render(p.error()));
         published = *p;
       }
+      node_log(*settings, cluster_security_event(cfg, settings->name, published, cluster_warnings));
     }
     if (cfg.http) {
       server = std::make_unique<Server>(sys, settings, opts);

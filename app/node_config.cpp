@@ -5,7 +5,10 @@
 #include <unistd.h>
 
 #include <caf/all.hpp>
+#include <caf/io/middleman.hpp>
+#include <caf/openssl/manager.hpp>
 
+#include "app/cluster_tls.h"
 #include "app/common.h"
 #include "core/gltf_loader.h"
 
@@ -52,6 +55,8 @@ NodeConfig::NodeConfig() {
   register_message_types(*this);
   // The ray tracer and the DXT1 encoder run on TBB in this process: keep CAF's scheduler small.
   set("scheduler.max-threads", size_t{2});
+  // What CAF's handshake tells a peer about the application (cluster_protocol.h).
+  set("middleman.app-identifiers", std::vector<std::string>{kCafAppIdentifier});
   opt_group{custom_options_, "tessera"}
       .add(port, "port", "TCP port of HTTP + WebSocket (0: any free port)")
       .add(max_clients, "max-clients", "simultaneous WebSocket clients")
@@ -92,6 +97,12 @@ NodeConfig::NodeConfig() {
   custom_options_.add(string_option(tls_key, "tessera", "tls-key", "PEM private key of tls-cert"));
   custom_options_.add(string_option(cluster_host, "tessera", "cluster-host", "address of the cluster port (0.0.0.0: all interfaces)"));
   custom_options_.add(string_option(name, "tessera", "name", "this node's name in node lists and logs (default host:cluster-port)"));
+  custom_options_.add(string_option(cluster_tls_cert, "tessera", "cluster-tls-cert",
+                                    "this node's certificate (PEM) for mutual TLS between nodes, signed by the cluster CA"));
+  custom_options_.add(string_option(cluster_tls_key, "tessera", "cluster-tls-key",
+                                    "the private key (PEM, unencrypted) of cluster-tls-cert"));
+  custom_options_.add(string_option(cluster_tls_ca, "tessera", "cluster-tls-ca",
+                                    "the cluster CA's certificate (PEM): peers must present a certificate it signed"));
   custom_options_.add(string_list_option(
       web_public, "tessera", "web-public",
       "further folders of the web root to serve, as [\"dir/\", ...] (default: index.html, src/, demo/, three.js)"));
@@ -107,6 +118,48 @@ NodeConfig::NodeConfig() {
   custom_options_.add(bool_option(renders, "tessera", "render", "render tasks here (false: hub or dedicated master)"));
   custom_options_.add(bool_option(http, "tessera", "http", "serve HTTP and WebSocket clients (false: worker or hub only)"));
   custom_options_.add(string_list_option(children, "tessera", "children", "child nodes as [\"host:port\", ...]"));
+}
+
+std::vector<std::string> NodeConfig::load_cluster_modules() {
+  std::vector<std::string> warnings;
+  // CAF's own openssl.* settings would turn its OpenSSL module's authentication on or off
+  // behind the node's back (any one of them set enables it): the node sets them itself.
+  for (const auto& [setting, value] : {std::pair<const char*, const std::string*>{"certificate", &openssl_certificate},
+                                       {"key", &openssl_key},
+                                       {"passphrase", &openssl_passphrase},
+                                       {"capath", &openssl_capath},
+                                       {"cafile", &openssl_cafile}})
+    if (!value->empty())
+      throw std::invalid_argument(std::string("openssl.") + setting +
+                                  " is CAF's own setting: set tessera.cluster-tls-cert, cluster-tls-key and "
+                                  "cluster-tls-ca instead");
+  // CAF's automatic connections open a second CAF port, plain and on every interface.
+  if (caf::get_or(*this, "middleman.enable-automatic-connections", false))
+    throw std::invalid_argument(
+        "middleman.enable-automatic-connections opens a second, plain CAF port on every interface: not supported "
+        "(nodes connect only to the children they name)");
+  const int set = int(!cluster_tls_cert.empty()) + int(!cluster_tls_key.empty()) + int(!cluster_tls_ca.empty());
+  if (set != 0 && set != 3) {
+    std::string missing;
+    for (const auto& [setting, value] : {std::pair<const char*, const std::string*>{"cluster-tls-cert", &cluster_tls_cert},
+                                         {"cluster-tls-key", &cluster_tls_key},
+                                         {"cluster-tls-ca", &cluster_tls_ca}})
+      if (value->empty()) missing += (missing.empty() ? "tessera." : " and tessera.") + std::string(setting);
+    throw std::invalid_argument("mutual TLS between nodes needs tessera.cluster-tls-cert, cluster-tls-key and "
+                                "cluster-tls-ca: " + missing + (set == 2 ? " is" : " are") + " missing");
+  }
+  if (set == 3) warnings = check_cluster_tls(ClusterTlsFiles{cluster_tls_cert, cluster_tls_key, cluster_tls_ca});
+  if (!cluster()) return warnings;
+  load<caf::io::middleman>();
+  if (cluster_tls()) {
+    // CAF's OpenSSL module with these settings requires a certificate the CA signed from every
+    // peer, on both ends of a connection (SSL_VERIFY_PEER | SSL_VERIFY_FAIL_IF_NO_PEER_CERT).
+    openssl_certificate = cluster_tls_cert;
+    openssl_key = cluster_tls_key;
+    openssl_cafile = cluster_tls_ca;
+    load<caf::openssl::manager>();
+  }
+  return warnings;
 }
 
 std::shared_ptr<NodeSettings> NodeConfig::node_settings() const {
@@ -157,6 +210,11 @@ std::shared_ptr<NodeSettings> NodeConfig::node_settings() const {
   if (max_update_bytes < 1 || uint64_t(max_update_bytes) > kMaxPeerBytes)
     throw std::invalid_argument("tessera.max-update-bytes must be in 1.." + std::to_string(kMaxPeerBytes));
   s->max_update_bytes = uint64_t(max_update_bytes);
+  s->cluster_tls = cluster_tls();
+  // A child whose CAF handshake is cut off: a TLS handshake as this node would make it says
+  // whether TLS is why (a child without TLS, or one of another CA).
+  s->diagnose_link = [files = ClusterTlsFiles{cluster_tls_cert, cluster_tls_key, cluster_tls_ca}](
+                         const std::string& host, uint16_t port) { return diagnose_cluster_link(host, port, files); };
   s->name = !name.empty() ? name
             : cluster_port > 0  ? cluster_host + ":" + std::to_string(cluster_port)
             : cluster_port == 0 ? cluster_host + ":any/pid" + std::to_string(getpid())
@@ -167,6 +225,33 @@ std::shared_ptr<NodeSettings> NodeConfig::node_settings() const {
     if (e.kind != Ev::frame) std::fprintf(stderr, "%s\n", to_json_line(e).c_str());
   };
   return s;
+}
+
+Event cluster_security_event(const NodeConfig& cfg, const std::string& name, int published,
+                             const std::vector<std::string>& warnings) {
+  Event e(Ev::cluster_security, cfg.cluster_tls() ? "mutual_tls" : "none");
+  e.scope = {{"node", name}};
+  e.with("endpoint", published >= 0 ? Json(cfg.cluster_host + ":" + std::to_string(published)) : Json());
+  if (cfg.cluster_tls()) {
+    e.with("ca", cfg.cluster_tls_ca).with("cert", cfg.cluster_tls_cert);
+  } else {
+    std::vector<std::string> open;
+    if (published >= 0 && !is_loopback_host(cfg.cluster_host)) open.push_back("its cluster port on " + cfg.cluster_host);
+    for (const std::string& c : cfg.children)
+      if (!is_loopback_host(c.substr(0, c.rfind(':')))) open.push_back("child " + c);
+    std::string list;
+    for (const std::string& o : open) list += (list.empty() ? "" : ", ") + o;
+    if (!open.empty())
+      e.with("warning", "no TLS on " + list +
+                            ": scenes and frames cross the network in clear, and whoever reaches a cluster port can "
+                            "open workers on it; set tessera.cluster-tls-cert, cluster-tls-key and cluster-tls-ca "
+                            "(docs/operations.md, \"Running a cluster across hosts securely\")");
+  }
+  if (!warnings.empty()) {
+    std::vector<Json> w(warnings.begin(), warnings.end());
+    e.with("warnings", Json::array(std::move(w)));
+  }
+  return e;
 }
 
 ServerOptions NodeConfig::server_options() const {

@@ -59,9 +59,21 @@ struct NodeConfig : caf::actor_system_config {
   int max_workers = 0;            // live workers on this node (0: 2 x max-clients)
   int keepalive_misses = 10;      // a worker ends after this many keep-alive periods of silence
   int64_t max_update_bytes = int64_t(kMaxPeerBytes);  // the largest scene update a worker takes
+  // Mutual TLS between nodes (docs/operations.md, "Running a cluster across hosts securely"):
+  // all three or none; scripts/cluster-certs.sh makes them.
+  std::string cluster_tls_cert;  // this node's certificate (PEM), signed by the cluster CA
+  std::string cluster_tls_key;   // its private key (PEM, unencrypted)
+  std::string cluster_tls_ca;    // the cluster CA's certificate: peers must show one it signed
   bool cluster() const { return cluster_port >= 0 || !children.empty(); }
+  bool cluster_tls() const { return !cluster_tls_cert.empty(); }  // after load_cluster_modules
 
   NodeConfig();
+  // Loads CAF's middleman when the node is in a cluster, and CAF's OpenSSL module over it when
+  // the node has its TLS files, which are checked first (app/cluster_tls.h) and handed to the
+  // module as its openssl.* settings. Call after parse, before the actor system starts. Throws
+  // std::invalid_argument (a setting missing, a file unreadable, a certificate the CA did not
+  // sign, CAF's own openssl.* settings or automatic connections set); returns warnings.
+  std::vector<std::string> load_cluster_modules();
   // Fills NodeSettings and ServerOptions (limits checked, key and token files read; throws
   // std::invalid_argument).
   std::shared_ptr<NodeSettings> node_settings() const;
@@ -70,5 +82,12 @@ struct NodeConfig : caf::actor_system_config {
  private:
   void set_admission(ServerOptions& o) const;
 };
+
+// The node's start-up event on its cluster links (Ev::cluster_security, scope {"node": name}):
+// "mutual_tls" with the CA and certificate files, or "none" with a warning when the cluster port
+// or a child is not on loopback (scenes and frames then cross the network in clear);
+// `published`: the bound cluster port (-1: none); `warnings`: load_cluster_modules's.
+Event cluster_security_event(const NodeConfig& cfg, const std::string& name, int published,
+                             const std::vector<std::string>& warnings);
 
 }  // namespace tessera::app

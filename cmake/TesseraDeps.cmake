@@ -7,7 +7,10 @@ find_package(ZLIB REQUIRED)
 find_package(libjpeg-turbo REQUIRED)
 find_package(websocketpp REQUIRED)
 find_package(Catch2 2 REQUIRED)
-find_package(OpenSSL REQUIRED COMPONENTS Crypto SSL)  # access tokens (net/admission.h), HTTPS/WSS (net/tls.h)
+# libcrypto: HMAC-SHA256 of access tokens (net/admission.h); libssl: HTTPS/WSS (net/tls.h) and the
+# cluster's mutual TLS (CAF's OpenSSL module, and the node's own checks of its certificate files,
+# app/cluster_tls.h).
+find_package(OpenSSL REQUIRED COMPONENTS Crypto SSL)
 
 # CAF 0.17.6: no CMake config and no .pc file.
 find_path(CAF_INCLUDE_DIR caf/all.hpp REQUIRED)
@@ -20,6 +23,14 @@ set_target_properties(caf::core PROPERTIES IMPORTED_LOCATION ${CAF_CORE_LIBRARY}
 add_library(caf::io UNKNOWN IMPORTED)
 set_target_properties(caf::io PROPERTIES IMPORTED_LOCATION ${CAF_IO_LIBRARY}
   INTERFACE_LINK_LIBRARIES caf::core)
+# CAF's OpenSSL module (libcaf-openssl0.17, a dependency of libcaf-dev): the middleman over TLS.
+# Its headers include <openssl/ssl.h>.
+find_path(CAF_OPENSSL_INCLUDE_DIR caf/openssl/manager.hpp REQUIRED)
+find_library(CAF_OPENSSL_LIBRARY caf_openssl REQUIRED)
+add_library(caf::openssl UNKNOWN IMPORTED)
+set_target_properties(caf::openssl PROPERTIES IMPORTED_LOCATION ${CAF_OPENSSL_LIBRARY}
+  INTERFACE_INCLUDE_DIRECTORIES ${CAF_OPENSSL_INCLUDE_DIR}
+  INTERFACE_LINK_LIBRARIES "caf::io;OpenSSL::SSL")
 
 # libsquish 1.15: its .pc file has an empty prefix.
 find_path(SQUISH_INCLUDE_DIR squish.h REQUIRED)

@@ -5,7 +5,8 @@
 // the namespace goes down: the process lives on and its TCP connection stays open, so the
 // master only notices when the task timeout expires: the part is late and rendered by the
 // master, and a worker that does not answer a ping within another timeout is lost) and after
-// the link comes back (the master reopens a worker on it).
+// the link comes back (the master reopens a worker on it). The same again over mutual TLS, with
+// certificates that scripts/cluster-certs.sh makes at the start.
 //
 // Needs root (CAP_NET_ADMIN, and CAP_SYS_ADMIN for `ip netns exec`) and iproute2's `ip`.
 // Without them, or with TESSERA_NO_NETNS=1, it prints why and exits 77 (CTest: skipped).
@@ -238,11 +239,42 @@ struct Node {
   }
 };
 
+// The nodes' mutual TLS (docs/operations.md): off, or certificates that scripts/cluster-certs.sh
+// makes into a temporary folder (removed at the end), one per node, with the workers' addresses
+// as subjectAltNames.
+struct Tls {
+  std::string dir;  // "": no TLS
+  Tls() = default;
+  explicit Tls(const std::vector<std::string>& nodes) {
+    char tmpl[] = "/tmp/tessera-netns-tls-XXXXXX";
+    REQUIRE(mkdtemp(tmpl) != nullptr);
+    dir = tmpl;
+    std::vector<std::string> a{"/bin/bash", TESSERA_CERTS_SCRIPT, dir + "/certs"};
+    a.insert(a.end(), nodes.begin(), nodes.end());
+    CmdResult r = run_cmd(a);
+    INFO("scripts/cluster-certs.sh: " << r.output);
+    REQUIRE(r.status == 0);
+  }
+  Tls(const Tls&) = delete;
+  Tls& operator=(const Tls&) = delete;
+  ~Tls() {
+    if (!dir.empty()) run_cmd({"/bin/rm", "-rf", dir});
+  }
+  // The settings of node `name` ({} without TLS).
+  std::vector<std::string> args(const std::string& name) const {
+    if (dir.empty()) return {};
+    return {"--tessera.cluster-tls-cert=" + dir + "/certs/" + name + ".pem",
+            "--tessera.cluster-tls-key=" + dir + "/certs/" + name + ".key",
+            "--tessera.cluster-tls-ca=" + dir + "/certs/ca.pem"};
+  }
+};
+
 // A worker inside a namespace, its cluster port bound to the namespace's address.
-Node worker(const Netns& ns, const std::string& name) {
-  return Node({ip_binary(), "netns", "exec", ns.name},
-              {"--no-http", "--cluster-port", std::to_string(kClusterPort), "--tessera.cluster-host=" + ns.ns_ip,
-               "--tessera.name=" + name});
+Node worker(const Netns& ns, const std::string& name, const Tls& tls) {
+  std::vector<std::string> a{"--no-http", "--cluster-port", std::to_string(kClusterPort),
+                             "--tessera.cluster-host=" + ns.ns_ip, "--tessera.name=" + name};
+  for (auto& t : tls.args(name)) a.push_back(t);
+  return Node({ip_binary(), "netns", "exec", ns.name}, a);
 }
 
 // Requests frame k of the camera loop and checks it against the direct render.
@@ -265,8 +297,11 @@ std::string cluster_frame(Process& master, uint32_t number) {
 
 }  // namespace
 
-TEST_CASE("Workers in two network namespaces render for a master; a cut link times out, is covered and rejoins",
-          "[cluster][fault][netns]") {
+namespace {
+
+// Two workers in their namespaces and a dedicated master: frames right before, during and after
+// a cut of one worker's link, over plain CAF or over mutual TLS (`tls`).
+void cut_link_and_rejoin(const Tls& tls) {
   Netns a('a', subnet_base()), b('b', subnet_base() + 1);
   {
     std::string err = a.create();
@@ -278,15 +313,25 @@ TEST_CASE("Workers in two network namespaces render for a master; a cut link tim
   }
   const std::string addr_a = a.ns_ip + ":" + std::to_string(kClusterPort);
   const std::string addr_b = b.ns_ip + ":" + std::to_string(kClusterPort);
-  Node wa = worker(a, "wa"), wb = worker(b, "wb");
+  Node wa = worker(a, "wa", tls), wb = worker(b, "wb", tls);
   CHECK(wa.cluster == addr_a);
   CHECK(wb.cluster == addr_b);
-  Node m({}, {"--port", "0", "--no-render", "--children", addr_a + "," + addr_b});
+  std::vector<std::string> margs{"--port", "0", "--no-render", "--children", addr_a + "," + addr_b};
+  for (auto& t : tls.args("master")) margs.push_back(t);
+  Node m({}, margs);
   Process& log = *m.p;
   {
     bool connected = wait_for([&] { return log.err_count("\"child_connected\"") == 2; }, 20000);
     INFO("master stderr: " << log.err());
     REQUIRE(connected);
+  }
+  // Each node says how its links are secured; without TLS the workers, listening on addresses
+  // other machines could reach, and the master with such children, warn.
+  const std::string security = tls.dir.empty() ? "\"cluster_security\": \"none\"" : "\"cluster_security\": \"mutual_tls\"";
+  for (Process* p : {wa.p.get(), wb.p.get(), &log}) {
+    INFO("stderr: " << p->err());
+    CHECK(p->err_count(security) == 1);
+    CHECK(p->err_count("\"warning\": \"no TLS on ") == (tls.dir.empty() ? 1u : 0u));
   }
 
   ProtoClient c;
@@ -409,6 +454,20 @@ TEST_CASE("Workers in two network namespaces render for a master; a cut link tim
     CHECK(wa.p->err_count("\"worker_opened\"") == opened);
     CHECK(wb.p->err_count("\"orphaned\"") == 0);
   }
+}
+
+}  // namespace
+
+TEST_CASE("Workers in two network namespaces render for a master; a cut link times out, is covered and rejoins",
+          "[cluster][fault][netns]") {
+  cut_link_and_rejoin(Tls());
+}
+
+TEST_CASE("Over mutual TLS workers in two network namespaces survive a cut link and rejoin",
+          "[cluster][fault][netns][tls]") {
+  // The workers' certificates name their addresses (10.213.K.2; CAF does not check them).
+  const int k = subnet_base();
+  cut_link_and_rejoin(Tls({"master", "wa=10.213." + std::to_string(k) + ".2", "wb=10.213." + std::to_string(k + 1) + ".2"}));
 }
 
 int main(int argc, char** argv) {

@@ -228,6 +228,8 @@ struct PeerConfig : caf::actor_system_config {
   PeerConfig() {
     register_message_types(*this);
     load<caf::io::middleman>();
+    // A peer that names the application as the nodes do (CAF refuses other identifiers).
+    set("middleman.app-identifiers", std::vector<std::string>{kCafAppIdentifier});
     set("scheduler.max-threads", size_t{2});
     set("logger.verbosity", caf::atom("quiet"));
   }
