@@ -10,15 +10,19 @@
 # tls run's frame_ms over the plain run's before it (target: frame time +3% at most). Load (uptime), CPU and ISA at the start and the end. Certificates come from
 # scripts/cluster-certs.sh in a temporary folder.
 #
-#   bench/cluster_tls.sh [PAIRS=3] [FRAMES=60] [SIZE="1280 720"] [THREADS=1]
+#   bench/cluster_tls.sh [PAIRS=3] [FRAMES=60] [SIZE="1280 720"] [THREADS=1] [WORKERS=2]
+#   TESSERA (a command, may hold a loader), SCENE (folder of scene.gltf and camera-loop.json) and
+#   CLUSTER_CERTS (made before by scripts/cluster-certs.sh DIR master w1 ... wN, for a machine
+#   without the openssl command) override the defaults. The pairs alternate which mode runs first.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PAIRS=${1:-3}
 FRAMES=${2:-60}
 SIZE=${3:-"1280 720"}
 THREADS=${4:-1}
-B=build/app/tessera
-SCENE=../shared/scenes/pavilion
+WORKERS=${5:-2}
+B=${TESSERA:-build/app/tessera}
+SCENE=${SCENE:-../shared/scenes/pavilion}
 TMP=$(mktemp -d)
 pids=()
 cleanup() {
@@ -26,7 +30,8 @@ cleanup() {
   rm -rf "$TMP"
 }
 trap cleanup EXIT
-scripts/cluster-certs.sh "$TMP/certs" master w1 w2 > /dev/null
+CERTS=${CLUSTER_CERTS:-$TMP/certs}
+[ -n "${CLUSTER_CERTS:-}" ] || scripts/cluster-certs.sh "$CERTS" master $(seq -f 'w%g' 1 "$WORKERS") > /dev/null
 
 port_of() { # file key -> port from serve's first line
   for _ in $(seq 200); do
@@ -36,14 +41,14 @@ port_of() { # file key -> port from serve's first line
   echo "no start line in $1" >&2; exit 1
 }
 tls_args() { # node -> its TLS settings
-  echo "--tessera.cluster-tls-cert=$TMP/certs/$1.pem --tessera.cluster-tls-key=$TMP/certs/$1.key --tessera.cluster-tls-ca=$TMP/certs/ca.pem"
+  echo "--tessera.cluster-tls-cert=$CERTS/$1.pem --tessera.cluster-tls-key=$CERTS/$1.key --tessera.cluster-tls-ca=$CERTS/ca.pem"
 }
 
 # run MODE (plain | tls) -> one JSON line
 run() {
   local mode=$1 kids="" i
   pids=()
-  for i in 1 2; do
+  for i in $(seq "$WORKERS"); do
     local extra=""
     [ "$mode" = tls ] && extra=$(tls_args w$i)
     # shellcheck disable=SC2086
@@ -59,7 +64,7 @@ run() {
     > "$TMP/m.out" 2> "$TMP/m.err" &
   pids+=($!)
   local port; port=$(port_of "$TMP/m.out" listening)
-  for _ in $(seq 200); do [ "$(grep -c child_connected "$TMP/m.err" || true)" -ge 2 ] && break; sleep 0.1; done
+  for _ in $(seq 200); do [ "$(grep -c child_connected "$TMP/m.err" || true)" -ge "$WORKERS" ] && break; sleep 0.1; done
   grep -q "\"cluster_security\": \"$([ "$mode" = tls ] && echo mutual_tls || echo none)\"" "$TMP/m.err" ||
     { echo "master not in mode $mode:" >&2; cat "$TMP/m.err" >&2; exit 1; }
   # shellcheck disable=SC2086
@@ -84,18 +89,18 @@ PY
 }
 
 isa=AVX2; grep -qw avx512f /proc/cpuinfo && isa=AVX-512
-echo "{\"start\": true, \"uptime\": \"$(uptime)\", \"isa\": \"$isa\", \"cpu\": \"$(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | xargs)\", \"cores\": $(nproc), \"size\": \"$SIZE\", \"frames\": $FRAMES, \"worker_threads\": $THREADS, \"scene\": \"$SCENE\"}"
-for _ in $(seq "$PAIRS"); do
-  run plain | tee -a "$TMP/runs"
-  run tls | tee -a "$TMP/runs"
+echo "{\"start\": true, \"uptime\": \"$(uptime)\", \"isa\": \"$isa\", \"cpu\": \"$(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | xargs)\", \"cores\": $(nproc), \"size\": \"$SIZE\", \"frames\": $FRAMES, \"worker_threads\": $THREADS, \"workers\": $WORKERS, \"scene\": \"$SCENE\"}"
+for p in $(seq "$PAIRS"); do
+  if (( p % 2 )); then run plain | tee -a "$TMP/runs"; run tls | tee -a "$TMP/runs"
+  else run tls | tee -a "$TMP/runs"; run plain | tee -a "$TMP/runs"; fi
 done
 python3 - "$TMP/runs" <<'PY'
 import json, statistics, sys
 runs = [json.loads(l) for l in open(sys.argv[1])]
 med = {m: statistics.median(r["frame_ms"] for r in runs if r["mode"] == m) for m in ("plain", "tls")}
 cpu = {m: statistics.median(r["nodes_cpu_s"] for r in runs if r["mode"] == m) for m in ("plain", "tls")}
-# Each tls run over the plain run just before it: drift in the machine's load cancels out.
-pairs = [(runs[i], runs[i + 1]) for i in range(0, len(runs) - 1, 2)]
+# Each pair's tls run over its plain run (the order alternates): drift in the machine's load cancels out.
+pairs = [tuple(sorted(runs[i:i + 2], key=lambda r: r["mode"])) for i in range(0, len(runs) - 1, 2)]
 pair_ratio = statistics.median(t["frame_ms"] / p["frame_ms"] for p, t in pairs)
 print(json.dumps({"summary": True, "median_frame_ms_plain": med["plain"], "median_frame_ms_tls": med["tls"],
                   "tls_over_plain": round(med["tls"] / med["plain"], 4), "median_pair_ratio": round(pair_ratio, 4),

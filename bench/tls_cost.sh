@@ -9,6 +9,9 @@
 # Usage: bench/tls_cost.sh [TESSERA] [PAIRS] [SECONDS]   (default build/app/tessera, 3 pairs, 10 s)
 #        TESSERA may be a command with arguments (a loader and the binary), unquoted.
 #        TESSERA_AB_WIDTH=640 TESSERA_AB_HEIGHT=360 bench/tls_cost.sh ...   (frames of another size)
+#        FRAMES=F bench/tls_cost.sh ...   (each client's F frames after its warm-up instead of a time
+#        window: every run renders the same frames of the camera loop, so the loop's varying cost
+#        per frame does not enter the ratio)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 BIN=${1:-build/app/tessera}; PAIRS=${2:-3}; SECS=${3:-10}
@@ -25,13 +28,15 @@ fi
 run() {
   local tag=$1 clients=$2 line extra=()
   [[ $tag == tls ]] && extra=(--tls-cert "$certs/node.crt" --tls-key "$certs/node.key")
+  local window=(--seconds "$SECS")
+  [[ -n ${FRAMES:-} ]] && window=(--frames "$FRAMES")
   line=$($BIN loadtest --scene $S/scene.gltf --camera-loop $S/camera-loop.json --size "$W" "$H" \
-         --clients "$clients" --display jpeg --seconds "$SECS" --warmup 2 "${extra[@]}" 2> /dev/null | grep '"summary": true')
+         --clients "$clients" --display jpeg "${window[@]}" --warmup 2 "${extra[@]}" 2> /dev/null | grep '"summary": true')
   python3 -c 'import json,sys; d=json.loads(sys.argv[3]); print(json.dumps({"transport": sys.argv[1], "clients": int(sys.argv[2]), "fps_total": d["fps_total"], "latency_ms": d["median_latency_ms"], "p90_latency_ms": d["p90_latency_ms"], "pipeline_ms": d["median_pipeline_ms"], "bytes": d["median_bytes"], "tls": d["tls"], "errors": d["errors"]}))' \
     "$tag" "$clients" "$line" | tee -a "$out"
 }
 isa=AVX2; grep -qw avx512f /proc/cpuinfo && isa=AVX-512
-echo "{\"load_start\": \"$(cut -d' ' -f1-3 /proc/loadavg)\", \"isa\": \"$isa\", \"cores\": $(nproc), \"cpu\": \"$(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //')\", \"size\": \"${W}x${H}\", \"seconds\": $SECS}"
+echo "{\"load_start\": \"$(cut -d' ' -f1-3 /proc/loadavg)\", \"isa\": \"$isa\", \"cores\": $(nproc), \"cpu\": \"$(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //')\", \"size\": \"${W}x${H}\", \"seconds\": $SECS, \"frames\": \"${FRAMES:-}\"}"
 for p in $(seq "$PAIRS"); do
   for c in 1 3; do
     # Alternate which goes first, so that a drift in the machine does not favour one.
