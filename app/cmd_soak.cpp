@@ -413,7 +413,7 @@ std::vector<Malformed> malformed_kinds() {
     m.resize(m.size() - 3);
     v.push_back({"truncated", m});
   }
-  v.push_back({"truncated_header", {'T', 'S', 1, 0, 1}});
+  v.push_back({"truncated_header", {'T', 'S', protocol::kVersion, 0, 1}});
   v.push_back({"empty", {}});
   {
     auto m = settings;

@@ -219,6 +219,7 @@ Material convert_material(const tinygltf::Material& gm, const std::map<int, Id>&
     mat.opacity = alpha;  // see-through weighted by 1 - opacity
   }
   mat.double_sided = gm.doubleSided;
+  mat.use_vertex_color = true;  // glTF: a primitive's COLOR_0 multiplies the base colour (meshes without one: no change)
   return mat;
 }
 
@@ -328,7 +329,7 @@ LoadedScene load_gltf(const std::string& path) {
 
   // Geometry: one set of buffers per primitive, shared by every node that instances the mesh.
   struct Prim {
-    Id positions = kNoId, normals = kNoId, texcoords = kNoId, indices = kNoId, material = kNoId;
+    Id positions = kNoId, normals = kNoId, texcoords = kNoId, colors = kNoId, indices = kNoId, material = kNoId;
     std::vector<float> pos;  // kept for bounds
     float max_abs = 0;       // largest |coordinate| (for the world-box check)
   };
@@ -364,6 +365,27 @@ LoadedScene load_gltf(const std::string& path) {
         prim.normals = add_floats(read_floats(model, it->second, 3, what + " NORMAL"), 3);
       if (auto it = p.attributes.find("TEXCOORD_0"); it != p.attributes.end())
         prim.texcoords = add_floats(read_floats(model, it->second, 2, what + " TEXCOORD_0"), 2);
+      // COLOR_0: RGB or RGBA (alpha left out), float or normalised unsigned byte/short; linear.
+      if (auto it = p.attributes.find("COLOR_0"); it != p.attributes.end()) {
+        const int index = it->second;
+        const int nc = index >= 0 && size_t(index) < model.accessors.size()
+                           ? tinygltf::GetNumComponentsInType(model.accessors[size_t(index)].type)
+                           : 0;
+        if (nc != 3 && nc != 4) throw LoadError(what + " COLOR_0: expected 3 or 4 components");
+        std::vector<float> c = read_floats(model, index, nc, what + " COLOR_0");
+        std::vector<float> rgb;
+        rgb.reserve(c.size() / size_t(nc) * 3);
+        for (size_t i = 0; i + size_t(nc) <= c.size(); i += size_t(nc)) rgb.insert(rgb.end(), {c[i], c[i + 1], c[i + 2]});
+        bool finite = true;
+        for (float v : rgb) finite = finite && std::isfinite(v);
+        if (rgb.size() / 3 != nv)
+          out.warnings.push_back(what + ": COLOR_0 has " + std::to_string(rgb.size() / 3) + " elements, POSITION " +
+                                 std::to_string(nv) + "; colours left out");
+        else if (!finite)
+          out.warnings.push_back(what + ": COLOR_0 holds NaN or Inf; colours left out");
+        else
+          prim.colors = add_floats(std::move(rgb), 3);
+      }
       if (p.indices >= 0) {
         Buffer ib;
         ib.type = Buffer::Type::u32;
@@ -411,6 +433,7 @@ LoadedScene load_gltf(const std::string& path) {
         mesh.positions = prim.positions;
         mesh.normals = prim.normals;
         mesh.texcoords = prim.texcoords;
+        mesh.colors = prim.colors;
         mesh.indices = prim.indices;
         mesh.material = prim.material;
         mesh.transform = world;

@@ -44,6 +44,13 @@ std::string Scene::validate_mesh(const Mesh& m) const {
     if (t->type != Buffer::Type::f32 || t->components != 2) return "texcoord buffer must be float2";
     if (t->count() != nv) return "texcoord count " + std::to_string(t->count()) + " != vertex count " + std::to_string(nv);
   }
+  if (m.colors != kNoId) {
+    const Buffer* c = buffer(m.colors);
+    if (!c) return "mesh references missing colour buffer " + std::to_string(m.colors);
+    if (c->type != Buffer::Type::f32 || c->components != 3) return "colour buffer must be float3";
+    if (c->count() != nv) return "colour count " + std::to_string(c->count()) + " != vertex count " + std::to_string(nv);
+    if (!buffer_index_.at(m.colors).finite) return "colour buffer " + std::to_string(m.colors) + " holds NaN or Inf";
+  }
   if (m.indices != kNoId) {
     const Buffer* ib = buffer(m.indices);
     if (!ib) return "mesh references missing index buffer " + std::to_string(m.indices);

@@ -21,7 +21,7 @@ namespace tessera {
 using Id = uint32_t;
 constexpr Id kNoId = 0;  // "no reference" (ids chosen by clients start at 1)
 
-// A typed array: float (positions, normals, texcoords) or uint32 (indices).
+// A typed array: float (positions, normals, texcoords, colours) or uint32 (indices).
 struct Buffer {
   enum class Type : uint8_t { f32 = 0, u32 = 1 };
   Type type = Type::f32;
@@ -65,12 +65,14 @@ struct Material {
   bool alpha_mask = false;  // cut out where diffuse texture alpha (x opacity) < alpha_cutoff
   float alpha_cutoff = 0.5f;
   bool double_sided = true;
+  bool use_vertex_color = false;  // XML3D's useVertexColor: the mesh's vertex colours multiply diffuse_color
 };
 
 struct Mesh {
   Id positions = kNoId;  // float3, required
   Id normals = kNoId;    // float3, optional (flat normals when missing)
   Id texcoords = kNoId;  // float2, optional
+  Id colors = kNoId;     // float3 vertex colours, optional (used by materials with use_vertex_color)
   Id indices = kNoId;    // uint32 triangles, optional (non-indexed: positions taken in threes)
   Mat4 transform;        // object to world
   Id material = kNoId;   // kNoId: the default material

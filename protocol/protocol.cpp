@@ -233,7 +233,8 @@ struct ClientEncoder {
     const Material& m = s.material;
     w.u32(s.id);
     w.u8(uint8_t(m.model));
-    w.u8(uint8_t((m.alpha_mask ? kMaterialAlphaMask : 0) | (m.double_sided ? kMaterialDoubleSided : 0)));
+    w.u8(uint8_t((m.alpha_mask ? kMaterialAlphaMask : 0) | (m.double_sided ? kMaterialDoubleSided : 0) |
+                 (m.use_vertex_color ? kMaterialUseVertexColor : 0)));
     w.u16(0);
     w.vec3(m.diffuse_color);
     w.vec3(m.specular_color);
@@ -257,6 +258,7 @@ struct ClientEncoder {
     w.u32(m.positions);
     w.u32(m.normals);
     w.u32(m.texcoords);
+    w.u32(m.colors);
     w.u32(m.indices);
     w.u32(m.material);
     w.mat4(m.transform);
@@ -639,6 +641,7 @@ class ClientDecoder {
         m.positions = r.u32();
         m.normals = r.u32();
         m.texcoords = r.u32();
+        m.colors = r.u32();
         m.indices = r.u32();
         m.material = r.u32();
         m.transform = r.mat4();
@@ -825,11 +828,12 @@ class ClientDecoder {
     m.ior = r.f32();
     m.alpha_cutoff = r.f32();
     if (!c.id(s.id, "id") || !c.enumeration(model, wire::enum_max::material_model, "model") || !c.reserved(res)) return false;
-    if (flags & ~(kMaterialAlphaMask | kMaterialDoubleSided))
+    if (flags & ~(kMaterialAlphaMask | kMaterialDoubleSided | kMaterialUseVertexColor))
       return c.fail(ErrorCode::bad_reserved, "unknown material flags");
     m.model = Material::Model(model);
     m.alpha_mask = flags & kMaterialAlphaMask;
     m.double_sided = flags & kMaterialDoubleSided;
+    m.use_vertex_color = flags & kMaterialUseVertexColor;
     if (!c.non_negative(m.diffuse_color, "diffuse_color") || !c.non_negative(m.specular_color, "specular_color") ||
         !c.range(m.shininess, wire::material::shininess, "shininess") ||
         !c.non_negative(m.emissive_color, "emissive_color") ||

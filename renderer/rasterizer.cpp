@@ -96,17 +96,20 @@ const char* kVertexShader = R"(#version 300 es
 layout(location = 0) in vec3 aPosition;
 layout(location = 1) in vec3 aNormal;
 layout(location = 2) in vec2 aUv;
+layout(location = 3) in vec3 aColor;
 uniform mat4 uModel;         // object -> camera-relative world
 uniform mat3 uNormalMatrix;  // inverse transpose of the model's 3x3
 uniform mat4 uViewProj;
 out vec3 vWorldPos;
 out vec3 vNormal;
 out vec2 vUv;
+out vec3 vColor;
 void main() {
   vec4 wp = uModel * vec4(aPosition, 1.0);
   vWorldPos = wp.xyz;
   vNormal = uNormalMatrix * aNormal;
   vUv = aUv;
+  vColor = aColor;
   gl_Position = uViewProj * wp;
 }
 )";
@@ -128,6 +131,7 @@ uniform bool uAlphaMask;
 uniform bool uHasDiffuseTexture;
 uniform bool uHasSpecularTexture;
 uniform bool uHasEmissiveTexture;
+uniform bool uUseVertexColor;  // XML3D's useVertexColor, and the mesh has colours
 uniform sampler2D uDiffuseTexture;
 uniform sampler2D uSpecularTexture;
 uniform sampler2D uEmissiveTexture;
@@ -152,6 +156,7 @@ uniform bool uBlend;
 in vec3 vWorldPos;
 in vec3 vNormal;
 in vec2 vUv;
+in vec3 vColor;
 out vec4 fragColor;
 
 vec3 shade(vec3 L, vec3 I, vec3 N, vec3 V, vec3 kd, vec3 ks) {
@@ -171,6 +176,7 @@ vec3 encode_srgb(vec3 c) {
 
 void main() {
   vec3 kd = uDiffuseColor;
+  if (uUseVertexColor) kd *= max(vColor, vec3(0.0));
   float alpha = uOpacity;
   if (uHasDiffuseTexture) {
     vec4 t = texture(uDiffuseTexture, vUv);
@@ -254,11 +260,11 @@ struct Rasterizer::Impl {
     bool decoded = false;  // uploaded as sRGB (decoded to linear when sampled)
     bool has_alpha = false;
   };
-  using GeomKey = std::tuple<Id, Id, Id, Id>;  // positions, normals, texcoords, indices
+  using GeomKey = std::tuple<Id, Id, Id, Id, Id>;  // positions, normals, texcoords, colors, indices
   struct Geom {
-    GLuint vao = 0, vbo[3] = {0, 0, 0}, ibo = 0;
+    GLuint vao = 0, vbo[4] = {0, 0, 0, 0}, ibo = 0;
     GLsizei count = 0;  // vertices to draw
-    bool indexed = false, has_uv = false;
+    bool indexed = false, has_uv = false, has_color = false;
     Vec3 lo, hi;        // object-space bounds
     uint64_t version = 0;
     bool used = false;
@@ -274,7 +280,7 @@ struct Rasterizer::Impl {
         opacity, alpha_cutoff, alpha_mask, has_diffuse_tex, has_specular_tex, has_emissive_tex, diffuse_tex,
         specular_tex, emissive_tex, scene_ambient, num_point, num_dir, num_spot, point_pos, point_int, point_att,
         dir_dir, dir_int, spot_pos, spot_dir, spot_int, spot_att, spot_cone, diffuse_scale, exposure, encode_srgb,
-        blend;
+        blend, use_vertex_color;
   };
 
   EGLDisplay dpy = EGL_NO_DISPLAY;
@@ -409,7 +415,8 @@ void Rasterizer::Impl::create_context() {
            loc("uSceneAmbient"), loc("uNumPoint"), loc("uNumDir"), loc("uNumSpot"), loc("uPointPosition"),
            loc("uPointIntensity"), loc("uPointAttenuation"), loc("uDirDirection"), loc("uDirIntensity"),
            loc("uSpotPosition"), loc("uSpotDirection"), loc("uSpotIntensity"), loc("uSpotAttenuation"),
-           loc("uSpotCone"), loc("uDiffuseScale"), loc("uExposure"), loc("uEncodeSrgb"), loc("uBlend")};
+           loc("uSpotCone"), loc("uDiffuseScale"), loc("uExposure"), loc("uEncodeSrgb"), loc("uBlend"),
+           loc("uUseVertexColor")};
       glUseProgram(program);
       glUniform1i(u.diffuse_tex, 0);
       glUniform1i(u.specular_tex, 1);
@@ -479,13 +486,13 @@ void Rasterizer::Impl::upload_texture(Id id, const Texture& src, Tex& t, bool de
 }
 
 void Rasterizer::Impl::upload_geom(const Scene& scene, const GeomKey& key, Geom& g) {
-  auto [pos_id, nrm_id, uv_id, idx_id] = key;
+  auto [pos_id, nrm_id, uv_id, col_id, idx_id] = key;
   const Buffer& pos = *scene.buffer(pos_id);
   size_t nv = pos.count();
   free_geom(g);
   glGenVertexArrays(1, &g.vao);
   glBindVertexArray(g.vao);
-  glGenBuffers(3, g.vbo);
+  glGenBuffers(4, g.vbo);
   glBindBuffer(GL_ARRAY_BUFFER, g.vbo[0]);
   glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(nv * 3 * sizeof(float)), pos.f.data(), GL_STATIC_DRAW);
   glVertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, 0, nullptr);
@@ -531,6 +538,15 @@ void Rasterizer::Impl::upload_geom(const Scene& scene, const GeomKey& key, Geom&
   } else {
     glDisableVertexAttribArray(2);
     glVertexAttrib2f(2, 0, 0);
+  }
+  g.has_color = col_id != kNoId;  // read only where the material uses vertex colours (uUseVertexColor)
+  if (g.has_color) {
+    glBindBuffer(GL_ARRAY_BUFFER, g.vbo[3]);
+    glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(nv * 3 * sizeof(float)), scene.buffer(col_id)->f.data(), GL_STATIC_DRAW);
+    glVertexAttribPointer(3, 3, GL_FLOAT, GL_FALSE, 0, nullptr);
+    glEnableVertexAttribArray(3);
+  } else {
+    glDisableVertexAttribArray(3);
   }
   g.indexed = idx != nullptr;
   if (idx) {
@@ -583,10 +599,10 @@ void Rasterizer::Impl::sync(const Scene& scene, std::vector<std::string>& warnin
   std::map<Id, GeomKey> mesh_key;
   for (auto [id, mesh] : scene.renderable_meshes(warnings)) {
     const Mesh& m = *mesh;
-    GeomKey key{m.positions, m.normals, m.texcoords, m.indices};
+    GeomKey key{m.positions, m.normals, m.texcoords, m.colors, m.indices};
     mesh_key[id] = key;
     uint64_t v = 0;
-    for (Id b : {m.positions, m.normals, m.texcoords, m.indices})
+    for (Id b : {m.positions, m.normals, m.texcoords, m.colors, m.indices})
       if (b != kNoId) v = std::max(v, scene.buffers().at(b).version);
     Geom& g = geoms[key];
     if (!g.used && (!g.vao || g.version != v)) {
@@ -831,6 +847,7 @@ void Rasterizer::Impl::render(const Rect& requested, const RenderSettings& setti
     glUniform1f(u.alpha_cutoff, m.alpha_cutoff);
     glUniform1i(u.alpha_mask, m.alpha_mask ? 1 : 0);
     glUniform1i(u.blend, d.transparent ? 1 : 0);
+    glUniform1i(u.use_vertex_color, m.use_vertex_color && d.geom->has_color ? 1 : 0);
     auto bind = [&](int unit, Id tex, GLint flag) {
       auto it = tex != kNoId && d.geom->has_uv ? textures.find(tex) : textures.end();
       bool ok = it != textures.end() && it->second.name;

@@ -153,7 +153,7 @@ static void alpha_filter(const RTCFilterFunctionNArguments* args) {
 // ---------------------------------------------------------------------------------------
 
 void RayTracer::Impl::build_geom(const Scene& scene, const GeomKey& key, Geom& g) {
-  auto [pos_id, nrm_id, uv_id, idx_id] = key;
+  auto [pos_id, nrm_id, uv_id, col_id, idx_id] = key;
   const Buffer& pos = *scene.buffer(pos_id);
   size_t nv = pos.count();
   g.indices.clear();
@@ -165,6 +165,8 @@ void RayTracer::Impl::build_geom(const Scene& scene, const GeomKey& key, Geom& g
   }
   g.normals = nrm_id != kNoId ? scene.buffer(nrm_id)->f : std::vector<float>{};
   g.texcoords = uv_id != kNoId ? scene.buffer(uv_id)->f : std::vector<float>{};
+  g.colors = col_id != kNoId ? scene.buffer(col_id)->f : std::vector<float>{};
+  for (float& c : g.colors) c = std::fmax(c, 0.0f);  // colours are >= 0 (validate_mesh refused NaN and Inf)
   if (g.blas) rtcReleaseScene(g.blas);
   g.blas = rtcNewScene(device);
   rtcSetSceneBuildQuality(g.blas, RTC_BUILD_QUALITY_HIGH);
@@ -266,7 +268,7 @@ void RayTracer::Impl::sync(const Scene& scene, std::vector<std::string>& warning
   std::map<Id, GeomKey> mesh_key;
   for (auto [id, mesh] : scene.renderable_meshes(warnings)) {
     const Mesh& m = *mesh;
-    GeomKey key{m.positions, m.normals, m.texcoords, m.indices};
+    GeomKey key{m.positions, m.normals, m.texcoords, m.colors, m.indices};
     mesh_key[id] = key;
     auto mit = material_index.find(m.material);
     const Material& mat = mit == material_index.end() ? materials[0] : materials[mit->second];
@@ -274,9 +276,9 @@ void RayTracer::Impl::sync(const Scene& scene, std::vector<std::string>& warning
     see_through[key] = see_through[key] || mat.refraction > 0;
   }
   for (auto& [id, key] : mesh_key) {
-    auto [p, n, t, i] = key;
+    auto [p, n, t, c, i] = key;
     uint64_t v = 0;
-    for (Id b : {p, n, t, i})
+    for (Id b : {p, n, t, c, i})
       if (b != kNoId) v = std::max(v, scene.buffers().at(b).version);
     Geom& g = geoms[key];
     g.used = true;
@@ -388,6 +390,7 @@ void RayTracer::Impl::sync(const Scene& scene, std::vector<std::string>& warning
     c.phong = m.model == Material::Model::phong;
     c.alpha_mask = m.alpha_mask;
     c.textured = mat_diffuse_tex[i] || mat_specular_tex[i] || mat_emissive_tex[i];
+    c.vertex_color = m.use_vertex_color;
     shade_mats.push_back(c);
   }
   width = scene.width();
@@ -400,6 +403,7 @@ void RayTracer::Impl::sync(const Scene& scene, std::vector<std::string>& warning
     if (m.reflection > 0 || m.refraction > 0 || (m.opacity < 1 && !m.alpha_mask)) features.secondary = true;
     if (mat_diffuse_tex[inst.material] || mat_specular_tex[inst.material] || mat_emissive_tex[inst.material]) features.textures = true;
     if (inst.g->filter) features.alpha_masks = true;
+    if (m.use_vertex_color && !inst.g->colors.empty()) features.vertex_colors = true;
   }
 }
 
@@ -473,7 +477,7 @@ static void render_dispatch(const RayTracer::Impl& impl, const Rect& pixels, con
 
 bool RayTracer::plain_kernel(const RenderSettings& settings) const {
   const SceneFeatures& f = impl_->features;
-  return !(f.secondary || f.textures || f.alpha_masks || settings.ao_samples > 0);
+  return !(f.secondary || f.textures || f.alpha_masks || f.vertex_colors || settings.ao_samples > 0);
 }
 
 // A scene that needs no AO, secondary rays or textures runs the kernel with them compiled out:

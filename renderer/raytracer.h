@@ -14,6 +14,7 @@ struct SceneFeatures {
   bool secondary = false;   // some visible material reflects, refracts or is see-through
   bool textures = false;    // some visible material is textured
   bool alpha_masks = false; // some visible geometry runs an alpha-mask filter function
+  bool vertex_colors = false; // some visible mesh has vertex colours and a material with use_vertex_color
   bool lights = false;      // at least one light is on
 };
 

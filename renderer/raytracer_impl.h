@@ -200,6 +200,7 @@ struct RayTracer::Impl {
     RTCScene blas = nullptr;
     std::vector<float> normals;    // object space, 3 per vertex (empty: flat)
     std::vector<float> texcoords;  // 2 per vertex (empty: none)
+    std::vector<float> colors;     // 3 per vertex, negatives as 0 (empty: none)
     std::vector<uint32_t> indices; // 3 per triangle
     uint64_t version = 0;          // max version of the buffers it was built from
     bool filter = false;           // alpha-mask filter attached
@@ -218,7 +219,7 @@ struct RayTracer::Impl {
     uint64_t geom_version = 0;
     Vec3 origin_used;      // the rebasing origin its transform was built for
   };
-  using GeomKey = std::tuple<Id, Id, Id, Id>;  // positions, normals, texcoords, indices
+  using GeomKey = std::tuple<Id, Id, Id, Id, Id>;  // positions, normals, texcoords, colors, indices
 
   std::shared_ptr<EmbreeDevice> shared_device = EmbreeDevice::acquire();  // one per process
   RTCDevice device = shared_device->get();
@@ -239,6 +240,7 @@ struct RayTracer::Impl {
     bool phong = false;      // has a specular highlight
     bool alpha_mask = false;
     bool textured = false;   // some texture of it is loaded
+    bool vertex_color = false;  // Material::use_vertex_color: vertex colours multiply diffuse
   };
   std::vector<ShadeMat> shade_mats;  // by material index
   struct LightConst {

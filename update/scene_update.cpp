@@ -129,6 +129,7 @@ Status apply(Scene& scene, ClientRecord&& record, const Limits& lim) {
       // Progressive loading: a mesh whose buffers have not all arrived is accepted as is.
       bool complete = s.buffer(mesh.positions) && (mesh.normals == kNoId || s.buffer(mesh.normals)) &&
                       (mesh.texcoords == kNoId || s.buffer(mesh.texcoords)) &&
+                      (mesh.colors == kNoId || s.buffer(mesh.colors)) &&
                       (mesh.indices == kNoId || s.buffer(mesh.indices));
       if (complete) {
         std::string why = s.validate_mesh(mesh);

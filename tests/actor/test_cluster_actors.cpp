@@ -875,7 +875,7 @@ CAF_TEST(apply_records reports broken forwarded updates) {
   Scene scene;
   CAF_CHECK_EQUAL(apply_records(scene, encode(tiny_scene()), Limits{}), "");
   CAF_CHECK_EQUAL(scene.meshes().size(), 1u);
-  CAF_CHECK(!apply_records(scene, std::vector<uint8_t>{'T', 'S', 1, 0, 5, 0, 0, 0, 1}, Limits{}).empty());
+  CAF_CHECK(!apply_records(scene, std::vector<uint8_t>{'T', 'S', protocol::kVersion, 0, 5, 0, 0, 0, 1}, Limits{}).empty());
   SetMesh bad;
   bad.id = 30;
   bad.mesh.positions = 2;  // the u32 index buffer as positions

@@ -465,7 +465,7 @@ CAF_TEST(a fatal protocol error closes only this session and ends its actors) {
 }
 
 CAF_TEST(malformed and inconsistent messages get errors and the session keeps rendering) {
-  self->send(session, client_atom::value, std::vector<uint8_t>{'T', 'S', 1, 0, 1, 0, 0, 0, 0x10});
+  self->send(session, client_atom::value, std::vector<uint8_t>{'T', 'S', protocol::kVersion, 0, 1, 0, 0, 0, 0x10});
   SetMesh bad;
   bad.id = 9;
   bad.mesh.positions = 2;  // the u32 index buffer as positions

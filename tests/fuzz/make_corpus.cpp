@@ -341,6 +341,16 @@ void render_corpus() {
     put("render", "textured_instances",
         encode(std::vector<ClientRecord>{cam, q.pos, q.idx, q.nrm, q.uv, tex, q.mat, q.mesh, second, point_light(), spot}));
   }
+  {  // Vertex colours (XML3D's useVertexColor): a float3 colour per vertex, a material that uses them.
+    Quad q = quad();
+    SetBuffer colors = q.pos;
+    colors.id = 12;
+    colors.buffer.f = {1, 0, 0, 0, 1, 0, 0, 0, 1, 1, 1, 1};
+    q.mat.material.use_vertex_color = true;
+    q.mesh.mesh.colors = 12;
+    put("render", "vertex_colors",
+        encode(std::vector<ClientRecord>{cam, q.pos, q.idx, q.nrm, q.uv, colors, q.mat, q.mesh, point_light()}));
+  }
   // Issue 16: each of these aborts inside Embree today (an assertion on the ray or the bounds).
   Mat4 zero;
   zero.m.fill(0);

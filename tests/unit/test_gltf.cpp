@@ -252,6 +252,63 @@ TEST_CASE("glTF emissiveTexture becomes the material's emissive texture, times e
   CHECK(warned);
 }
 
+TEST_CASE("glTF COLOR_0 becomes the mesh's float3 colour buffer, used by its material", "[gltf]") {
+  TempDir dir;
+  dir.write("tri.bin", tri_bin());
+  const uint8_t rgba[12] = {255, 0, 0, 255, 0, 255, 0, 128, 0, 0, 51, 0};
+  dir.write("col.bin", std::string(reinterpret_cast<const char*>(rgba), sizeof rgba));
+  // COLOR_0 as accessor 2: `count` normalised unsigned bytes of `type`.
+  auto with_colors = [&](const std::string& type, int count) {
+    std::string j = tri_gltf();
+    auto swap = [&](const std::string& from, const std::string& to) {
+      REQUIRE(j.find(from) != std::string::npos);
+      j.replace(j.find(from), from.size(), to);
+    };
+    swap(R"({"POSITION":0})", R"({"POSITION":0,"COLOR_0":2})");
+    swap(R"("byteLength":44}])", R"("byteLength":44},{"uri":"col.bin","byteLength":12}])");
+    swap(R"("byteLength":6}])", R"("byteLength":6},{"buffer":1,"byteOffset":0,"byteLength":12}])");
+    j.resize(j.size() - 2);  // before the accessors' "]}"
+    j += R"(,{"bufferView":2,"componentType":5121,"normalized":true,"count":)" + std::to_string(count) +
+         R"(,"type":")" + type + R"("}],"materials":[{}]})";
+    swap(R"("indices":1})", R"("indices":1,"material":0})");
+    return j;
+  };
+  {
+    LoadedScene ls = load_gltf(dir.write("rgba.gltf", with_colors("VEC4", 3)));
+    REQUIRE(ls.scene.meshes().size() == 2);
+    const Mesh& m = ls.scene.meshes().begin()->second.value;
+    REQUIRE(m.colors != kNoId);
+    const Buffer* c = ls.scene.buffer(m.colors);
+    REQUIRE(c);
+    CHECK(c->components == 3);  // RGBA: alpha left out
+    const std::vector<float> want = {1, 0, 0, 0, 1, 0, 0, 0, 0.2f};
+    REQUIRE(c->f.size() == want.size());
+    for (size_t i = 0; i < want.size(); ++i) CHECK(c->f[i] == Approx(want[i]));
+    CHECK(ls.scene.validate_mesh(m).empty());
+    REQUIRE(ls.scene.material(m.material));
+    CHECK(ls.scene.material(m.material)->use_vertex_color);
+    CHECK(ls.warnings.empty());
+  }
+  {  // RGB: three bytes an element, read tightly packed from the same 12 bytes
+    LoadedScene ls = load_gltf(dir.write("rgb.gltf", with_colors("VEC3", 3)));
+    const Mesh& m = ls.scene.meshes().begin()->second.value;
+    REQUIRE(m.colors != kNoId);
+    const std::vector<float> want = {1, 0, 0, 1, 0, 1, 0, 0.5019608f, 0};
+    const Buffer* c = ls.scene.buffer(m.colors);
+    REQUIRE(c->f.size() == want.size());
+    for (size_t i = 0; i < want.size(); ++i) CHECK(c->f[i] == Approx(want[i]));
+  }
+  {  // Another element count than POSITION's: left out with a warning, the mesh still loads.
+    LoadedScene ls = load_gltf(dir.write("short.gltf", with_colors("VEC4", 2)));
+    REQUIRE(ls.scene.meshes().size() == 2);
+    CHECK(ls.scene.meshes().begin()->second.value.colors == kNoId);
+    bool warned = false;
+    for (const std::string& w : ls.warnings) warned = warned || w.find("COLOR_0 has 2 elements") != std::string::npos;
+    CHECK(warned);
+  }
+  expect_error(dir.write("vec2.gltf", with_colors("VEC2", 3)), "COLOR_0 of two components");
+}
+
 TEST_CASE("broken glTF files throw std::runtime_error naming the file", "[gltf][broken]") {
   TempDir dir;
   dir.write("tri.bin", tri_bin());

@@ -139,6 +139,7 @@ SetMaterial sample_material(Id id) {
   m.alpha_mask = true;
   m.alpha_cutoff = 0.3f;
   m.double_sided = false;
+  m.use_vertex_color = true;
   return s;
 }
 
@@ -181,6 +182,8 @@ std::vector<ClientRecord> every_client_record() {
   v.push_back(sample_texture(5));
   v.push_back(sample_material(4));
   v.push_back(sample_mesh(10, 1));
+  std::get<SetMesh>(v.back()).mesh.texcoords = 12;
+  std::get<SetMesh>(v.back()).mesh.colors = 13;
   v.push_back(sample_light(20));
   v.push_back(Remove{RecordType::light, 21});
   v.push_back(RenderRequest{42});
@@ -235,9 +238,12 @@ TEST_CASE("Every client record survives an encode/decode round trip", "[protocol
     CHECK(m.ior == 1.33f);
     CHECK(m.alpha_mask);
     CHECK_FALSE(m.double_sided);
+    CHECK(m.use_vertex_color);
     CHECK(m.emissive_texture == 9);
     CHECK(std::get<SetMesh>(v[9]).mesh.transform == Mat4::translate({1, 2, 3}));
     CHECK(std::get<SetMesh>(v[9]).mesh.material == 4);
+    CHECK(std::get<SetMesh>(v[9]).mesh.texcoords == 12);
+    CHECK(std::get<SetMesh>(v[9]).mesh.colors == 13);
     CHECK(std::get<SetLight>(v[10]).light.type == Light::Type::spot);
     CHECK(std::get<SetLight>(v[10]).light.attenuation == Vec3(1, 0.1f, 0.01f));
     CHECK_FALSE(std::get<SetLight>(v[10]).light.on);
@@ -413,8 +419,10 @@ TEST_CASE("Framing violations are rejected with their error codes", "[protocol]"
   }
   SECTION("unsupported version is fatal") {
     auto m = good;
-    m[2] = 2;
-    CHECK(mentions(fails(m, ErrorCode::bad_version), "version 2"));
+    m[2] = kVersion + 1;
+    CHECK(mentions(fails(m, ErrorCode::bad_version), "version " + std::to_string(kVersion + 1)));
+    m[2] = 1;  // version 1 (before vertex colours): its mesh records are 4 bytes shorter
+    CHECK(mentions(fails(m, ErrorCode::bad_version), "version 1 not supported"));
     CHECK(is_fatal(ErrorCode::bad_version));
   }
   SECTION("server message on the client decoder and vice versa") {
@@ -784,8 +792,18 @@ TEST_CASE("Material rules", "[protocol]") {
   m[kBody + 4] = 3;
   CHECK(mentions(fails(m, ErrorCode::bad_enum), "model"));
   m = good;
-  m[kBody + 5] = 4;
+  m[kBody + 5] = 8;  // bits 0..2 are alpha_mask, double_sided, use_vertex_color
   fails(m, ErrorCode::bad_reserved);
+  m = good;
+  m[kBody + 5] = 4;  // use_vertex_color alone
+  {
+    auto r = decode_client(m.data(), m.size(), Limits{});
+    REQUIRE(r.ok());
+    const Material& x = std::get<SetMaterial>(r.value()[0]).material;
+    CHECK(x.use_vertex_color);
+    CHECK_FALSE(x.alpha_mask);
+    CHECK_FALSE(x.double_sided);
+  }
   m = good;
   m[kBody + 6] = 1;
   fails(m, ErrorCode::bad_reserved);
@@ -808,11 +826,21 @@ TEST_CASE("Mesh rules at decode time", "[protocol]") {
   s.mesh.transform.m[12] = kInf;
   CHECK(mentions(fails(encode(ClientRecord{s}), ErrorCode::not_finite), "transform"));
   auto m = encode(ClientRecord{sample_mesh(1, 2)});
-  m[kBody + 88] = 2;
+  m[kBody + wire::mesh::at::visible] = 2;
   CHECK(mentions(fails(m, ErrorCode::bad_enum), "visible"));
-  m[kBody + 88] = 0;
-  m[kBody + 91] = 1;
+  m[kBody + wire::mesh::at::visible] = 0;
+  m[kBody + wire::mesh::at::reserved + 2] = 1;
   fails(m, ErrorCode::bad_reserved);
+  // The colour buffer id sits between texcoords and indices; 0 is "none", any other id decodes.
+  SetMesh c = sample_mesh(1, 2, 3);
+  c.mesh.colors = 7;
+  auto cm = encode(ClientRecord{c});
+  CHECK(cm.size() == kBody + wire::mesh::kFixed);
+  CHECK(cm[kBody + wire::mesh::at::colors] == 7);
+  auto r = decode_client(cm.data(), cm.size(), Limits{});
+  REQUIRE(r.ok());
+  CHECK(std::get<SetMesh>(r.value()[0]).mesh.colors == 7);
+  CHECK(std::get<SetMesh>(r.value()[0]).mesh.indices == 3);
 }
 
 TEST_CASE("Light rules", "[protocol]") {
@@ -930,6 +958,59 @@ TEST_CASE("Meshes whose buffers are missing are accepted; inconsistent ones are 
   nan.buffer.f[4] = kNaN;
   CHECK(apply(scene, std::move(nan), lim).ok());
   CHECK(apply(scene, sample_mesh(4, 14), lim).code() == ErrorCode::bad_mesh);
+}
+
+TEST_CASE("Vertex colour buffers: float3, one per vertex, finite; a mesh waits for its colours", "[protocol]") {
+  Scene scene;
+  Limits lim;
+  CHECK(apply(scene, positions_buffer(10, 1), lim).ok());  // 3 vertices
+  auto colors = [](Id id, uint8_t components, size_t values) {
+    SetBuffer b;
+    b.id = id;
+    b.buffer.type = Buffer::Type::f32;
+    b.buffer.components = components;
+    b.buffer.f.assign(values, 0.5f);
+    return b;
+  };
+  auto with_colors = [](Id id, Id c) {
+    SetMesh m = sample_mesh(id, 10);
+    m.mesh.colors = c;
+    return m;
+  };
+  // Progressive loading: the colours may come after the mesh.
+  CHECK(apply(scene, with_colors(1, 20), lim).ok());
+  CHECK_FALSE(scene.validate_mesh(scene.meshes().at(1).value).empty());
+  CHECK(mentions(scene.validate_mesh(scene.meshes().at(1).value), "colour buffer 20"));
+  CHECK(apply(scene, colors(20, 3, 9), lim).ok());
+  CHECK(scene.validate_mesh(scene.meshes().at(1).value).empty());
+  CHECK(apply(scene, with_colors(2, 20), lim).ok());
+  // Two components (float2): refused as the texcoord rule refuses a float3 texcoord buffer.
+  CHECK(apply(scene, colors(21, 2, 6), lim).ok());
+  auto st = apply(scene, with_colors(3, 21), lim);
+  CHECK(st.code() == ErrorCode::bad_mesh);
+  CHECK(mentions(st.error().message, "colour buffer must be float3"));
+  // Four components (RGBA) are not taken either.
+  CHECK(apply(scene, colors(22, 4, 12), lim).ok());
+  CHECK(apply(scene, with_colors(3, 22), lim).code() == ErrorCode::bad_mesh);
+  // Integers are not colours.
+  SetBuffer ints = index_buffer(23, {0, 1, 2, 0, 1, 2, 0, 1, 2});
+  ints.buffer.components = 3;
+  CHECK(apply(scene, std::move(ints), lim).ok());
+  CHECK(mentions(apply(scene, with_colors(3, 23), lim).error().message, "float3"));
+  // Another vertex count than the positions'.
+  CHECK(apply(scene, colors(24, 3, 12), lim).ok());
+  st = apply(scene, with_colors(3, 24), lim);
+  CHECK(st.code() == ErrorCode::bad_mesh);
+  CHECK(mentions(st.error().message, "colour count 4 != vertex count 3"));
+  // NaN or Inf colours.
+  SetBuffer nan = colors(25, 3, 9);
+  nan.buffer.f[4] = kNaN;
+  CHECK(apply(scene, std::move(nan), lim).ok());
+  CHECK(mentions(apply(scene, with_colors(3, 25), lim).error().message, "NaN or Inf"));
+  CHECK(scene.meshes().count(3) == 0);
+  // A colour buffer replaced by a bad one leaves the mesh unrenderable until fixed.
+  CHECK(apply(scene, colors(20, 3, 6), lim).ok());
+  CHECK_FALSE(scene.validate_mesh(scene.meshes().at(1).value).empty());
 }
 
 TEST_CASE("Scene-wide limits: client bytes and triangles", "[protocol]") {

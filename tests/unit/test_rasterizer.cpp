@@ -297,6 +297,56 @@ TEST_CASE("rasterizer shades point, directional and spot lights, phong, textures
   CHECK(!(left.g > left.r + 40));  // cut out: floor or background
 }
 
+TEST_CASE("rasterizer shows vertex colours where the material uses them, as the ray tracer") {
+  Scene scene;
+  const int W = 160, H = 80;
+  scene.set_resolution(W, H);
+  scene.set_environment(plain_env({0, 0, 0}));
+  scene.set_camera(look({0, 0, 4}, {0, 0, 0}, 0.9f));
+  Material vc = matte({1, 1, 1});
+  vc.use_vertex_color = true;
+  scene.set_material(1, vc);
+  scene.set_material(2, matte({1, 1, 1}));
+  Material lit = diffuse({0.5f, 1, 1});
+  lit.use_vertex_color = true;
+  scene.set_material(3, lit);
+  scene.set_light(1, directional({0, 0, -1}));
+  Buffer colors;  // quad()'s corners: red, green, blue, white
+  colors.components = 3;
+  colors.f = {1, 0, 0, 0, 1, 0, 0, 0, 1, 1, 1, 1};
+  scene.set_buffer(99, colors);
+  const Id materials[3] = {1, 2, 3};
+  for (int i = 0; i < 3; ++i) {
+    Mesh m = add_geometry(scene, Id(10 * (i + 1)), quad({-3.3f + 2.2f * float(i), -1, 0}, {2, 0, 0}, {0, 2, 0}));
+    m.colors = 99;
+    m.material = materials[i];
+    scene.set_mesh(Id(10 * (i + 1)), m);
+  }
+  RayTracer rt;
+  Rasterizer gl;
+  Image a = render(gl, scene, primary_only());
+  Image b = render(rt, scene, primary_only());
+  dump("raster_vertex_colors", a);
+  dump("rt_vertex_colors", b);
+  Diff d = compare_off_edges(a, b);
+  INFO("mean " << d.mean << ", >24: " << d.over24 * 100 << "%, max " << d.max << ", compared " << d.compared * 100 << "%");
+  CHECK(d.mean <= 1.0);
+  CHECK(d.over24 <= 0.002);
+  auto at = [&](const Image& im, Vec3 p) {
+    float x, y;
+    project(scene.camera(), W, H, p, x, y);
+    return px(im, int(std::lround(x)), int(std::lround(y)));
+  };
+  // Left quad near its red corner: red; middle quad (flag off): white; right quad near its
+  // green corner: green (lit head-on, diffuse 0.5 1 1).
+  Rgb red = at(a, {-3.3f + 0.15f, -0.85f, 0}), white = at(a, {0.15f - 1.1f, -0.85f, 0}),
+      green = at(a, {1.1f + 2 - 0.15f, -0.85f, 0});
+  INFO("red " << str(red) << ", white " << str(white) << ", green " << str(green));
+  CHECK((red.r > 200 && red.g < 50 && red.b < 50));
+  CHECK((white.r > 240 && white.g > 240 && white.b > 240));
+  CHECK((green.g > 200 && green.r < 50 && green.b < 50));
+}
+
 int main(int argc, char** argv) {
   std::string why;
   if (!rasterizer_available(&why)) {

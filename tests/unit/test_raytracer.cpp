@@ -280,6 +280,119 @@ TEST_CASE("a 2x2 nearest texture on a quad facing the camera shows its texels ex
   }
 }
 
+// XML3D's useVertexColor: a quad with red, green, blue and white corners; the vertex colour,
+// interpolated with the hit's barycentrics, multiplies the diffuse colour where the material
+// asks for it, and changes nothing where it does not or where the mesh has no colours.
+TEST_CASE("vertex colours multiply the diffuse colour of materials with use_vertex_color", "[raytracer][vertex-color]") {
+  const int W = 96, H = 96;
+  const Camera cam = look({0, 0, 3}, {0, 0, 0}, 60 * kDeg);
+  // quad()'s corners: (-1,-1) red, (1,-1) green, (1,1) blue, (-1,1) white; triangles 0 1 2 and 0 2 3.
+  const float colors[12] = {1, 0, 0, 0, 1, 0, 0, 0, 1, 1, 1, 1};
+  auto expected = [&](float x, float y) {  // the interpolated vertex colour at (x, y) on the quad
+    const float* c = colors;
+    Vec3 red{c[0], c[1], c[2]}, green{c[3], c[4], c[5]}, blue{c[6], c[7], c[8]}, white{c[9], c[10], c[11]};
+    if (x >= y) return red * ((1 - x) / 2) + green * ((x - y) / 2) + blue * ((y + 1) / 2);
+    return red * ((1 - y) / 2) + blue * ((x + 1) / 2) + white * ((y - x) / 2);
+  };
+  auto make_scene = [&](const Material& mat, bool with_colors) {
+    Scene scene;
+    scene.set_resolution(W, H);
+    scene.set_environment(plain_env({0, 0, 0}));
+    scene.set_camera(cam);
+    scene.set_material(1, mat);
+    Mesh m = add_geometry(scene, 100, quad({-1, -1, 0}, {2, 0, 0}, {0, 2, 0}));
+    if (with_colors) {
+      Buffer c;
+      c.components = 3;
+      c.f.assign(colors, colors + 12);
+      scene.set_buffer(110, c);
+      m.colors = 110;
+    }
+    m.material = 1;
+    scene.set_mesh(100, m);
+    REQUIRE(scene.validate_mesh(m).empty());
+    return scene;
+  };
+  // Every pixel whose centre's ray hits the quad at least 0.05 inside its edges: the colour of
+  // that hit point, times `tint`, or white times tint where `colored` is false.
+  auto check = [&](const Image& img, Vec3 tint, bool colored, const char* what) {
+    int checked = 0, bad = 0;
+    for (int y = 0; y < H; ++y)
+      for (int x = 0; x < W; ++x) {
+        const Vec3 o = cam_pos(cam), d = pixel_dir(cam, W, H, float(x), float(y));
+        const float t = -o.z / d.z;
+        const Vec3 hit = o + d * t;
+        if (std::fabs(hit.x) > 0.95f || std::fabs(hit.y) > 0.95f) continue;
+        const Vec3 c = colored ? expected(hit.x, hit.y) : Vec3{1, 1, 1};
+        const int want[3] = {int(std::lround(std::fmin(c.x * tint.x, 1.0f) * 255)),
+                             int(std::lround(std::fmin(c.y * tint.y, 1.0f) * 255)),
+                             int(std::lround(std::fmin(c.z * tint.z, 1.0f) * 255))};
+        const Rgb p = px(img, x, y);
+        ++checked;
+        if (std::abs(p.r - want[0]) > 2 || std::abs(p.g - want[1]) > 2 || std::abs(p.b - want[2]) > 2) {
+          if (++bad <= 5)
+            FAIL_CHECK(what << ": pixel (" << x << "," << y << ") at (" << hit.x << "," << hit.y << ") is " << str(p)
+                            << ", expected (" << want[0] << "," << want[1] << "," << want[2] << ")");
+        }
+      }
+    CHECK(checked > 2000);
+    CHECK(bad == 0);
+  };
+  Material vc = matte({1, 1, 1});
+  vc.use_vertex_color = true;
+  for (PacketLayout layout : {PacketLayout{2, 2}, PacketLayout{4, 2}, PacketLayout{4, 4}}) {
+    INFO("packet " << layout.w << "x" << layout.h);
+    {
+      RayTracer rt(layout);
+      Image img = render_full(rt, make_scene(vc, true), no_ao());
+      dump("vertex_color", img);
+      CHECK(rt.features().vertex_colors);
+      CHECK_FALSE(rt.plain_kernel(no_ao()));
+      check(img, {1, 1, 1}, true, "use_vertex_color, white diffuse");
+      // Near each corner its own colour dominates.
+      float fx, fy;
+      project(cam, W, H, {-0.85f, -0.85f, 0}, fx, fy);
+      Rgb near_red = px(img, int(std::lround(fx)), int(std::lround(fy)));
+      CHECK((near_red.r > 200 && near_red.g < 40 && near_red.b < 40));
+      project(cam, W, H, {0.85f, -0.85f, 0}, fx, fy);
+      Rgb near_green = px(img, int(std::lround(fx)), int(std::lround(fy)));
+      CHECK((near_green.g > 200 && near_green.r < 40 && near_green.b < 40));
+    }
+    {
+      Material tinted = vc;
+      tinted.diffuse_color = {0.5f, 1, 0.25f};  // multiplied, not replaced
+      RayTracer rt(layout);
+      check(render_full(rt, make_scene(tinted, true), no_ao()), {0.5f, 1, 0.25f}, true, "use_vertex_color, tinted diffuse");
+    }
+    {
+      RayTracer rt(layout);  // the flag off: the colours are ignored
+      check(render_full(rt, make_scene(matte({1, 1, 1}), true), no_ao()), {1, 1, 1}, false, "flag off");
+      CHECK_FALSE(rt.features().vertex_colors);
+    }
+    {
+      RayTracer rt(layout);  // the flag on, but the mesh has no colours: the diffuse colour alone
+      check(render_full(rt, make_scene(vc, false), no_ao()), {1, 1, 1}, false, "no colour buffer");
+      CHECK_FALSE(rt.features().vertex_colors);
+    }
+  }
+  // Lit: a diffuse material under a light from the camera's side is the vertex colour times
+  // diffuse times N.L (1 here), as without vertex colours; a changed colour buffer is picked up.
+  {
+    Material lit = diffuse({1, 1, 1});
+    lit.use_vertex_color = true;
+    Scene scene = make_scene(lit, true);
+    Light l = directional({0, 0, -1});
+    scene.set_light(1, l);
+    RayTracer rt;
+    check(render_full(rt, scene, no_ao()), {1, 1, 1}, true, "diffuse, lit head-on");
+    Buffer grey;
+    grey.components = 3;
+    grey.f.assign(12, 0.5f);
+    scene.set_buffer(110, grey);
+    check(render_full(rt, scene, no_ao()), {0.5f, 0.5f, 0.5f}, false, "colour buffer changed to grey");
+  }
+}
+
 // ---------------------------------------------------------------------------------------
 // Phong highlights
 // ---------------------------------------------------------------------------------------

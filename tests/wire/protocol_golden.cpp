@@ -166,6 +166,7 @@ struct ClientJs {
     const Material& m = s.material;
     return Obj{}.f("type", q("material")).f("id", num(s.id)).f("model", q(name(m.model)))
         .f("alphaMask", boolean(m.alpha_mask)).f("doubleSided", boolean(m.double_sided))
+        .f("useVertexColor", boolean(m.use_vertex_color))
         .f("diffuseColor", vec3(m.diffuse_color)).f("specularColor", vec3(m.specular_color))
         .f("shininess", num(m.shininess)).f("emissiveColor", vec3(m.emissive_color))
         .f("ambientIntensity", num(m.ambient_intensity)).f("opacity", num(m.opacity))
@@ -176,7 +177,8 @@ struct ClientJs {
   std::string operator()(const SetMesh& s) {
     const Mesh& m = s.mesh;
     return Obj{}.f("type", q("mesh")).f("id", num(s.id)).f("positions", num(m.positions)).f("normals", num(m.normals))
-        .f("texcoords", num(m.texcoords)).f("indices", num(m.indices)).f("material", num(m.material))
+        .f("texcoords", num(m.texcoords)).f("colors", num(m.colors)).f("indices", num(m.indices))
+        .f("material", num(m.material))
         .f("transform", mat4(m.transform)).f("visible", boolean(m.visible)).str();
   }
   std::string operator()(const SetLight& s) {
@@ -397,6 +399,7 @@ SetMesh mesh() {
   s.mesh.positions = 7;
   s.mesh.normals = 6;
   s.mesh.texcoords = 5;
+  s.mesh.colors = 4;
   s.mesh.indices = 8;
   s.mesh.material = 10;
   s.mesh.transform = Mat4::translate({1, -2, 3}) * Mat4::scale({2, 3, 4});
@@ -529,13 +532,17 @@ void valid_messages() {
     h.double_sided = true;
     matte.material.model = Material::Model::matte;
     matte.id = kMaxU32;
-    flags.material.alpha_mask = flags.material.double_sided = true;
-    client("materials: every model and flag, ranges at both ends", {material(), lo, hi, matte, flags});
+    flags.material.alpha_mask = flags.material.double_sided = flags.material.use_vertex_color = true;
+    SetMaterial vertex_color = material();
+    vertex_color.material.alpha_mask = false;
+    vertex_color.material.use_vertex_color = true;
+    client("materials: every model and flag, ranges at both ends", {material(), lo, hi, matte, flags, vertex_color});
   }
   {
     SetMesh bare, big = mesh(), shown = mesh();
     bare.id = 1, bare.mesh.positions = 2;
-    big.id = big.mesh.positions = big.mesh.normals = big.mesh.texcoords = big.mesh.indices = big.mesh.material = kMaxU32;
+    big.id = big.mesh.positions = big.mesh.normals = big.mesh.texcoords = big.mesh.colors = big.mesh.indices =
+        big.mesh.material = kMaxU32;
     big.mesh.transform = Mat4::translate({-4294967296.0f, 0, 4294967296.0f}) * Mat4::scale({1024, 1024, 1024});
     shown.mesh.visible = true;
     client("meshes: bare, largest ids and transform, visible", {mesh(), bare, big, shown});
@@ -681,7 +688,8 @@ void framing(Channel ch, const Bytes& good) {
   b("message shorter than its header", Bytes(good.begin(), good.begin() + 7), ErrorCode::truncated);
   b("bad magic", put<uint8_t>(good, 0, 'X'), ErrorCode::bad_magic);
   b("bad magic, second byte", put<uint8_t>(good, 1, 's'), ErrorCode::bad_magic);
-  b("version 2", put<uint8_t>(good, 2, 2), ErrorCode::bad_version);
+  b("version 1 (before vertex colours)", put<uint8_t>(good, 2, 1), ErrorCode::bad_version);
+  b("the next version", put<uint8_t>(good, 2, kVersion + 1), ErrorCode::bad_version);
   b("version 0", put<uint8_t>(good, 2, 0), ErrorCode::bad_version);
   b("the other channel", put<uint8_t>(good, 3, ch == Channel::client ? 1 : 0), ErrorCode::bad_channel);
   b("channel 2", put<uint8_t>(good, 3, 2), ErrorCode::bad_channel);
@@ -910,7 +918,9 @@ void client_records() {
     bad_client("material: id 0", put<uint32_t>(m, kB + at::id, 0), ErrorCode::bad_id);
     bad_client("material: model 3", put<uint8_t>(m, kB + at::model, 3), ErrorCode::bad_enum);
     bad_client("material: reserved", put<uint16_t>(m, kB + at::reserved, 0x100), ErrorCode::bad_reserved);
-    bad_client("material: unknown flag", put<uint8_t>(m, kB + at::flags, 4), ErrorCode::bad_reserved);
+    bad_client("material: unknown flag", put<uint8_t>(m, kB + at::flags, 8), ErrorCode::bad_reserved);
+    bad_client("material: unknown flag beside the known ones", put<uint8_t>(m, kB + at::flags, 0x87),
+               ErrorCode::bad_reserved);
     for (auto [field, off] : {std::pair{"diffuse_color", at::diffuse_color}, {"specular_color", at::specular_color},
                               {"emissive_color", at::emissive_color}}) {
       bad_client(std::string("material: ") + field + " negative", put(m, kB + off + 8, -1.0f), ErrorCode::out_of_range);

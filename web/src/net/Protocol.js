@@ -30,6 +30,7 @@ export const Channel = Object.freeze(Object.fromEntries(ENUMS.channel.map((n, i)
 export const Op = Object.freeze(Object.fromEntries(ENUMS.op.map((n, i) => [n, i])));
 export const BUFFER_DEFLATE = FLAGS.buffer.deflate;
 export const MATERIAL_ALPHA_MASK = FLAGS.material.alpha_mask, MATERIAL_DOUBLE_SIDED = FLAGS.material.double_sided;
+export const MATERIAL_USE_VERTEX_COLOR = FLAGS.material.use_vertex_color;
 const TYPE_NAME = Object.fromEntries(Object.entries(RecordType).map(([k, v]) => [v, k]));
 
 // `code`: the C++ ErrorCode's name ('truncated', 'bad_enum', ...) for a decoding error, null for
@@ -122,7 +123,8 @@ function encodeClientRecord(w, r) {
     case 'material':
       at = w.begin(RecordType.material);
       w.u32(r.id); w.u8(index(MaterialModel, r.model, 'material model'));
-      w.u8((r.alphaMask ? MATERIAL_ALPHA_MASK : 0) | (r.doubleSided !== false ? MATERIAL_DOUBLE_SIDED : 0)); w.u16(0);
+      w.u8((r.alphaMask ? MATERIAL_ALPHA_MASK : 0) | (r.doubleSided !== false ? MATERIAL_DOUBLE_SIDED : 0) |
+        (r.useVertexColor ? MATERIAL_USE_VERTEX_COLOR : 0)); w.u16(0);
       w.vec3(r.diffuseColor); w.vec3(r.specularColor); w.f32(r.shininess); w.vec3(r.emissiveColor);
       w.f32(r.ambientIntensity); w.f32(r.opacity);
       w.u32(r.diffuseTexture || 0); w.u32(r.specularTexture || 0); w.u32(r.emissiveTexture || 0);
@@ -130,7 +132,8 @@ function encodeClientRecord(w, r) {
       break;
     case 'mesh':
       at = w.begin(RecordType.mesh);
-      w.u32(r.id); w.u32(r.positions); w.u32(r.normals || 0); w.u32(r.texcoords || 0); w.u32(r.indices || 0);
+      w.u32(r.id); w.u32(r.positions); w.u32(r.normals || 0); w.u32(r.texcoords || 0); w.u32(r.colors || 0);
+      w.u32(r.indices || 0);
       w.u32(r.material || 0); w.mat4(r.transform); w.u8(r.visible === false ? 0 : 1); w.u8(0); w.u8(0); w.u8(0);
       break;
     case 'light':
@@ -457,6 +460,7 @@ function decodeClientRecord(c, op, r, state) {
       c.length(r.left(), spec.fixed);
       const id = r.u32(), model = r.u8(), flags = r.u8(), res = r.u16();
       const rec = { type: name, id, model: null, alphaMask: (flags & MATERIAL_ALPHA_MASK) !== 0, doubleSided: (flags & MATERIAL_DOUBLE_SIDED) !== 0,
+        useVertexColor: (flags & MATERIAL_USE_VERTEX_COLOR) !== 0,
         diffuseColor: r.vec3(), specularColor: r.vec3(), shininess: r.f32(), emissiveColor: r.vec3(),
         ambientIntensity: r.f32(), opacity: r.f32(), diffuseTexture: r.u32(), specularTexture: r.u32(),
         emissiveTexture: r.u32(), reflection: r.f32(), refraction: r.f32(), ior: r.f32(), alphaCutoff: r.f32() };
@@ -473,8 +477,8 @@ function decodeClientRecord(c, op, r, state) {
     }
     case 'mesh': {
       c.length(r.left(), spec.fixed);
-      const rec = { type: name, id: r.u32(), positions: r.u32(), normals: r.u32(), texcoords: r.u32(), indices: r.u32(),
-        material: r.u32(), transform: r.mat4(), visible: null };
+      const rec = { type: name, id: r.u32(), positions: r.u32(), normals: r.u32(), texcoords: r.u32(), colors: r.u32(),
+        indices: r.u32(), material: r.u32(), transform: r.mat4(), visible: null };
       const visible = r.u8(), res = r.reserved3();
       c.id(rec.id, 'id'); c.id(rec.positions, 'positions'); c.finite(rec.transform, 'transform');
       rec.visible = c.flag(visible, 'visible');

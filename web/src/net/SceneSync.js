@@ -8,6 +8,7 @@ const sig = (o) => JSON.stringify(o, (k, v) => (ArrayBuffer.isView(v) ? Array.fr
 export function wireMaterial(m) {
   return {
     type: 'material', id: m.id, model: m.model, alphaMask: !!m.alphaMask, doubleSided: m.doubleSided !== false,
+    useVertexColor: !!m.useVertexColor,
     diffuseColor: nonNeg(m.diffuseColor), specularColor: nonNeg(m.specularColor), shininess: clamp(m.shininess, 0, 1e6),
     emissiveColor: nonNeg(m.emissiveColor), ambientIntensity: clamp(m.ambientIntensity, 0, 1e6), opacity: clamp(m.opacity, 0, 1),
     diffuseTexture: m.diffuseTexture || 0, specularTexture: m.specularTexture || 0, emissiveTexture: m.emissiveTexture || 0,
@@ -73,7 +74,7 @@ export class SceneSync {
     }
     for (const m of scene.meshes.values()) {
       const r = { type: 'mesh', id: m.id, positions: m.positions, normals: m.normals, texcoords: m.texcoords,
-        indices: m.indices, material: m.material, transform: m.transform, visible: m.visible };
+        colors: m.colors || 0, indices: m.indices, material: m.material, transform: m.transform, visible: m.visible };
       const k = sig(r);
       if (s.meshes.get(m.id) === k) continue;
       s.meshes.set(m.id, k);

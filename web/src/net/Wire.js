@@ -3,7 +3,7 @@
 //   python3 protocol/gen_wire.py --js web/src/net/Wire.js
 // CTest protocol_wire_js fails while this file differs from what that writes.
 
-export const VERSION = 1;
+export const VERSION = 2;
 export const MAGIC = [0x54, 0x53];  // "TS"
 export const MESSAGE_HEADER = 8;
 export const RECORD_HEADER = 8;
@@ -57,7 +57,7 @@ export const LightType = ENUMS.light_type;
 
 export const FLAGS = Object.freeze({
   buffer: Object.freeze({ deflate: 1 }),
-  material: Object.freeze({ alpha_mask: 1, double_sided: 2 }),
+  material: Object.freeze({ alpha_mask: 1, double_sided: 2, use_vertex_color: 4 }),
 });
 
 // Every record: its type code, channel, body bytes before any payload, and its fields in wire
@@ -168,17 +168,18 @@ export const RECORDS = Object.freeze({
     ]),
   }),
   mesh: Object.freeze({
-    code: 0x13, channel: 'client', fixed: 92, tail: false, removable: true,
+    code: 0x13, channel: 'client', fixed: 96, tail: false, removable: true,
     fields: Object.freeze([
       { name: 'id', type: 'u32', offset: 0, js: 'id', id: true },
       { name: 'positions', type: 'u32', offset: 4, js: 'positions', id: true },
       { name: 'normals', type: 'u32', offset: 8, js: 'normals' },
       { name: 'texcoords', type: 'u32', offset: 12, js: 'texcoords' },
-      { name: 'indices', type: 'u32', offset: 16, js: 'indices' },
-      { name: 'material', type: 'u32', offset: 20, js: 'material' },
-      { name: 'transform', type: 'mat4', offset: 24, js: 'transform', finite: true, transform: 'mesh' },
-      { name: 'visible', type: 'u8', offset: 88, js: 'visible', flag: true },
-      { name: 'reserved', type: 'u8x3', offset: 89, js: 'reserved', reserved: true },
+      { name: 'colors', type: 'u32', offset: 16, js: 'colors' },
+      { name: 'indices', type: 'u32', offset: 20, js: 'indices' },
+      { name: 'material', type: 'u32', offset: 24, js: 'material' },
+      { name: 'transform', type: 'mat4', offset: 28, js: 'transform', finite: true, transform: 'mesh' },
+      { name: 'visible', type: 'u8', offset: 92, js: 'visible', flag: true },
+      { name: 'reserved', type: 'u8x3', offset: 93, js: 'reserved', reserved: true },
     ]),
   }),
   light: Object.freeze({

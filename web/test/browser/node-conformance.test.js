@@ -92,8 +92,7 @@ function quadColour([x, y]) {
   return [0, 1, 2].map((k) => 255 * w.reduce((s, wi, i) => s + wi * c[i][k], 0));
 }
 const VC = view(200, 100);
-const vcProbe = (what, x, y) => probe(VC, what, -1.2 + x, y, -3.5, ([X, Y]) => quadColour([X + 1.2, Y]),
-  { todo: { server: 'the protocol has no vertex colours (docs/web-client.md, materials: useVertexColor is WebGL only); the node draws the quad in its plain white diffuse colour' } });
+const vcProbe = (what, x, y) => probe(VC, what, -1.2 + x, y, -3.5, ([X, Y]) => quadColour([X + 1.2, Y]));
 
 // Green rows in column c of a view (projective-view.html: the square's height in pixels).
 const greenRun = (img, c) => { let n = 0; for (let r = 0; r < img.h; r++) { const i = (r * img.w + c) * 3; if (img.rgb[i + 1] > 128 && img.rgb[i] < 128) n++; } return n; };

@@ -20,7 +20,7 @@ const CLIENT = [
   { type: 'material', id: 10, model: 'phong', alphaMask: true, doubleSided: true, diffuseColor: [0.5, 0.25, 1], specularColor: [1, 1, 1],
     shininess: 0.2, emissiveColor: [0, 0.1, 0], ambientIntensity: 0.3, opacity: 0.75, diffuseTexture: 9, specularTexture: 0,
     emissiveTexture: 0, reflection: 0.1, refraction: 0.9, ior: 1.5, alphaCutoff: 0.5 },
-  { type: 'mesh', id: 11, positions: 7, normals: 0, texcoords: 0, indices: 8, material: 10, transform: scale, visible: false },
+  { type: 'mesh', id: 11, positions: 7, normals: 0, texcoords: 0, colors: 13, indices: 8, material: 10, transform: scale, visible: false },
   { type: 'light', id: 12, lightType: 'spot', on: true, castShadow: false, color: [1, 0.5, 0.25], intensity: 1, position: [1, 2, 3], direction: [0, -1, 0],
     attenuation: [1, 0, 0.1], cutoff: 0.4, softness: 0.5 },
   { type: 'remove', what: 'mesh', id: 5 },
@@ -47,6 +47,9 @@ test('client records decode back to what was encoded', () => {
   assert.equal(recs[7].alphaMask, true);
   assert.ok(Math.abs(recs[7].ior - 1.5) < 1e-6);
   assert.equal(recs[8].visible, false);
+  assert.equal(recs[8].colors, 13);
+  assert.equal(recs[8].indices, 8);
+  assert.equal(recs[7].useVertexColor, false);
   assert.equal(recs[9].lightType, 'spot');
   assert.equal(recs[9].castShadow, false);
   assert.deepEqual(recs[10], { type: 'remove', what: 'mesh', id: 5 });
@@ -173,4 +176,24 @@ test('u64 fields beyond 2^53 decode exactly, as BigInt', () => {
   const [s] = decodeServer(encodeServer([{ type: 'stats', bytesSent: 2n ** 64n - 1n, sceneBytes: 5 }]));
   assert.equal(s.bytesSent, 2n ** 64n - 1n);
   assert.equal(s.sceneBytes, 5);
+});
+
+test('vertex colours: a mesh names its colour buffer (0: none), a material flag says use them', () => {
+  const mesh = { ...CLIENT[8], colors: 0 };
+  assert.equal(RECORDS.mesh.fixed, 96);
+  const at = RECORDS.mesh.fields.find((f) => f.name === 'colors').offset;
+  assert.equal(at, 16);
+  assert.equal(decodeClient(encodeClient([mesh]))[0].colors, 0);
+  const { colors, ...noColors } = mesh;  // a record without the field encodes as none
+  assert.equal(decodeClient(encodeClient([noColors]))[0].colors, 0);
+  const m = encodeClient([{ ...mesh, colors: 0x01020304 }]);
+  assert.deepEqual([...m.slice(8 + 8 + at, 8 + 8 + at + 4)], [4, 3, 2, 1]);
+  const mat = { ...CLIENT[7], alphaMask: false, doubleSided: false, useVertexColor: true };
+  const bytes = encodeClient([mat]);
+  assert.equal(bytes[8 + 8 + 5], 4, 'flag bit 2');
+  const back = decodeClient(bytes)[0];
+  assert.equal(back.useVertexColor, true);
+  assert.equal(back.alphaMask, false);
+  const unknown = bytes.slice(); unknown[8 + 8 + 5] = 8;
+  refuses(() => decodeClient(unknown), 'bad_reserved', 0);
 });

@@ -53,3 +53,30 @@ test('reset re-sends the whole scene (after a reconnect)', () => {
   sync.reset();
   assert.equal(sync.diff(reader.read(doc.querySelector('xml3d')), VIEW).length, n);
 });
+
+test('vertex colours reach the wire: the mesh names its colour buffer, the material carries useVertexColor', () => {
+  const doc = page(`<xml3d><defs>
+    <data id="quad"><float3 name="position">-1 -1 0 1 -1 0 1 1 0 -1 1 0</float3>
+      <float3 name="color">1 0 0 0 1 0 0 0 1 1 1 1</float3><int name="index">0 1 2 0 2 3</int></data>
+    <material id="vc" model="urn:xml3d:material:matte"><bool name="useVertexColor">true</bool></material>
+    <material id="plain" model="urn:xml3d:material:matte"><float3 name="diffuseColor">1 1 0</float3></material></defs>
+    <mesh id="a" src="#quad" material="#vc"></mesh>
+    <mesh id="b" material="#plain"><float3 name="position">0 0 0 1 0 0 0 1 0</float3></mesh></xml3d>`);
+  const recs = new SceneSync().diff(new MarkupReader().read(doc.querySelector('xml3d')), VIEW);
+  const meshes = recs.filter((r) => r.type === 'mesh');
+  const colored = meshes.find((m) => m.colors !== 0), plain = meshes.find((m) => m.colors === 0);
+  assert.ok(colored && plain, 'one mesh with a colour buffer, one without');
+  const buffer = recs.find((r) => r.type === 'buffer' && r.id === colored.colors);
+  assert.ok(buffer, 'the colour buffer is sent before the mesh');
+  assert.ok(recs.indexOf(buffer) < recs.indexOf(colored));
+  assert.equal(buffer.bufferType, 'f32');
+  assert.equal(buffer.components, 3);
+  assert.deepEqual([...buffer.data], [1, 0, 0, 0, 1, 0, 0, 0, 1, 1, 1, 1]);
+  const mats = new Map(recs.filter((r) => r.type === 'material').map((m) => [m.id, m]));
+  assert.equal(mats.get(colored.material).useVertexColor, true);
+  assert.equal(mats.get(plain.material).useVertexColor, false);
+  // And through the codec.
+  const wire = decodeClient(encodeClient(recs.filter((r) => r.type !== 'texture')));
+  assert.equal(wire.find((r) => r.type === 'mesh' && r.id === colored.id).colors, colored.colors);
+  assert.equal(wire.find((r) => r.type === 'material' && r.id === colored.material).useVertexColor, true);
+});
