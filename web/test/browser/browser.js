@@ -56,3 +56,17 @@ export async function pixel(page, x, y, selector = 'canvas.tessera-webgl') {
     return [...out];
   }, [selector, x, y]);
 }
+
+// Polls `read(page)` every 50 ms until `pred` holds for what it returns, which it then returns;
+// fails with `what`, the last value and the page's console lines after `timeout` ms.
+export async function pollUntil(page, read, pred, what, timeout = 20000) {
+  const t0 = Date.now();
+  let st;
+  while (Date.now() - t0 < timeout) {
+    st = await read(page);
+    if (pred(st)) return st;
+    await new Promise((r) => setTimeout(r, 50));
+  }
+  const logs = (page.logs || []).map((l) => (typeof l === 'string' ? l : `${l.type}: ${l.text}`));
+  throw new Error(`${what}: not within ${timeout} ms: ${JSON.stringify(st)}\n${logs.join('\n')}`);
+}

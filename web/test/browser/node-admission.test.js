@@ -12,7 +12,7 @@ import { execFileSync } from 'node:child_process';
 import fs from 'node:fs';
 import os from 'node:os';
 import path from 'node:path';
-import { launch } from './browser.js';
+import { launch, pollUntil } from './browser.js';
 import { startNode } from '../../tools/tessera-node.js';
 
 const BIN = process.env.TESSERA_BIN;
@@ -56,16 +56,7 @@ const state = (page) => page.evaluate(() => ({
   href: location.href,
 }));
 
-async function until(page, pred, what, timeout = 20000) {
-  const t0 = Date.now();
-  let st;
-  while (Date.now() - t0 < timeout) {
-    st = await state(page);
-    if (pred(st)) return st;
-    await new Promise((r) => setTimeout(r, 50));
-  }
-  return assert.fail(`${what}: not within ${timeout} ms: ${JSON.stringify(st)}\n${page.logs.map((l) => `${l.type}: ${l.text}`).join('\n')}`);
-}
+const until = (page, pred, what, timeout) => pollUntil(page, state, pred, what, timeout);
 
 test('a token in the page URL fragment gets frames, and leaves the address bar', { skip }, async () => {
   const fromCommand = execFileSync(BIN, ['token', '--key', path.join(tmp, 'token.key'), '--ttl', '600', '--subject', 'browser'])

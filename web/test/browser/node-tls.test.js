@@ -10,7 +10,7 @@ import { execFileSync } from 'node:child_process';
 import fs from 'node:fs';
 import os from 'node:os';
 import path from 'node:path';
-import { launch } from './browser.js';
+import { launch, pollUntil } from './browser.js';
 import { startNode, WEB } from '../../tools/tessera-node.js';
 
 const BIN = process.env.TESSERA_BIN;
@@ -38,16 +38,7 @@ const state = (page) => page.evaluate(() => ({
   protocol: location.protocol,
 }));
 
-async function until(page, pred, what, timeout = 20000) {
-  const t0 = Date.now();
-  let st;
-  while (Date.now() - t0 < timeout) {
-    st = await state(page);
-    if (pred(st)) return st;
-    await new Promise((r) => setTimeout(r, 50));
-  }
-  return assert.fail(`${what}: not within ${timeout} ms: ${JSON.stringify(st)}\n${page.logs.join('\n')}`);
-}
+const until = (page, pred, what, timeout) => pollUntil(page, state, pred, what, timeout);
 
 test('the node serves https:// and wss:// only', { skip }, async () => {
   assert.equal(node.info.listening.slice(0, 8), 'https://');
