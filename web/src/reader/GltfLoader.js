@@ -115,8 +115,21 @@ export async function loadGltf(body, url, fetchBinary) {
     };
   });
 
-  // undrawn: primitives that are not drawn (points and lines), counted for one warning.
-  const result = { meshes: [], lights: [], camera: null, url, undrawn: 0 };
+  // undrawn: primitives that are not drawn (points and lines), counted for one warning;
+  // badColors: COLOR_0 attributes left out because they do not give one colour per vertex.
+  const result = { meshes: [], lights: [], camera: null, url, undrawn: 0, badColors: 0 };
+  // COLOR_0 as RGB floats (VEC3, or VEC4 with its alpha dropped; normalised integers are scaled
+  // by accessor()), or null. glTF multiplies the base colour by it.
+  function vertexColors(at) {
+    if (at.COLOR_0 === undefined) return null;
+    const a = json.accessors[at.COLOR_0], n = COMPONENTS[a.type];
+    const c = asFloat(accessor(at.COLOR_0));
+    if ((n !== 3 && n !== 4) || a.count !== json.accessors[at.POSITION].count) { result.badColors++; return null; }
+    if (n === 3) return c;
+    const rgb = new Float32Array(a.count * 3);
+    for (let v = 0; v < a.count; v++) for (let j = 0; j < 3; j++) rgb[v * 3 + j] = c[v * 4 + j];
+    return rgb;
+  }
   const lightDefs = (json.extensions && json.extensions.KHR_lights_punctual && json.extensions.KHR_lights_punctual.lights) || [];
   function visit(ni, parent) {
     const node = json.nodes[ni];
@@ -142,7 +155,7 @@ export async function loadGltf(body, url, fetchBinary) {
           positions: asFloat(accessor(at.POSITION)),
           normals: at.NORMAL !== undefined ? asFloat(accessor(at.NORMAL)) : null,
           texcoords: at.TEXCOORD_0 !== undefined ? asFloat(accessor(at.TEXCOORD_0)) : null,
-          colors: null,
+          colors: vertexColors(at),
           indices, strip: mode === 5,
           material: p.material !== undefined ? materials[p.material] : null,
           matrix: world,

@@ -487,6 +487,9 @@ export class MarkupReader {
       if (g.undrawn > 0)
         this.warn(el, `${this.describe(el)} src="${src}": ${g.undrawn} glTF primitive${g.undrawn > 1 ? 's' : ''} of points, lines or triangle fans ` +
           `not drawn: only triangles and triangle strips are`);
+      if (g.badColors > 0)
+        this.warn(el, `${this.describe(el)} src="${src}": COLOR_0 of ${g.badColors} glTF primitive${g.badColors > 1 ? 's' : ''} ` +
+          'left out: not one RGB or RGBA colour per vertex');
       const pick = parsePick(el.getAttribute('pick'));
       g.meshes.forEach((p, i) => {
         if (pick && !pickSelects(pick, { name: p.name, classes: new Set() })) return;
@@ -495,6 +498,7 @@ export class MarkupReader {
         if (o && o.getAttribute('material')) mat = this.buildMaterial(this.materialParams(o.getAttribute('material'), o), null, o);
         else if (p.material) mat = { ...MATERIAL_DEFAULTS, ...p.material };
         else mat = this.buildMaterial(fallback, null, el);
+        if (p.colors) mat = { ...mat, useVertexColor: true };  // glTF: COLOR_0 multiplies the base colour
         const m = M.multiply(world, p.matrix);
         this.addGeometry(el, el, this.ids.of(el, `gltf:${i}`), { ...p, type: 'triangles' }, m, mat, visible);
       });

@@ -334,3 +334,39 @@ test('cyclic asset src and bad includes are errors on their elements, and nothin
   assert.match(msgs, /recursive include/);
   assert.equal([...scene.meshes.values()].filter((m) => m.element.id === 'm1').length, 1, 'the asset still draws once');
 });
+
+test('glTF COLOR_0 reaches the mesh as RGB (alpha dropped, normalised bytes scaled) with useVertexColor; a bad one warns', async () => {
+  const pos = new Float32Array([0, 0, 0, 1, 0, 0, 0, 1, 0]);
+  const rgba = new Uint8Array([255, 0, 0, 255, 0, 255, 0, 128, 0, 0, 255, 0]);
+  const bytes = Buffer.concat([Buffer.from(pos.buffer), Buffer.from(rgba.buffer)]);
+  const gltf = {
+    asset: { version: '2.0' }, scene: 0, scenes: [{ nodes: [0] }], nodes: [{ mesh: 0 }],
+    meshes: [{ primitives: [{ attributes: { POSITION: 0, COLOR_0: 1 } }, { attributes: { POSITION: 0, COLOR_0: 2 } },
+      { attributes: { POSITION: 0 } }] }],
+    accessors: [{ bufferView: 0, componentType: 5126, count: 3, type: 'VEC3' },
+      { bufferView: 1, componentType: 5121, normalized: true, count: 3, type: 'VEC4' },
+      { bufferView: 1, componentType: 5121, normalized: true, count: 2, type: 'VEC4' }],
+    bufferViews: [{ buffer: 0, byteOffset: 0, byteLength: 36 }, { buffer: 0, byteOffset: 36, byteLength: 12 }],
+    buffers: [{ uri: 'data:application/octet-stream;base64,' + bytes.toString('base64'), byteLength: 48 }],
+  };
+  const fetch = async (url) => ({ ok: true, status: 200, json: async () => gltf, arrayBuffer: async () => new ArrayBuffer(0), text: async () => JSON.stringify(gltf), url });
+  let loaded;
+  const done = new Promise((r) => (loaded = r));
+  const resources = new Resources({ fetch, onLoad: () => loaded() });
+  const doc = page('<xml3d><model id="g" src="m/colors.gltf"></model></xml3d>');
+  const reader = new MarkupReader({ resources });
+  reader.read(doc.querySelector('xml3d'));
+  await done;
+  const scene = reader.read(doc.querySelector('xml3d'));
+  const [coloured, bad, plain] = [...scene.meshes.values()];
+  assert.ok(coloured.colors, 'the colour buffer is there');
+  assert.deepEqual([...scene.buffers.get(coloured.colors).data], [1, 0, 0, 0, 1, 0, 0, 0, 1]);
+  assert.equal(scene.buffers.get(coloured.colors).components, 3);
+  assert.equal(scene.materials.get(coloured.material).useVertexColor, true);
+  assert.equal(bad.colors, 0, 'two colours for three vertices are left out');
+  assert.equal(plain.colors, 0);
+  assert.notEqual(scene.materials.get(plain.material).useVertexColor, true);
+  assert.deepEqual(scene.warnings.map((w) => w.message),
+    ['<model id="g"> src="m/colors.gltf": COLOR_0 of 1 glTF primitive left out: not one RGB or RGBA colour per vertex']);
+  assert.deepEqual(scene.errors, []);
+});
