@@ -21,20 +21,11 @@
 #include <openssl/x509.h>
 #include <openssl/x509_vfy.h>
 
+#include "net/tls.h"
+
 namespace tessera::app {
 
 namespace {
-
-// OpenSSL's queued errors as one line ("" when none), and the queue cleared.
-std::string openssl_errors() {
-  std::string out;
-  while (unsigned long e = ERR_get_error()) {
-    char buf[256];
-    ERR_error_string_n(e, buf, sizeof buf);
-    out += (out.empty() ? "" : "; ") + std::string(buf);
-  }
-  return out;
-}
 
 [[noreturn]] void fail(const char* setting, const std::string& path, const std::string& what) {
   throw std::invalid_argument(std::string("tessera.") + setting + ": " + path + ": " + what);
@@ -66,7 +57,7 @@ int verify_for(SSL_CTX* ctx, X509* cert, const char* purpose) {
   SSL_CTX_get0_chain_certs(ctx, &chain);
   std::unique_ptr<X509_STORE_CTX, decltype(&X509_STORE_CTX_free)> v(X509_STORE_CTX_new(), X509_STORE_CTX_free);
   if (!v || X509_STORE_CTX_init(v.get(), SSL_CTX_get_cert_store(ctx), cert, chain) != 1)
-    throw std::runtime_error("cannot make an OpenSSL verification context: " + openssl_errors());
+    throw std::runtime_error("cannot make an OpenSSL verification context: " + tls::last_error(""));
   X509_STORE_CTX_set_default(v.get(), purpose);
   const int ok = X509_verify_cert(v.get());
   const int err = X509_STORE_CTX_get_error(v.get());
@@ -97,23 +88,23 @@ std::vector<std::string> check_cluster_tls(const ClusterTlsFiles& f) {
   require_readable("cluster-tls-ca", f.ca);
   ERR_clear_error();
   // The same calls as CAF's OpenSSL session (libcaf_openssl, session::create_ssl_context).
-  std::unique_ptr<SSL_CTX, decltype(&SSL_CTX_free)> ctx(SSL_CTX_new(TLS_method()), SSL_CTX_free);
-  if (!ctx) throw std::runtime_error("cannot make an OpenSSL context: " + openssl_errors());
+  tls::CtxPtr ctx(SSL_CTX_new(TLS_method()));
+  if (!ctx) throw std::runtime_error("cannot make an OpenSSL context: " + tls::last_error(""));
   SSL_CTX_set_default_passwd_cb(ctx.get(), no_passphrase);
   if (SSL_CTX_use_certificate_chain_file(ctx.get(), f.cert.c_str()) != 1)
-    fail("cluster-tls-cert", f.cert, "holds no PEM certificate OpenSSL accepts (" + openssl_errors() + ")");
+    fail("cluster-tls-cert", f.cert, "holds no PEM certificate OpenSSL accepts (" + tls::last_error("") + ")");
   if (SSL_CTX_use_PrivateKey_file(ctx.get(), f.key.c_str(), SSL_FILETYPE_PEM) != 1) {
     const unsigned long e = ERR_peek_last_error();
     if (ERR_GET_LIB(e) == ERR_LIB_X509 && ERR_GET_REASON(e) == X509_R_KEY_VALUES_MISMATCH)
-      fail("cluster-tls-key", f.key, "is not the key of the certificate " + f.cert + " (" + openssl_errors() + ")");
+      fail("cluster-tls-key", f.key, "is not the key of the certificate " + f.cert + " (" + tls::last_error("") + ")");
     fail("cluster-tls-key", f.key,
-         "holds no unencrypted PEM private key OpenSSL accepts (encrypted keys are not supported; " + openssl_errors() +
+         "holds no unencrypted PEM private key OpenSSL accepts (encrypted keys are not supported; " + tls::last_error("") +
              ")");
   }
   if (SSL_CTX_check_private_key(ctx.get()) != 1)
-    fail("cluster-tls-key", f.key, "is not the key of the certificate " + f.cert + " (" + openssl_errors() + ")");
+    fail("cluster-tls-key", f.key, "is not the key of the certificate " + f.cert + " (" + tls::last_error("") + ")");
   if (SSL_CTX_load_verify_locations(ctx.get(), f.ca.c_str(), nullptr) != 1)
-    fail("cluster-tls-ca", f.ca, "holds no PEM certificate OpenSSL accepts (" + openssl_errors() + ")");
+    fail("cluster-tls-ca", f.ca, "holds no PEM certificate OpenSSL accepts (" + tls::last_error("") + ")");
 
   // The CA must have signed this node's certificate for both ends of a connection: a node
   // accepts its parents (TLS server) and connects to its children (TLS client).
@@ -217,7 +208,7 @@ std::string diagnose_cluster_link(const std::string& host, uint16_t port, const 
   SigpipeBlock no_sigpipe;
   const int fd = connect_tcp(host, port, timeout_ms);
   if (fd < 0) return {};  // not a question of TLS
-  std::unique_ptr<SSL_CTX, decltype(&SSL_CTX_free)> ctx(SSL_CTX_new(TLS_client_method()), SSL_CTX_free);
+  tls::CtxPtr ctx(SSL_CTX_new(TLS_client_method()));
   std::unique_ptr<SSL, decltype(&SSL_free)> ssl(ctx ? SSL_new(ctx.get()) : nullptr, SSL_free);
   const bool tls = !files.cert.empty();
   std::string peer;  // the child's certificate's subject, as the verification saw it
@@ -233,7 +224,7 @@ std::string diagnose_cluster_link(const std::string& host, uint16_t port, const 
         SSL_use_PrivateKey_file(ssl.get(), files.key.c_str(), SSL_FILETYPE_PEM) != 1 ||
         SSL_CTX_load_verify_locations(ctx.get(), files.ca.c_str(), nullptr) != 1) {
       close(fd);
-      return "this node's own certificate files cannot be read now (" + openssl_errors() + ")";
+      return "this node's own certificate files cannot be read now (" + tls::last_error("") + ")";
     }
     SSL_set_app_data(ssl.get(), &peer);
     SSL_set_verify(ssl.get(), SSL_VERIFY_PEER, note_peer);
@@ -284,15 +275,6 @@ std::string diagnose_cluster_link(const std::string& host, uint16_t port, const 
   if (!tls) return {};  // the child does not speak TLS either: something else cut CAF's handshake
   return "the child does not answer in TLS" + detail +
          ": it runs without mutual TLS (no tessera.cluster-tls-* settings), or is not a tessera node";
-}
-
-bool is_loopback_host(const std::string& host) {
-  if (host == "localhost" || host == "::1" || host == "[::1]") return true;
-  // 127.0.0.0/8, as a dotted quad.
-  unsigned a, b, c, d;
-  char rest;
-  return std::sscanf(host.c_str(), "%u.%u.%u.%u%c", &a, &b, &c, &d, &rest) == 4 && a == 127 && b < 256 && c < 256 &&
-         d < 256;
 }
 
 }  // namespace tessera::app

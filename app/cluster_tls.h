@@ -31,8 +31,4 @@ std::vector<std::string> check_cluster_tls(const ClusterTlsFiles& files);
 std::string diagnose_cluster_link(const std::string& host, uint16_t port, const ClusterTlsFiles& files,
                                   int timeout_ms = 3000);
 
-// Whether a cluster host names this machine's loopback (127.0.0.0/8, ::1, localhost): the
-// cluster port is then out of other machines' reach.
-bool is_loopback_host(const std::string& host);
-
 }  // namespace tessera::app

@@ -235,10 +235,15 @@ Event cluster_security_event(const NodeConfig& cfg, const std::string& name, int
   if (cfg.cluster_tls()) {
     e.with("ca", cfg.cluster_tls_ca).with("cert", cfg.cluster_tls_cert);
   } else {
+    // A cluster address on this machine's loopback is out of other machines' reach.
+    auto loopback = [](std::string host) {
+      if (host.size() > 2 && host.front() == '[' && host.back() == ']') host = host.substr(1, host.size() - 2);
+      return admission::loopback_host(host);
+    };
     std::vector<std::string> open;
-    if (published >= 0 && !is_loopback_host(cfg.cluster_host)) open.push_back("its cluster port on " + cfg.cluster_host);
+    if (published >= 0 && !loopback(cfg.cluster_host)) open.push_back("its cluster port on " + cfg.cluster_host);
     for (const std::string& c : cfg.children)
-      if (!is_loopback_host(c.substr(0, c.rfind(':')))) open.push_back("child " + c);
+      if (!loopback(c.substr(0, c.rfind(':')))) open.push_back("child " + c);
     std::string list;
     for (const std::string& o : open) list += (list.empty() ? "" : ", ") + o;
     if (!open.empty())

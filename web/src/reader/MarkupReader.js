@@ -726,14 +726,16 @@ function addPost(e, el) {
   if (localName(el) === 'assetmesh') e.type = (el.getAttribute('type') || 'triangles').trim();
   for (const c of (el.getAttribute('class') || '').split(/\s+/)) if (c) e.classes.add(c);
 }
+// A copy of entry `e` (its own post list and classes) becomes an entry of table `t`.
+function addEntryCopy(t, e) {
+  const c = { ...e, table: t, posts: [...e.posts], classes: new Set(e.classes) };
+  t.entries.push(c);
+  if (c.name) t.named.set(c.name, c);
+}
 // Copies `from` (a src asset's table) into the empty table `t`: entries and sub-tables become
 // t's own (re-parented), the material and transform carry over.
 function copyTable(t, from) {
-  for (const e of from.entries) {
-    const c = { ...e, table: t, posts: [...e.posts], classes: new Set(e.classes) };
-    t.entries.push(c);
-    if (c.name) t.named.set(c.name, c);
-  }
+  for (const e of from.entries) addEntryCopy(t, e);
   for (const sub of from.subs) mergeSubTable(t, cloneTable(sub, t));
   if (from.material) t.material = from.material;
   if (from.transform) t.transform = from.transform;
@@ -757,10 +759,8 @@ function mergeSubTable(t, sub) {
   }
   for (const e of sub.entries) {
     const have = e.name && into.named.get(e.name);
-    if (have) { for (const p of e.posts) addPost(have, p); continue; }
-    const c = { ...e, table: into, posts: [...e.posts], classes: new Set(e.classes) };
-    into.entries.push(c);
-    if (c.name) into.named.set(c.name, c);
+    if (have) for (const p of e.posts) addPost(have, p);
+    else addEntryCopy(into, e);
   }
   for (const s of sub.subs) mergeSubTable(into, cloneTable(s, into));
   if (sub.material) into.material = sub.material;
