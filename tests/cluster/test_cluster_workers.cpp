@@ -194,8 +194,12 @@ TEST_CASE("A master that stops answering or is killed takes its workers with it"
     m.p->signal(SIGCONT);
   }
 
-  // Killed (SIGKILL): the connection closes and the worker ends at once (bound: 1 s; the
-  // silence rule would take 1 s or more and log "parent silent").
+  // Killed (SIGKILL): the connection closes and the worker ends at once ("parent down"), or by
+  // the silence rule (1.0..1.4 s, "parent silent") when the close comes later. It can: the
+  // kernel frees a killed process's memory before it closes its sockets (do_exit: exit_mm, then
+  // exit_files), and on a loaded 2-core machine the link's end also waits for the worker's
+  // middleman thread. Bound: the silence rule's, 3 s, as above (CI once saw one worker end
+  // silent at 1.02 s and the other not yet at 1.0 s).
   {
     Node m({"--port", "0", "--children", w.addr()});
     REQUIRE(wait_for([&] { return m.p->err_count("\"child_connected\"") == 1; }, 20000));
@@ -210,11 +214,10 @@ TEST_CASE("A master that stops answering or is killed takes its workers with it"
     const size_t silent_before = w.p->err_count("\"ended\": \"parent silent\"");
     m.p->signal(SIGKILL);
     const auto t0 = clock_type::now();
-    CHECK(wait_for([&] { return w.live_workers() == 0; }, 1000));
+    CHECK(wait_for([&] { return w.live_workers() == 0; }, 3000));
     const double ended_s = seconds_since(t0);
     INFO("worker stderr: " << w.p->err());
-    // The link's end is seen at once ("parent down"); on a loaded machine (sanitizer builds) the
-    // keep-alive rule can come first ("parent silent"). Either way both end, within the bound.
+    // Either way both end, within the bound, each with one of the two reasons.
     CHECK(w.p->err_count("\"ended\": \"parent down\"") + w.p->err_count("\"ended\": \"parent silent\"") ==
           2 + silent_before);
     WARN("killed master: its 2 workers ended after " << ended_s << " s");
