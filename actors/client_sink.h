@@ -26,6 +26,10 @@ class ClientSink {
   virtual void close(const std::string& reason) = 0;
   // The session token (names the MJPEG endpoint /mjpeg/<token>); may be empty.
   virtual std::string token() const = 0;
+  // "http://host:port" (or https) as the client reached this node: its WebSocket's Host header.
+  // References to files under this origin's /scenes/ are read from the node's scenes folder
+  // (update/asset_store.h). "": unknown (the client's references name no file of this node).
+  virtual std::string node_origin() const { return ""; }
 };
 
 }  // namespace tessera

@@ -37,6 +37,8 @@ enum class Ev : uint8_t {
   closed_slow_client, rejected, network_thread_error,
   // A session: its still reached its refine target and rendering stopped.
   converged,
+  // A session: the references of a client message, loaded or refused (update/asset_store.h).
+  references,
 };
 // The kind's key in a JSON line ("node_lost").
 const char* event_name(Ev kind);

@@ -24,6 +24,7 @@
 #include "actors/subtree_protocol.h"
 #include "actors/tiler_protocol.h"
 #include "protocol/memory_budget.h"
+#include "update/asset_store.h"
 #include "protocol/protocol.h"
 #include "lb/tiler.h"
 
@@ -81,6 +82,9 @@ struct NodeSettings {
                                          // with a fatal bad_handshake (0: no timeout)
   std::shared_ptr<MemoryBudget> budget;  // node-wide: every session's scene bytes and the frames
                                          // queued for its client (none: only max_client_bytes)
+  // References (docs/protocol.md, "References"): what this node loads itself, and its cache of
+  // decoded textures shared by every session (none: every reference is refused).
+  std::shared_ptr<AssetStore> assets;
   NodeInfo info() const { return NodeInfo{name, coefficient.logical_cores, coefficient.single_core_perf}; }
 };
 

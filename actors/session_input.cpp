@@ -104,6 +104,61 @@ static bool admit_payloads(self_ptr self, std::vector<uint8_t>& bytes, std::vect
 
 static void on_client_records(self_ptr self, std::vector<uint8_t>& bytes, const std::vector<uint32_t>& kept);
 
+static bool is_reference(const ClientRecord& r) {
+  return std::holds_alternative<SetBufferRef>(r) || std::holds_alternative<SetTextureRef>(r);
+}
+
+// References (docs/protocol.md, "References"): the node's AssetStore turns each buffer_ref and
+// texture_ref of the message into a buffer or texture record, or refuses it (it stays a
+// reference, and the loop below skips it). The client gets one reference record for each, all
+// in one message, before anything of this message is applied: it sends what depends on a
+// reference only after that answer. Loaded content counts against the node's memory budget as
+// an upload does (admit_payloads could not: a reference declares no size).
+static void resolve_references(self_ptr self, std::vector<ClientRecord>& recs) {
+  auto& st = self->state;
+  std::vector<size_t> at;
+  for (size_t i = 0; i < recs.size(); ++i)
+    if (is_reference(recs[i])) at.push_back(i);
+  if (at.empty()) return;
+  const int64_t t0 = steady_ns();
+  const AssetStats before = st.settings->assets ? st.settings->assets->stats() : AssetStats{};
+  std::vector<Reference> answers;
+  if (st.settings->assets) {
+    st.settings->assets->resolve(recs, st.sink->node_origin(), st.settings->limits, answers);
+  } else {
+    for (size_t i : at) {
+      const bool buffer = std::holds_alternative<SetBufferRef>(recs[i]);
+      const Id id = buffer ? std::get<SetBufferRef>(recs[i]).id : std::get<SetTextureRef>(recs[i]).id;
+      answers.push_back(Reference{buffer ? RefKind::buffer : RefKind::texture, false, id, 0,
+                                  "this node loads no references"});
+    }
+  }
+  uint64_t loaded = 0, bytes = 0;
+  std::string first_refusal;
+  for (size_t k = 0; k < at.size(); ++k) {
+    Reference& a = answers[k];
+    if (a.ok && st.settings->budget && !st.share.reserve(a.bytes)) {
+      const MemoryBudget& b = *st.settings->budget;
+      a.ok = false;
+      a.message = std::string(a.what == RefKind::buffer ? "buffer " : "texture ") + std::to_string(a.id) + ": its " +
+                  std::to_string(a.bytes) + " bytes would exceed the node's memory budget (" + std::to_string(b.used()) +
+                  " of " + std::to_string(b.limit()) + " bytes in use by all clients)";
+      a.bytes = 0;
+      recs[at[k]] = SetBufferRef{};  // refused after all: skipped like the others
+    }
+    if (a.ok) loaded++, bytes += a.bytes;
+    else if (first_refusal.empty()) first_refusal = a.message;
+  }
+  st.sink->send(encode(std::vector<ServerRecord>(answers.begin(), answers.end())));
+  const AssetStats after = st.settings->assets ? st.settings->assets->stats() : AssetStats{};
+  Event e(Ev::references, int64_t(at.size()));
+  e.with("loaded", loaded).with("bytes", bytes).with("refused", uint64_t(at.size() - loaded))
+      .with("cache_hits", after.hits - before.hits).with("cache_misses", after.misses - before.misses)
+      .with("ms", Json::number(double(steady_ns() - t0) / 1e6));
+  if (!first_refusal.empty()) e.with("first_refusal", first_refusal.substr(0, 512));
+  log(self, std::move(e));
+}
+
 void on_client(self_ptr self, std::vector<uint8_t>& bytes) {
   auto& st = self->state;
   if (st.closed) return;
@@ -130,9 +185,11 @@ static void on_client_records(self_ptr self, std::vector<uint8_t>& bytes, const 
   }
   auto& recs = res.value();
   if (Status order = check_session_order(st.handshake_done, recs); !order) return fail(self, order.error());
+  resolve_references(self, recs);
   st.still.active = false;  // the client has spoken: the still it saw is no longer refined
   for (uint32_t i = 0; i < recs.size() && !st.closed; ++i) {
     ClientRecord& rec = recs[i];
+    if (is_reference(rec)) continue;  // refused, and answered
     if (auto* res = std::get_if<Resolution>(&rec)) st.full_w = res->width, st.full_h = res->height;
     if (auto* h = std::get_if<Handshake>(&rec)) {
       on_handshake(self, *h);

@@ -15,6 +15,7 @@
 #include "app/command.h"
 #include "app/common.h"
 #include "app/node_config.h"
+#include "net/http.h"
 #include "renderer/rasterizer.h"
 
 namespace tessera::app {
@@ -141,6 +142,20 @@ int run(const std::vector<std::string>& argv) {
   if (renderer == "rasterizer" && !gl_ok) throw std::runtime_error("--renderer rasterizer: " + gl_why);
   ServerOptions opts = cfg.server_options();
   if (!scenes_root.empty()) opts.scenes_root = scenes_root;
+  // References: files of this node's /scenes/, and URLs of the listed origins over HTTP(S).
+  AssetOptions assets;
+  assets.scenes_root = opts.scenes_root;
+  assets.origins = cfg.asset_origins;
+  assets.cache_bytes = uint64_t(cfg.asset_cache_mb) << 20;
+  assets.max_file_bytes = uint64_t(cfg.asset_max_file_mb) << 20;
+  try {
+    settings->assets = std::make_shared<AssetStore>(assets, [](const std::string& url, uint64_t max_bytes,
+                                                               std::vector<uint8_t>& body, std::string& error) {
+      return http::fetch_url(url, max_bytes, body, error);
+    });
+  } catch (const std::runtime_error& e) {
+    throw std::invalid_argument(e.what());
+  }
   caf::actor_system sys{cfg};
   // Every actor's events go through one logger (actors/event.h); this is its only strong handle.
   logger_actor logger = spawn_logger(sys, settings->log);

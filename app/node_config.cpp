@@ -80,6 +80,8 @@ NodeConfig::NodeConfig() {
       .add(max_mjpeg_per_session, "max-mjpeg-per-session", "MJPEG viewers of one session")
       .add(max_mjpeg_viewers, "max-mjpeg-viewers", "MJPEG viewers on the node")
       .add(max_connections_per_ip, "max-connections-per-ip", "WebSocket connections per client address (0: no limit)")
+      .add(asset_cache_mb, "asset-cache-mb", "decoded textures of references kept for later sessions, in MiB (0: none)")
+      .add(asset_max_file_mb, "asset-max-file-mb", "the largest file a reference may name, in MiB")
       .add(cluster_port, "cluster-port", "publish this node to parent nodes on this port (-1: off, 0: any)")
       .add(task_timeout_ms, "task-timeout-ms", "fail a sub-tree that has not returned its tiles after this long")
       .add(reconnect_ms, "reconnect-ms", "retry period for lost child nodes; keep-alive period to workers below")
@@ -110,6 +112,10 @@ NodeConfig::NodeConfig() {
       allowed_origins, "tessera", "allowed-origins",
       "page origins that may open sessions, as [\"https://app.example.com\", \"self\", \"loopback\"] or [\"*\"] "
       "(default: self and loopback)"));
+  custom_options_.add(string_list_option(
+      asset_origins, "tessera", "asset-origins",
+      "origins whose URLs the node fetches when a client references them, as [\"https://cdn.example\"] "
+      "(default: none; files of the node's own /scenes/ are always read)"));
   custom_options_.add(bool_option(require_origin, "tessera", "require-origin",
                                   "refuse WebSocket requests without an Origin header (non-browser clients)"));
   custom_options_.add(bool_option(log_frames, "tessera", "log-frames", "log one JSON line per frame"));
@@ -305,6 +311,8 @@ void NodeConfig::set_admission(ServerOptions& o) const {
       o.tokens.add_static(t);
   o.origins = admission::OriginPolicy::parse(allowed_origins, require_origin);
   if (max_connections_per_ip < 0) throw std::invalid_argument("tessera.max-connections-per-ip must be >= 0 (0: no limit)");
+  if (asset_cache_mb < 0) throw std::invalid_argument("tessera.asset-cache-mb must be >= 0");
+  if (asset_max_file_mb < 1) throw std::invalid_argument("tessera.asset-max-file-mb must be >= 1");
   o.max_connections_per_ip = size_t(max_connections_per_ip);
 }
 

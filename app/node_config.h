@@ -46,6 +46,10 @@ struct NodeConfig : caf::actor_system_config {
   std::vector<std::string> allowed_origins{"self", "loopback"};  // page origins ("*": any)
   bool require_origin = false;     // refuse WebSocket requests without an Origin header (non-browsers)
   int max_connections_per_ip = 0;  // WebSocket connections per client address (0: no limit)
+  // References (docs/operations.md, "References"): what the node loads itself for its clients.
+  std::vector<std::string> asset_origins;  // origins fetched over HTTP(S) besides the node's own /scenes/
+  int64_t asset_cache_mb = 512;             // decoded textures kept for later sessions
+  int64_t asset_max_file_mb = 1024;         // the largest file a reference may name
   // Cluster (docs/operations.md): this node's CAF endpoint and its children.
   int cluster_port = -1;          // publish the node actor here (-1: not a child of anyone; 0: any port)
   std::string cluster_host = "127.0.0.1";  // address the cluster port binds to

@@ -28,6 +28,14 @@ void write_png(const std::string& path, const Image& img) {
     throw std::runtime_error(path + ": could not write PNG");
 }
 
+bool png_dimensions(const uint8_t* p, size_t n, uint32_t& w, uint32_t& h) {
+  static const uint8_t sig[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+  if (n < 24 || std::memcmp(p, sig, 8) != 0 || std::memcmp(p + 12, "IHDR", 4) != 0) return false;
+  w = (uint32_t(p[16]) << 24) | (uint32_t(p[17]) << 16) | (uint32_t(p[18]) << 8) | p[19];
+  h = (uint32_t(p[20]) << 24) | (uint32_t(p[21]) << 16) | (uint32_t(p[22]) << 8) | p[23];
+  return true;
+}
+
 bool decode_image(const uint8_t* data, size_t size, Image& out, std::string& error) {
   if (size > size_t(std::numeric_limits<int>::max())) {
     error = "image data too large";

@@ -23,6 +23,10 @@ Image read_image(const std::string& path);
 // Decodes an in-memory PNG/JPEG; returns false and sets error on failure.
 bool decode_image(const uint8_t* data, size_t size, Image& out, std::string& error);
 
+// A PNG's size from its signature and IHDR chunk (big-endian width and height), read before
+// decoding so a caller can refuse an image larger than its limit; false: not a PNG.
+bool png_dimensions(const uint8_t* data, size_t size, uint32_t& width, uint32_t& height);
+
 // Copies src into dst at (x, y); src must fit.
 void blit(Image& dst, const Image& src, int32_t x, int32_t y);
 

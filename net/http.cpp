@@ -44,68 +44,6 @@ const char* mime_type(const std::string& path) {
   return "application/octet-stream";
 }
 
-std::string target_path(const std::string& target) {
-  return target.substr(0, target.find_first_of("?#"));
-}
-
-namespace {
-
-int hex(char c) {
-  if (c >= '0' && c <= '9') return c - '0';
-  if (c >= 'a' && c <= 'f') return c - 'a' + 10;
-  if (c >= 'A' && c <= 'F') return c - 'A' + 10;
-  return -1;
-}
-
-std::optional<std::string> percent_decode(const std::string& s) {
-  std::string out;
-  for (size_t i = 0; i < s.size(); ++i) {
-    if (s[i] != '%') { out += s[i]; continue; }
-    if (i + 2 >= s.size()) return std::nullopt;
-    int a = hex(s[i + 1]), b = hex(s[i + 2]);
-    if (a < 0 || b < 0) return std::nullopt;
-    char c = char(a * 16 + b);
-    if (c == '\0') return std::nullopt;
-    out += c;
-    i += 2;
-  }
-  return out;
-}
-
-}  // namespace
-
-std::optional<std::string> resolve_static(const std::string& root, const std::string& target) {
-  if (target.empty() || target[0] != '/') return std::nullopt;
-  auto decoded = percent_decode(target_path(target));
-  if (!decoded) return std::nullopt;
-  std::string rel;
-  size_t i = 1;
-  const std::string& p = *decoded;
-  while (i <= p.size()) {
-    size_t j = p.find('/', i);
-    if (j == std::string::npos) j = p.size();
-    std::string seg = p.substr(i, j - i);
-    if (!seg.empty()) {
-      if (seg[0] == '.' || seg.find('\\') != std::string::npos) return std::nullopt;  // "..", ".", hidden
-      if (!rel.empty()) rel += '/';
-      rel += seg;
-    }
-    i = j + 1;
-  }
-  if (p.back() == '/') rel += rel.empty() ? "index.html" : "/index.html";
-  std::error_code ec;
-  fs::path base = fs::weakly_canonical(fs::path(root), ec);
-  if (ec) return std::nullopt;
-  fs::path full = fs::weakly_canonical(base / rel, ec);
-  if (ec) return std::nullopt;
-  if (fs::is_directory(full, ec)) full /= "index.html";
-  // Must stay inside root after resolving symlinks.
-  auto b = base.string(), f = full.string();
-  if (f.size() <= b.size() || f.compare(0, b.size(), b) != 0 || f[b.size()] != '/') return std::nullopt;
-  if (!fs::is_regular_file(full, ec)) return std::nullopt;
-  return f;
-}
-
 bool public_path(const std::string& rel, const std::vector<std::string>& extra) {
   static const char* kPrefixes[] = {"src/", "demo/", "node_modules/three/build/"};
   if (rel == "index.html") return true;
@@ -355,6 +293,73 @@ std::optional<Response> request(const std::string& host, uint16_t port, const st
   r.content_type = header_value(r.head, "content-type");
   r.body = buf.substr(he + 4);
   return r;
+}
+
+bool fetch_url(const std::string& url, uint64_t max_bytes, std::vector<uint8_t>& body, std::string& error,
+               int timeout_ms) {
+  const size_t colon = url.find("://");
+  const std::string scheme = colon == std::string::npos ? "" : url.substr(0, colon);
+  if (scheme != "http" && scheme != "https") {
+    error = "not an http(s) URL";
+    return false;
+  }
+  const size_t start = colon + 3, end = url.find_first_of("/?#", start);
+  const std::string authority = url.substr(start, end == std::string::npos ? std::string::npos : end - start);
+  std::string target = end == std::string::npos ? "/" : url.substr(end);
+  target = target.substr(0, target.find('#'));
+  if (target.empty() || target[0] != '/') target = "/" + target;
+  std::string host = authority;
+  uint16_t port = scheme == "https" ? 443 : 80;
+  const size_t bracket = authority.rfind(']'), last = authority.rfind(':');
+  if (last != std::string::npos && (bracket == std::string::npos || last > bracket)) {
+    host = authority.substr(0, last);
+    port = uint16_t(std::atoi(authority.c_str() + last + 1));
+  }
+  if (host.size() > 2 && host.front() == '[' && host.back() == ']') host = host.substr(1, host.size() - 2);
+  const auto deadline = Clock::now() + std::chrono::milliseconds(timeout_ms);
+  Stream stream;
+  if (!stream.open(host, port, ClientTls{scheme == "https", scheme == "https" ? tls::kSystemCas : ""}, deadline, &error)) {
+    error = url + ": " + error;
+    return false;
+  }
+  if (!stream.write_all("GET " + target + " HTTP/1.0\r\nHost: " + authority + "\r\nUser-Agent: tessera\r\n\r\n")) {
+    error = url + ": cannot send the request";
+    return false;
+  }
+  std::string buf;
+  bool eof = false;
+  while (!eof) {
+    if (buf.size() > max_bytes + 65536) {
+      error = url + ": the body exceeds " + std::to_string(max_bytes) + " bytes";
+      return false;
+    }
+    if (!stream.read_some(buf, deadline)) eof = true;
+  }
+  if (Clock::now() >= deadline) {
+    error = url + ": no complete answer within " + std::to_string(timeout_ms) + " ms";
+    return false;
+  }
+  const size_t he = buf.find("\r\n\r\n");
+  if (buf.compare(0, 5, "HTTP/") != 0 || he == std::string::npos) {
+    error = url + ": not an HTTP answer";
+    return false;
+  }
+  const int status = std::atoi(buf.c_str() + buf.find(' ') + 1);
+  if (status != 200) {
+    error = url + ": HTTP " + std::to_string(status);
+    return false;
+  }
+  if (buf.size() - he - 4 > max_bytes) {
+    error = url + ": the body exceeds " + std::to_string(max_bytes) + " bytes";
+    return false;
+  }
+  const std::string length = header_value(buf.substr(0, he + 2), "content-length");
+  if (!length.empty() && std::strtoull(length.c_str(), nullptr, 10) != buf.size() - he - 4) {
+    error = url + ": the body ended before its Content-Length";
+    return false;
+  }
+  body.assign(buf.begin() + std::ptrdiff_t(he + 4), buf.end());
+  return true;
 }
 
 bool read_mjpeg(const std::string& host, uint16_t port, const std::string& target, size_t parts,

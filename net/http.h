@@ -7,16 +7,17 @@
 #include <string>
 #include <vector>
 
+#include "core/static_path.h"
+
 namespace tessera::http {
 
 // MIME type from the file extension ("application/octet-stream" when unknown).
 const char* mime_type(const std::string& path);
 
-// Maps a request target ("/a/b.js?x=1") to a regular file under root. Rejects (nullopt):
-// targets not starting with '/', bad or NUL percent-encodings, "..", backslashes, hidden
-// segments (".git"), anything resolving outside root (symlinks included), and directories
-// without index.html. A target ending in '/' means its index.html.
-std::optional<std::string> resolve_static(const std::string& root, const std::string& target);
+// resolve_static and target_path: core/static_path.h (the node also reads referenced scene
+// files through them, update/asset_store.h).
+using tessera::resolve_static;
+using tessera::target_path;
 
 // What the node serves of its web root: the web client (src/), the demo pages (demo/), the
 // index page and the three.js build the pages import (node_modules/three/build/); never
@@ -44,8 +45,6 @@ RangeKind parse_range(const std::string& header, uint64_t size, ByteRange& range
 bool valid_token(const std::string& token);
 // The value of `key` in the target's query string ("" when absent).
 std::string query_param(const std::string& target, const std::string& key);
-// The path of a target without query string and fragment.
-std::string target_path(const std::string& target);
 
 // --- Client side (tests, load test) -------------------------------------------------------
 
@@ -71,6 +70,13 @@ std::optional<Response> get(const std::string& host, uint16_t port, const std::s
 std::optional<Response> request(const std::string& host, uint16_t port, const std::string& method,
                                 const std::string& target, const std::string& extra_headers = "",
                                 int timeout_ms = 5000, const ClientTls& tls = {});
+
+// GETs an absolute http(s) URL for the node's references (update/asset_store.h) as HTTP/1.0
+// (no chunked bodies): HTTPS verified against the system's CAs and the URL's host. Anything
+// but a 200 (a redirect included: it could lead anywhere), a body beyond max_bytes, or the
+// timeout fails with why.
+bool fetch_url(const std::string& url, uint64_t max_bytes, std::vector<uint8_t>& body, std::string& error,
+               int timeout_ms = 30000);
 
 // Reads `parts` JPEG parts from a multipart/x-mixed-replace stream (MJPEG), then closes.
 // False and *error on failure or timeout.

@@ -289,6 +289,8 @@ struct Sink : ClientSink {
     open = false;
   }
   std::string token() const override { return tok; }
+  std::string origin;
+  std::string node_origin() const override { return origin; }
 };
 
 // A client that does not read must not grow the node: websocketpp queues every send without
@@ -502,6 +504,8 @@ void Endpoint<Config>::on_open(connection_hdl h) {
   sink->impl = this->shared_from_this();
   sink->hdl = h;
   sink->tok = http::query_param(con->get_resource(), "session");
+  const std::string host = con->get_request_header("Host");
+  if (!host.empty()) sink->origin = std::string(opts.tls() ? "https://" : "http://") + host;
   if (!sink->tok.empty()) tokens.insert(sink->tok);
   uint64_t id = ++next_id;
   auto c = std::make_shared<Conn>();

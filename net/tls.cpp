@@ -66,6 +66,10 @@ CtxPtr client_context(const std::string& ca_file) {
   CtxPtr ctx = new_context(TLS_client_method());
   if (ca_file.empty()) {
     SSL_CTX_set_verify(ctx.get(), SSL_VERIFY_NONE, nullptr);
+  } else if (ca_file == kSystemCas) {
+    if (SSL_CTX_set_default_verify_paths(ctx.get()) != 1)
+      throw std::runtime_error("the system's CA certificates: " + last_error("cannot load"));
+    SSL_CTX_set_verify(ctx.get(), SSL_VERIFY_PEER, nullptr);
   } else {
     if (SSL_CTX_load_verify_locations(ctx.get(), ca_file.c_str(), nullptr) != 1)
       throw std::runtime_error("TLS CA file " + ca_file + ": " + last_error("cannot load"));

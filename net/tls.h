@@ -30,7 +30,9 @@ CtxPtr server_context(const std::string& cert_file, const std::string& key_file)
 // A client context with the same protocol floor. ca_file empty: the peer's certificate is
 // not verified (tests and load tests against a self-signed node); else it must chain to a
 // certificate in ca_file, and the host name is checked by the caller (verify_host).
+// kSystemCas: the system's CA certificates (OpenSSL's default paths, Debian's ca-certificates).
 CtxPtr client_context(const std::string& ca_file);
+inline const std::string kSystemCas = "system";
 
 // Makes a verifying client's handshake also check that the certificate names `host` (a DNS
 // name, or an IP address against the certificate's IP entries). `ssl` is the connection's SSL*.

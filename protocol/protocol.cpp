@@ -67,6 +67,9 @@ const char* to_string(RecordType t) {
     case RecordType::mesh: return "mesh";
     case RecordType::light: return "light";
     case RecordType::render: return "render";
+    case RecordType::buffer_ref: return "buffer_ref";
+    case RecordType::texture_ref: return "texture_ref";
+    case RecordType::reference: return "reference";
     case RecordType::handshake_reply: return "handshake_reply";
     case RecordType::frame: return "frame";
     case RecordType::error: return "error";
@@ -228,6 +231,29 @@ struct ClientEncoder {
       w.bytes(t.encoded.data(), t.encoded.size());
     w.end_record(at);
   }
+  void operator()(const SetBufferRef& b) {
+    size_t at = w.begin_record(RecordType::buffer_ref, Op::set);
+    w.u32(b.id);
+    w.u8(uint8_t(b.type));
+    w.u8(b.components);
+    w.u8(uint8_t(b.source));
+    w.u8(0);
+    w.u32(b.value_count);
+    w.u32(b.byte_stride);
+    w.u64(b.byte_offset);
+    w.bytes(b.url.data(), std::min(b.url.size(), wire::buffer_ref::url_max_length));
+    w.end_record(at);
+  }
+  void operator()(const SetTextureRef& t) {
+    size_t at = w.begin_record(RecordType::texture_ref, Op::set);
+    w.u32(t.id);
+    w.u8(uint8_t(t.sampler.wrap_s));
+    w.u8(uint8_t(t.sampler.wrap_t));
+    w.u8(uint8_t(t.sampler.filter));
+    w.u8(t.srgb ? 1 : 0);
+    w.bytes(t.url.data(), std::min(t.url.size(), wire::texture_ref::url_max_length));
+    w.end_record(at);
+  }
   void operator()(const SetMaterial& s) {
     size_t at = w.begin_record(RecordType::material, Op::set);
     const Material& m = s.material;
@@ -342,6 +368,16 @@ struct ServerEncoder {
     w.u8(0);
     w.u32(e.record);
     w.bytes(e.message.data(), std::min(e.message.size(), wire::error::message_max_length));
+    w.end_record(at);
+  }
+  void operator()(const Reference& f) {
+    size_t at = w.begin_record(RecordType::reference, Op::set);
+    w.u8(uint8_t(f.what));
+    w.u8(f.ok ? 1 : 0);
+    w.u16(0);
+    w.u32(f.id);
+    w.u64(f.bytes);
+    w.bytes(f.message.data(), std::min(f.message.size(), wire::reference::message_max_length));
     w.end_record(at);
   }
   void operator()(const Stats& s) {
@@ -537,15 +573,6 @@ struct Check {
   }
 };
 
-// PNG: signature, then the IHDR chunk holding big-endian width and height.
-bool png_dimensions(const uint8_t* p, size_t n, uint32_t& w, uint32_t& h) {
-  static const uint8_t sig[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
-  if (n < 24 || std::memcmp(p, sig, 8) != 0 || std::memcmp(p + 12, "IHDR", 4) != 0) return false;
-  w = (uint32_t(p[16]) << 24) | (uint32_t(p[17]) << 16) | (uint32_t(p[18]) << 8) | p[19];
-  h = (uint32_t(p[20]) << 24) | (uint32_t(p[21]) << 16) | (uint32_t(p[22]) << 8) | p[23];
-  return true;
-}
-
 // Decodes the client records of one message.
 class ClientDecoder {
  public:
@@ -633,6 +660,8 @@ class ClientDecoder {
       case RecordType::buffer: return buffer(c, r, out);
       case RecordType::texture: return texture(c, r, out);
       case RecordType::material: return material(c, r, out);
+      case RecordType::buffer_ref: return buffer_ref(c, r, out);
+      case RecordType::texture_ref: return texture_ref(c, r, out);
       case RecordType::mesh: {
         if (!c.length(r.left(), wire::mesh::kFixed)) return false;
         SetMesh s;
@@ -807,6 +836,73 @@ class ClientDecoder {
     return true;
   }
 
+  // A reference's URL: the rest of the body, 1..4096 bytes (what it may name is the node's
+  // business: update/asset_store.h).
+  static bool url(Check& c, Reader& r, size_t max_length, std::string& out) {
+    if (r.left() == 0 || r.left() > max_length)
+      return c.fail(ErrorCode::bad_length, "url of " + std::to_string(r.left()) + " bytes (1.." +
+                                               std::to_string(max_length) + ")");
+    out.assign(reinterpret_cast<const char*>(r.rest()), r.left());
+    return true;
+  }
+
+  bool buffer_ref(Check& c, Reader& r, ClientRecord& out) {
+    if (!c.min_length(r.left(), wire::buffer_ref::kFixed)) return false;
+    SetBufferRef s;
+    s.id = r.u32();
+    uint8_t type = r.u8(), comps = r.u8(), source = r.u8(), res = r.u8();
+    s.value_count = r.u32();
+    s.byte_stride = r.u32();
+    s.byte_offset = r.u64();
+    if (!c.id(s.id, "id") || !c.enumeration(type, wire::enum_max::buffer_type, "type") ||
+        !c.enumeration(source, wire::enum_max::source_type, "source") || !c.reserved(res))
+      return false;
+    if (!c.range(comps, wire::buffer_ref::components, "components", ErrorCode::bad_components)) return false;
+    s.type = Buffer::Type(type);
+    s.components = comps;
+    s.source = SourceType(source);
+    if ((s.type == Buffer::Type::f32) != (s.source == SourceType::f32))
+      return c.fail(ErrorCode::bad_enum, std::string("source ") + (s.source == SourceType::f32 ? "f32" : "integer") +
+                                             " does not fit a buffer of type " + (type ? "u32" : "f32"));
+    if (s.value_count % comps)
+      return c.fail(ErrorCode::bad_components, std::to_string(s.value_count) + " values are not a multiple of " +
+                                                   std::to_string(comps) + " components");
+    const uint64_t bytes = uint64_t(s.value_count) * 4;
+    if (bytes > lim_.max_buffer_bytes)
+      return c.fail(ErrorCode::limit_exceeded, "buffer of " + std::to_string(bytes) + " bytes exceeds the limit of " +
+                                                   std::to_string(lim_.max_buffer_bytes));
+    if (s.value_count / comps > lim_.max_vertices)
+      return c.fail(ErrorCode::limit_exceeded, std::to_string(s.value_count / comps) + " elements exceed the limit of " +
+                                                   std::to_string(lim_.max_vertices));
+    if (!c.range(s.byte_stride, wire::buffer_ref::byte_stride, "byte_stride")) return false;
+    const uint32_t size = source_size(s.source);
+    if (s.byte_stride && (s.byte_stride < comps * size || s.byte_stride % size))
+      return c.fail(ErrorCode::out_of_range, "byte_stride " + std::to_string(s.byte_stride) + " does not hold " +
+                                                 std::to_string(comps) + " values of " + std::to_string(size) +
+                                                 " bytes, or is not a multiple of " + std::to_string(size));
+    if (!url(c, r, wire::buffer_ref::url_max_length, s.url)) return false;
+    out = std::move(s);
+    return true;
+  }
+
+  bool texture_ref(Check& c, Reader& r, ClientRecord& out) {
+    if (!c.min_length(r.left(), wire::texture_ref::kFixed)) return false;
+    SetTextureRef s;
+    s.id = r.u32();
+    uint8_t wrap_s = r.u8(), wrap_t = r.u8(), filter = r.u8(), srgb = r.u8();
+    if (!c.id(s.id, "id") || !c.enumeration(wrap_s, wire::enum_max::wrap, "wrap_s") ||
+        !c.enumeration(wrap_t, wire::enum_max::wrap, "wrap_t") || !c.enumeration(filter, wire::enum_max::filter, "filter") ||
+        !c.flag(srgb, "srgb"))
+      return false;
+    s.sampler.wrap_s = Sampler::Wrap(wrap_s);
+    s.sampler.wrap_t = Sampler::Wrap(wrap_t);
+    s.sampler.filter = Sampler::Filter(filter);
+    s.srgb = srgb != 0;
+    if (!url(c, r, wire::texture_ref::url_max_length, s.url)) return false;
+    out = std::move(s);
+    return true;
+  }
+
   bool material(Check& c, Reader& r, ClientRecord& out) {
     if (!c.length(r.left(), wire::material::kFixed)) return false;
     SetMaterial s;
@@ -958,6 +1054,22 @@ bool server_record(Check& c, Reader& r, const Limits& lim, ServerRecord& out) {
       e.fatal = fatal != 0;
       e.message.assign(reinterpret_cast<const char*>(r.rest()), r.left());
       out = std::move(e);
+      return true;
+    }
+    case RecordType::reference: {
+      if (!c.min_length(r.left(), wire::reference::kFixed)) return false;
+      Reference f;
+      uint8_t what = r.u8(), ok = r.u8();
+      uint16_t res = r.u16();
+      f.id = r.u32();
+      f.bytes = r.u64();
+      if (!c.enumeration(what, wire::enum_max::ref_kind, "what") || !c.flag(ok, "ok") || !c.reserved(res) ||
+          !c.id(f.id, "id"))
+        return false;
+      f.what = RefKind(what);
+      f.ok = ok != 0;
+      f.message.assign(reinterpret_cast<const char*>(r.rest()), r.left());
+      out = std::move(f);
       return true;
     }
     case RecordType::stats: {

@@ -174,6 +174,31 @@ struct SetTexture {
   std::vector<uint8_t> encoded;  // PNG/JPEG bytes when format != rgba8 (encode only; decode leaves it empty)
 };
 
+// References (docs/protocol.md, "References"): the node loads the content from `url` itself.
+// A buffer: value_count values of `source` type from byte_offset on, one element (components
+// values) every byte_stride bytes (0: packed), widened to u32 for an integer source.
+struct SetBufferRef {
+  Id id = kNoId;
+  Buffer::Type type = Buffer::Type::f32;
+  uint8_t components = 1;
+  SourceType source = SourceType::f32;
+  uint32_t value_count = 0;
+  uint32_t byte_stride = 0;
+  uint64_t byte_offset = 0;
+  std::string url;
+};
+// Bytes of one value of a reference's source type.
+constexpr uint32_t source_size(SourceType s) {
+  return s == SourceType::u16 ? 2 : s == SourceType::u8 ? 1 : 4;
+}
+// A texture: a PNG or JPEG file, with the sampler and colour space a texture record carries.
+struct SetTextureRef {
+  Id id = kNoId;
+  Sampler sampler;
+  bool srgb = true;
+  std::string url;
+};
+
 struct SetMaterial {
   Id id = kNoId;
   Material material;
@@ -197,7 +222,8 @@ struct RenderRequest {
 };
 
 using ClientRecord = std::variant<Handshake, Settings, Resolution, SetCamera, SetEnvironment, SetBuffer, SetTexture,
-                                  SetMaterial, SetMesh, SetLight, Remove, RenderRequest, Refine, Budget>;
+                                  SetMaterial, SetMesh, SetLight, Remove, RenderRequest, Refine, Budget, SetBufferRef,
+                                  SetTextureRef>;
 
 // ---------------------------------------------------------------------------------------
 // Server -> client records.
@@ -245,7 +271,16 @@ struct Stats {
   float mean_pipeline_ms = 0;   // over the last second
 };
 
-using ServerRecord = std::variant<HandshakeReply, Frame, ErrorReply, Stats>;
+// The node's answer to a buffer_ref or texture_ref: loaded (the id is set) or refused, and why.
+struct Reference {
+  RefKind what = RefKind::buffer;
+  bool ok = false;
+  Id id = kNoId;
+  uint64_t bytes = 0;     // the content's size in the scene; 0 when refused
+  std::string message;    // why it was refused (at most 65535 bytes); empty when ok
+};
+
+using ServerRecord = std::variant<HandshakeReply, Frame, ErrorReply, Stats, Reference>;
 
 // ---------------------------------------------------------------------------------------
 // Encoding (infallible for valid values; values outside the wire's ranges are the caller's bug

@@ -14,6 +14,7 @@
 #include "renderer/rasterizer.h"
 #include "renderer/raytracer.h"
 #include "tests/e2e/node_fixture.h"
+#include "tests/unit/temp_files.h"
 
 using namespace tessera;
 using namespace tessera::test;
@@ -421,4 +422,140 @@ TEST_CASE("Within a frame budget, interactive frames shrink and the still after 
     samples = f->samples;
   }
   CHECK_FALSE(c.next<protocol::Frame>(500));  // converged: nothing more
+}
+
+TEST_CASE("References: the node loads its own /scenes/ files, refuses other origins, and a second session hits its cache",
+          "[e2e][references]") {
+  // A textured quad whose positions, uvs and u16 indices lie in one file and whose texture is
+  // a PNG, under a scenes folder of the node's own.
+  TempDir dir("refs");
+  std::string bin;
+  const float pos[12] = {-1, -1, 0, 1, -1, 0, 1, 1, 0, -1, 1, 0};
+  const float uv[8] = {0, 0, 1, 0, 1, 1, 0, 1};
+  const uint16_t idx[6] = {0, 1, 2, 0, 2, 3};
+  bin.append(reinterpret_cast<const char*>(pos), sizeof pos);
+  bin.append(reinterpret_cast<const char*>(uv), sizeof uv);
+  bin.append(reinterpret_cast<const char*>(idx), sizeof idx);
+  dir.write("quad.bin", bin);
+  Image tex(8, 8);
+  for (int y = 0; y < 8; ++y)
+    for (int x = 0; x < 8; ++x) {
+      uint8_t* p = tex.pixel(x, y);
+      p[0] = uint8_t(x * 32), p[1] = uint8_t(y * 32), p[2] = 128, p[3] = 255;
+    }
+  write_png(dir.path + "/quad.png", tex);
+  TestNode node(8, [&](NodeSettings& s, ServerOptions& o) {
+    o.scenes_root = dir.path;
+    AssetOptions a;
+    a.scenes_root = dir.path;
+    s.assets = std::make_shared<AssetStore>(a);
+  });
+  const std::string base = "http://127.0.0.1:" + std::to_string(node.port()) + "/scenes/";
+
+  using namespace protocol;
+  auto refs = [&](ProtoClient& c, const std::string& tex_url) {
+    SetBufferRef p;
+    p.id = 1, p.components = 3, p.value_count = 12, p.url = base + "quad.bin";
+    SetBufferRef t = p;
+    t.id = 2, t.components = 2, t.value_count = 8, t.byte_offset = sizeof pos;
+    SetBufferRef i;
+    i.id = 3, i.type = Buffer::Type::u32, i.source = SourceType::u16, i.components = 1, i.value_count = 6;
+    i.byte_offset = sizeof pos + sizeof uv, i.url = p.url;
+    SetTextureRef x;
+    x.id = 4, x.srgb = false, x.url = tex_url;
+    return c.send({p, t, i, x});
+  };
+  // The next n reference records (the node answers a message's references in one message).
+  auto answers = [](ProtoClient& c, size_t n) {
+    std::vector<Reference> out;
+    while (out.size() < n) {
+      auto msg = c.ws.receive(int(20000 * time_scale()));
+      if (!msg) break;
+      auto recs = decode_server(msg->data(), msg->size(), c.limits);
+      if (!recs) break;
+      for (auto& r : recs.value())
+        if (auto* x = std::get_if<Reference>(&r)) out.push_back(*x);
+    }
+    return out;
+  };
+  // The rest of the scene, the same for both ways of sending its data.
+  SetMaterial m;
+  m.id = 5;
+  m.material.model = Material::Model::matte;
+  m.material.diffuse_texture = 4;
+  SetMesh mesh;
+  mesh.id = 6;
+  mesh.mesh.positions = 1, mesh.mesh.texcoords = 2, mesh.mesh.indices = 3, mesh.mesh.material = 5;
+  const Camera cam{Mat4::look_at({0, 0, 2.5f}, {0, 0, 0}, {0, 1, 0}), 0.9f};
+  SetEnvironment env;
+  env.environment.ambient = {1, 1, 1};
+
+  // Session A: references, answered in order before anything else.
+  ProtoClient a;
+  REQUIRE(a.connect(node.port()));
+  REQUIRE(a.handshake(DisplayKind::jpeg, 64, 64, 90));
+  REQUIRE(refs(a, base + "quad.png"));
+  const std::vector<Reference> got = answers(a, 4);
+  REQUIRE(got.size() == 4);
+  for (uint32_t id = 1; id <= 4; ++id) {
+    const Reference* r = &got[id - 1];
+    INFO(r->message);
+    CHECK(r->ok);
+    CHECK(r->id == id);
+    CHECK(r->what == (id == 4 ? RefKind::texture : RefKind::buffer));
+  }
+  REQUIRE(a.send({m, mesh, env}));
+  auto fa = a.render(cam, 1);
+  REQUIRE(fa);
+
+  // Session B: the same scene uploaded. Its frame is the same image, byte for byte.
+  ProtoClient b;
+  REQUIRE(b.connect(node.port()));
+  REQUIRE(b.handshake(DisplayKind::jpeg, 64, 64, 90));
+  SetBuffer bp, bt, bi;
+  bp.id = 1, bp.buffer.components = 3, bp.buffer.f.assign(pos, pos + 12);
+  bt.id = 2, bt.buffer.components = 2, bt.buffer.f.assign(uv, uv + 8);
+  bi.id = 3, bi.buffer.type = Buffer::Type::u32, bi.buffer.components = 1, bi.buffer.u.assign(idx, idx + 6);
+  SetTexture bx;
+  bx.id = 4, bx.texture.width = 8, bx.texture.height = 8, bx.texture.rgba = tex.rgba, bx.texture.srgb = false;
+  REQUIRE(b.send({bp, bt, bi, bx, m, mesh, env}));
+  auto fb = b.render(cam, 1);
+  REQUIRE(fb);
+  CHECK(fa->payload == fb->payload);
+  Image img;
+  std::string err;
+  REQUIRE(jpeg_decode(fa->payload.data(), fa->payload.size(), img, err));
+  CHECK(int(img.pixel(32, 32)[2]) > 60);  // the texture's blue, not the background's black
+
+  // Session C: the texture again (a cache hit), and references the node refuses, each with its
+  // reason; the session goes on.
+  ProtoClient c;
+  REQUIRE(c.connect(node.port()));
+  REQUIRE(c.handshake(DisplayKind::jpeg, 64, 64, 90));
+  REQUIRE(refs(c, base + "quad.png"));
+  for (const Reference& r : answers(c, 4)) CHECK(r.ok);
+  SetTextureRef foreign;
+  foreign.id = 7, foreign.url = "http://evil.example/x.png";
+  SetTextureRef outside = foreign;
+  outside.id = 8, outside.url = "http://127.0.0.1:" + std::to_string(node.port()) + "/scenes/../etc/passwd";
+  SetBufferRef past;
+  past.id = 9, past.components = 1, past.value_count = 100, past.url = base + "quad.bin";
+  REQUIRE(c.send({foreign, outside, past}));
+  const std::vector<Reference> refused = answers(c, 3);
+  REQUIRE(refused.size() == 3);
+  const Reference *r7 = &refused[0], *r8 = &refused[1], *r9 = &refused[2];
+  CHECK_FALSE(r7->ok);
+  CHECK(r7->message.find("http://evil.example is neither this node's origin") != std::string::npos);
+  CHECK(r7->message.find("tessera.asset-origins") != std::string::npos);
+  CHECK_FALSE(r8->ok);
+  CHECK(r8->message.find("no file of this node's /scenes/") != std::string::npos);
+  CHECK_FALSE(r9->ok);
+  CHECK(r9->message.find("the file holds 92 bytes") != std::string::npos);
+  REQUIRE(c.send({m, mesh, env}));
+  auto fc = c.render(cam, 1);
+  REQUIRE(fc);
+  CHECK(fc->payload == fa->payload);
+  CHECK(node.settings->assets->stats().hits == 1);
+  CHECK(node.settings->assets->stats().misses == 1);
+  CHECK(node.count(Ev::references, [](const Event& e) { return has(e, "first_refusal", "evil.example"); }) == 1);
 }

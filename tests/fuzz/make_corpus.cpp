@@ -173,6 +173,20 @@ void protocol_corpus() {
   put("protocol", "server_frame_refined", encode(ServerRecord{frame}));
   put("protocol", "server_error", encode(ServerRecord{ErrorReply{ErrorCode::bad_mesh, false, 2, "mesh 8: bad"}}));
   put("protocol", "server_stats", encode(ServerRecord{Stats{}}));
+  SetBufferRef bref;
+  bref.id = 20;
+  bref.type = Buffer::Type::u32;
+  bref.source = SourceType::u16;
+  bref.value_count = 6;
+  bref.byte_stride = 2;
+  bref.byte_offset = 96;
+  bref.url = "http://127.0.0.1:8080/scenes/quad/quad.bin";
+  SetTextureRef tref;
+  tref.id = 21;
+  tref.url = "http://127.0.0.1:8080/scenes/quad/quad.png";
+  put("protocol", "refs", encode(std::vector<ClientRecord>{bref, tref}));
+  put("protocol", "server_reference",
+      encode(ServerRecord{Reference{RefKind::texture, false, 21, 0, "http://x is not in tessera.asset-origins"}}));
 }
 
 // --- glTF ----------------------------------------------------------------------------------

@@ -194,6 +194,18 @@ struct ClientJs {
   std::string operator()(const RenderRequest& r) { return Obj{}.f("type", q("render")).f("frame", num(r.frame)).str(); }
   std::string operator()(const Refine& r) { return Obj{}.f("type", q("refine")).f("samples", num(r.samples)).str(); }
   std::string operator()(const Budget& b) { return Obj{}.f("type", q("budget")).f("frameMs", num(b.frame_ms)).str(); }
+  std::string operator()(const SetBufferRef& b) {
+    static const char* sources[] = {"f32", "u32", "u16", "u8"};
+    return Obj{}.f("type", q("buffer_ref")).f("id", num(b.id)).f("bufferType", q(b.type == Buffer::Type::f32 ? "f32" : "u32"))
+        .f("components", num(uint32_t(b.components))).f("source", q(sources[int(b.source)]))
+        .f("values", num(b.value_count)).f("byteStride", num(b.byte_stride)).f("byteOffset", num(b.byte_offset))
+        .f("url", str(b.url)).str();
+  }
+  std::string operator()(const SetTextureRef& t) {
+    return Obj{}.f("type", q("texture_ref")).f("id", num(t.id)).f("wrapS", q(name(t.sampler.wrap_s)))
+        .f("wrapT", q(name(t.sampler.wrap_t))).f("filter", q(name(t.sampler.filter))).f("srgb", boolean(t.srgb))
+        .f("url", str(t.url)).str();
+  }
 };
 
 struct ServerJs {
@@ -216,6 +228,10 @@ struct ServerJs {
   std::string operator()(const ErrorReply& e) {
     return Obj{}.f("type", q("error")).f("code", num(uint32_t(e.code))).f("fatal", boolean(e.fatal))
         .f("record", num(e.record)).f("message", str(e.message)).str();
+  }
+  std::string operator()(const Reference& r) {
+    return Obj{}.f("type", q("reference")).f("what", q(r.what == RefKind::buffer ? "buffer" : "texture"))
+        .f("ok", boolean(r.ok)).f("id", num(r.id)).f("bytes", num(r.bytes)).f("message", str(r.message)).str();
   }
   std::string operator()(const Stats& s) {
     return Obj{}.f("type", q("stats")).f("frames", num(s.frames)).f("dropped", num(s.dropped))
@@ -421,6 +437,37 @@ SetLight light(Light::Type type) {
   l.on = true;
   return s;
 }
+SetBufferRef buffer_ref() {
+  SetBufferRef b;
+  b.id = 13;
+  b.type = Buffer::Type::f32;
+  b.components = 3;
+  b.source = SourceType::f32;
+  b.value_count = 300;
+  b.byte_stride = 24;
+  b.byte_offset = 5000000000ull;
+  b.url = "http://127.0.0.1:8080/scenes/kitchen/scene_0.bin";
+  return b;
+}
+SetTextureRef texture_ref() {
+  SetTextureRef t;
+  t.id = 14;
+  t.sampler.wrap_s = Sampler::Wrap::clamp;
+  t.sampler.wrap_t = Sampler::Wrap::repeat;
+  t.sampler.filter = Sampler::Filter::nearest;
+  t.srgb = false;
+  t.url = "https://assets.example/textures/a%20b.png?v=2";
+  return t;
+}
+Reference reference() {
+  Reference r;
+  r.what = RefKind::texture;
+  r.ok = false;
+  r.id = 14;
+  r.bytes = 0;
+  r.message = "https://assets.example is not in tessera.asset-origins";
+  return r;
+}
 HandshakeReply handshake_reply() {
   HandshakeReply r;
   r.renderer = RendererKind::rasterizer;
@@ -568,10 +615,26 @@ void valid_messages() {
   client("render requests", {RenderRequest{0}, RenderRequest{42}, RenderRequest{kMaxU32}});
   client("refine: off, one sample, a target, the limit", {Refine{0}, Refine{1}, Refine{64}, Refine{Limits{}.max_refine_samples}});
   client("budget: off, 1 ms, 33 ms, the limit", {Budget{0}, Budget{1}, Budget{33}, Budget{Limits{}.max_frame_budget_ms}});
+  {
+    SetBufferRef packed = buffer_ref(), u16 = buffer_ref(), u8 = buffer_ref(), u32 = buffer_ref();
+    packed.byte_stride = 0, packed.byte_offset = 0, packed.components = 4, packed.value_count = 0;
+    packed.url = std::string(wire::buffer_ref::url_max_length, 'u');
+    u16.type = Buffer::Type::u32, u16.source = SourceType::u16, u16.components = 1, u16.byte_stride = 2;
+    u16.id = kMaxU32, u16.byte_offset = kMaxU64;
+    u8.type = Buffer::Type::u32, u8.source = SourceType::u8, u8.components = 2, u8.byte_stride = 252;
+    u8.url = "http://h/\xc3\xa9.bin";
+    u32.type = Buffer::Type::u32, u32.source = SourceType::u32, u32.components = 1, u32.byte_stride = 0;
+    u32.value_count = Limits{}.max_vertices;
+    client("buffer references: every source, stride and offset at both ends, the longest url", {buffer_ref(), packed, u16, u8, u32});
+    SetTextureRef srgb = texture_ref();
+    srgb.srgb = true, srgb.sampler.filter = Sampler::Filter::linear, srgb.sampler.wrap_s = Sampler::Wrap::repeat;
+    srgb.id = kMaxU32, srgb.url = "x";
+    client("texture references: every sampler field", {texture_ref(), srgb});
+  }
   client("every client record in one message",
          {Settings{16, 5}, Refine{32}, Budget{33}, Resolution{640, 360}, camera(), environment(),
           f32_buffer(7, {0, 0, 0, 1, 0, 0, 0, 1, 0}, 3), u32_buffer(8, {0, 1, 2}, 1), rgba_texture(9, 1, 2), material(),
-          mesh(), light(Light::Type::spot), Remove{RecordType::mesh, 5}, RenderRequest{42}});
+          mesh(), light(Light::Type::spot), Remove{RecordType::mesh, 5}, RenderRequest{42}, buffer_ref(), texture_ref()});
 
   // Server channel.
   server("handshake reply", {handshake_reply()});
@@ -630,8 +693,15 @@ void valid_messages() {
     top.fps = kNaN, top.mean_pipeline_ms = kInf;
     server("stats: zero, largest and non-finite values", {stats(), zero, top});
   }
+  {
+    Reference loaded = reference(), cut = reference();
+    loaded.what = RefKind::buffer, loaded.ok = true, loaded.id = kMaxU32, loaded.bytes = kMaxU64, loaded.message.clear();
+    server("references: refused and loaded", {reference(), loaded});
+    cut.message = std::string(wire::reference::message_max_length + 10, 'r');
+    server("reference: a message beyond 65535 bytes is cut", {cut}, true);
+  }
   server("every server record in one message",
-         {handshake_reply(), frame(FrameEncoding::dxt1, 4, 4), error_reply(), stats()});
+         {handshake_reply(), frame(FrameEncoding::dxt1, 4, 4), error_reply(), stats(), reference()});
 }
 
 // ---------------------------------------------------------------------------------------
@@ -689,6 +759,7 @@ void framing(Channel ch, const Bytes& good) {
   b("bad magic", put<uint8_t>(good, 0, 'X'), ErrorCode::bad_magic);
   b("bad magic, second byte", put<uint8_t>(good, 1, 's'), ErrorCode::bad_magic);
   b("version 1 (before vertex colours)", put<uint8_t>(good, 2, 1), ErrorCode::bad_version);
+  b("version 2 (before references)", put<uint8_t>(good, 2, 2), ErrorCode::bad_version);
   b("the next version", put<uint8_t>(good, 2, kVersion + 1), ErrorCode::bad_version);
   b("version 0", put<uint8_t>(good, 2, 0), ErrorCode::bad_version);
   b("the other channel", put<uint8_t>(good, 3, ch == Channel::client ? 1 : 0), ErrorCode::bad_channel);
@@ -993,6 +1064,46 @@ void client_records() {
     bad_client("light: spot with cutoff 0", one(spot), ErrorCode::out_of_range);
     bad_client("light: point with no attenuation", one(flat), ErrorCode::out_of_range);
   }
+  // References.
+  {
+    const Bytes b = one(buffer_ref());
+    using namespace wire::buffer_ref;
+    bad_client("buffer_ref: body shorter than its fixed part", body_length(b, kFixed - 1), ErrorCode::bad_length);
+    bad_client("buffer_ref: no url", body_length(b, kFixed), ErrorCode::bad_length);
+    {
+      SetBufferRef big = buffer_ref();
+      big.url = std::string(url_max_length, 'u');
+      bad_client("buffer_ref: url of 4097 bytes", body_length(one(big), kFixed + url_max_length + 1), ErrorCode::bad_length);
+    }
+    bad_client("buffer_ref: id 0", put<uint32_t>(b, kB + at::id, 0), ErrorCode::bad_id);
+    bad_client("buffer_ref: type 2", put<uint8_t>(b, kB + at::type, 2), ErrorCode::bad_enum);
+    bad_client("buffer_ref: source 4", put<uint8_t>(b, kB + at::source, 4), ErrorCode::bad_enum);
+    bad_client("buffer_ref: an integer source for a f32 buffer", put<uint8_t>(b, kB + at::source, 2), ErrorCode::bad_enum);
+    bad_client("buffer_ref: a f32 source for a u32 buffer", put<uint8_t>(b, kB + at::type, 1), ErrorCode::bad_enum);
+    bad_client("buffer_ref: reserved", put<uint8_t>(b, kB + at::reserved, 1), ErrorCode::bad_reserved);
+    bad_client("buffer_ref: components 0", put<uint8_t>(b, kB + at::components, 0), ErrorCode::bad_components);
+    bad_client("buffer_ref: components 5", put<uint8_t>(b, kB + at::components, 5), ErrorCode::bad_components);
+    bad_client("buffer_ref: values not a multiple of components", put<uint32_t>(b, kB + at::value_count, 301),
+               ErrorCode::bad_components);
+    bad_client("buffer_ref: beyond max_buffer_bytes", put<uint32_t>(b, kB + at::value_count, 3000),
+               ErrorCode::limit_exceeded, [] { Limits l; l.max_buffer_bytes = 11996; return l; }());
+    bad_client("buffer_ref: beyond max_vertices", b, ErrorCode::limit_exceeded, [] { Limits l; l.max_vertices = 99; return l; }());
+    bad_client("buffer_ref: stride 253", put<uint32_t>(b, kB + at::byte_stride, 253), ErrorCode::out_of_range);
+    bad_client("buffer_ref: stride shorter than an element", put<uint32_t>(b, kB + at::byte_stride, 8), ErrorCode::out_of_range);
+    bad_client("buffer_ref: stride not a multiple of the source's size", put<uint32_t>(b, kB + at::byte_stride, 14),
+               ErrorCode::out_of_range);
+    bad_client("buffer_ref: op remove", put<uint8_t>(b, 9, 1), ErrorCode::bad_op);
+    const Bytes t = one(texture_ref());
+    bad_client("texture_ref: body shorter than its fixed part", body_length(t, wire::texture_ref::kFixed - 1),
+               ErrorCode::bad_length);
+    bad_client("texture_ref: no url", body_length(t, wire::texture_ref::kFixed), ErrorCode::bad_length);
+    bad_client("texture_ref: id 0", put<uint32_t>(t, kB + wire::texture_ref::at::id, 0), ErrorCode::bad_id);
+    bad_client("texture_ref: wrap_s 2", put<uint8_t>(t, kB + wire::texture_ref::at::wrap_s, 2), ErrorCode::bad_enum);
+    bad_client("texture_ref: wrap_t 2", put<uint8_t>(t, kB + wire::texture_ref::at::wrap_t, 2), ErrorCode::bad_enum);
+    bad_client("texture_ref: filter 2", put<uint8_t>(t, kB + wire::texture_ref::at::filter, 2), ErrorCode::bad_enum);
+    bad_client("texture_ref: srgb 2", put<uint8_t>(t, kB + wire::texture_ref::at::srgb, 2), ErrorCode::bad_enum);
+    bad_client("texture_ref: op remove", put<uint8_t>(t, 9, 1), ErrorCode::bad_op);
+  }
   // A failure names its record: the third record of a message.
   const size_t third = kMessageHeaderSize + (kRecordHeaderSize + wire::settings::kFixed) +
                        (kRecordHeaderSize + wire::render::kFixed) + kRecordHeaderSize;
@@ -1047,6 +1158,15 @@ void server_records() {
     bad_server("error: code 0xffff", put<uint16_t>(e, kB + at::code, 0xffff), ErrorCode::bad_enum);
     bad_server("error: fatal 2", put<uint8_t>(e, kB + at::fatal, 2), ErrorCode::bad_enum);
     bad_server("error: reserved", put<uint8_t>(e, kB + at::reserved, 1), ErrorCode::bad_reserved);
+  }
+  {
+    const Bytes r = one(reference());
+    using namespace wire::reference;
+    bad_server("reference: body shorter than its fixed part", body_length(r, kFixed - 1), ErrorCode::bad_length);
+    bad_server("reference: what 2", put<uint8_t>(r, kB + at::what, 2), ErrorCode::bad_enum);
+    bad_server("reference: ok 2", put<uint8_t>(r, kB + at::ok, 2), ErrorCode::bad_enum);
+    bad_server("reference: reserved", put<uint16_t>(r, kB + at::reserved, 1), ErrorCode::bad_reserved);
+    bad_server("reference: id 0", put<uint32_t>(r, kB + at::id, 0), ErrorCode::bad_id);
   }
   {
     const Bytes s = one(stats());

@@ -18,7 +18,7 @@ if (view && view.dataset.eye) {
 
 const params = new URLSearchParams(location.search);
 const defaultServer = params.get('server') || `${location.hostname}:${location.port || 80}`;
-for (const a of ['display', 'ao-samples', 'max-depth', 'refine-samples', 'frame-budget']) if (params.has(a)) xml3d.setAttribute(a, params.get(a));
+for (const a of ['display', 'ao-samples', 'max-depth', 'refine-samples', 'frame-budget', 'references']) if (params.has(a)) xml3d.setAttribute(a, params.get(a));
 if (params.get('server')) xml3d.setAttribute('server', params.get('server'));
 
 // The switch: toggling the server attribute makes xml3d.js rebuild the backend.

@@ -4,8 +4,13 @@
 // 1. page load -> first server frame, and -> `load` (every resource uploaded, a frame drawn),
 //    for each shared scene page (/demo/pavilion.html, kitchen.html, living-room.html);
 // 2. bytes uploaded over the WebSocket with and without deflate (CompressionStream removed);
+//    1 and 2 with `references=off`: everything uploaded;
 // 3. input-to-frame latency: a synthesised mouse drag step (examine camera) -> the first frame
-//    whose render request followed the camera record that the step produced.
+//    whose render request followed the camera record that the step produced;
+// 4. references (docs/protocol.md "References"): connecting -> the first frame of the whole
+//    scene for a first visitor (the node loads the files, its texture cache cold), a second
+//    visitor (another fresh browser profile: the node's cache warm) and a visitor that uploads
+//    everything (`references=off`), on a fresh node per repeat (--ref-pages, default the three).
 // Uses playwright-core with /usr/bin/chromium (headless, software GL) and a fresh `tessera serve`.
 import fs from 'node:fs';
 import os from 'node:os';
@@ -20,8 +25,9 @@ const opt = (name, def) => { const i = argv.indexOf(name); return i >= 0 ? argv[
 const BIN = opt('--tessera');
 const REPEAT = Number(opt('--repeat', 3)), STEPS = Number(opt('--steps', 15)), THREADS = Number(opt('--threads', 2));
 const CHROMIUM = process.env.CHROMIUM || '/usr/bin/chromium';
-const PAGES = (opt('--pages', 'pavilion,kitchen,living-room')).split(',');
-const LATENCY_PAGES = (opt('--latency-pages', 'basic,pavilion')).split(',');
+const PAGES = (opt('--pages', 'pavilion,kitchen,living-room')).split(',').filter(Boolean);
+const LATENCY_PAGES = (opt('--latency-pages', 'basic,pavilion')).split(',').filter(Boolean);
+const REF_PAGES = (opt('--ref-pages', 'kitchen,pavilion,living-room')).split(',').filter(Boolean);
 const MARKDOWN = argv.includes('--markdown');
 if (!BIN || !fs.existsSync(BIN)) { console.error('usage: node web/tools/web-figures.js --tessera PATH/TO/tessera [--repeat N] [--steps N] [--markdown]'); process.exit(2); }
 if (!fs.existsSync(CHROMIUM)) { console.error(`${CHROMIUM} not found`); process.exit(2); }
@@ -32,7 +38,7 @@ const pct = (a, p) => { const s = [...a].sort((x, y) => x - y); return s.length 
 
 // In the page before anything else: frame, load and input times, and every protocol message sent.
 function instrument(noDeflate) {
-  window.__drawn = []; window.__sends = []; window.__inputs = []; window.__load = null;
+  window.__drawn = []; window.__sends = []; window.__inputs = []; window.__load = null; window.__connected = null;
   if (noDeflate) { delete window.CompressionStream; }
   document.addEventListener('framedrawn', (e) => window.__drawn.push({ t: performance.now(), frame: e.detail.frame,
     rendering: e.detail.timings && e.detail.timings.rendering, pipeline: e.detail.timings && e.detail.timings.pipeline }), true);
@@ -45,10 +51,11 @@ function instrument(noDeflate) {
     let camera = false, render = null, scene = false, o = 8;
     for (let i = 0, n = dv.getUint32(4, true); i < n && o + 8 <= b.length; i++) {
       if (b[o] === 0x04) camera = true;
-      if (b[o] >= 0x10 && b[o] <= 0x14) scene = true;
+      if (b[o] >= 0x10 && b[o] <= 0x16) scene = true;  // buffer .. light, buffer_ref, texture_ref
       if (b[o] === 0x20) render = dv.getUint32(o + 8, true);
       o += 8 + dv.getUint32(o + 4, true);
     }
+    if (window.__connected === null) window.__connected = performance.now();  // the handshake, sent on open
     window.__sends.push({ t: performance.now(), camera, render, scene, bytes: b.length });
     return send.call(this, data);
   };
@@ -63,11 +70,11 @@ async function newContext() {
 }
 
 // Loads a demo page in server mode; resolves the timings and the upload byte breakdown.
-async function loadPage(node, name, { noDeflate = false, display = 'jpeg' } = {}) {
+async function loadPage(node, name, { noDeflate = false, display = 'jpeg', query = '' } = {}) {
   const { context, close } = await newContext();
   const page = await context.newPage();
   await page.addInitScript(instrument, noDeflate);
-  const up = { messages: 0, wire: 0, bufferRaw: 0, bufferWire: 0, buffersDeflated: 0, buffers: 0, texture: 0 };
+  const up = { messages: 0, wire: 0, bufferRaw: 0, bufferWire: 0, buffersDeflated: 0, buffers: 0, texture: 0, refs: 0 };
   let lastSend = Date.now();
   page.on('websocket', (ws) => ws.on('framesent', (f) => {
     const bytes = typeof f.payload === 'string' ? Buffer.from(f.payload) : f.payload;
@@ -75,9 +82,10 @@ async function loadPage(node, name, { noDeflate = false, display = 'jpeg' } = {}
     for (const r of decodeClient(new Uint8Array(bytes.buffer, bytes.byteOffset, bytes.length))) {
       if (r.type === 'buffer') { up.buffers++; up.bufferRaw += r.values * 4; up.bufferWire += r.payload.length; if (r.deflate) up.buffersDeflated++; }
       if (r.type === 'texture') up.texture += r.bytes.length;
+      if (r.type === 'buffer_ref' || r.type === 'texture_ref') up.refs++;
     }
   }));
-  await page.goto(`${node.base}/demo/${name}.html?server=${node.host}:${node.port}&display=${display}`);
+  await page.goto(`${node.base}/demo/${name}.html?server=${node.host}:${node.port}&display=${display}${query}`);
   await page.waitForFunction(() => window.__load !== null, null, { timeout: 180000, polling: 100 });
   while (Date.now() - lastSend < 1500) await new Promise((r) => setTimeout(r, 250));  // upload finished
   await page.waitForFunction(() => {  // the first frame requested after the last scene upload is on screen
@@ -88,7 +96,7 @@ async function loadPage(node, name, { noDeflate = false, display = 'jpeg' } = {}
     return !!d;
   }, null, { timeout: 180000, polling: 100 });
   const t = await page.evaluate(() => ({ first: window.__drawn.length ? window.__drawn[0].t : null, load: window.__load, complete: window.__complete,
-    nav: performance.getEntriesByType('navigation')[0].domContentLoadedEventEnd, frames: window.__drawn.length }));
+    nav: performance.getEntriesByType('navigation')[0].domContentLoadedEventEnd, frames: window.__drawn.length, connected: window.__connected }));
   return { page, close, t, up };
 }
 
@@ -132,7 +140,8 @@ try {
   for (const name of PAGES) {
     for (const noDeflate of [false, true]) {
       for (let k = 0; k < (noDeflate ? 1 : REPEAT); k++) {
-        const { close, t, up } = await loadPage(node, name, { noDeflate });
+        // Sections 1 and 2 measure uploads: the page sends no references (section 4 does).
+        const { close, t, up } = await loadPage(node, name, { noDeflate, query: '&references=off' });
         await close();
         const rec = { page: `/demo/${name}.html`, deflate: !noDeflate, run: k, first_frame_ms: +(t.first ?? NaN).toFixed(0),
           load_ms: +t.load.toFixed(0), complete_frame_ms: +t.complete.toFixed(0), dom_ready_ms: +t.nav.toFixed(0), frames_until_load: t.frames, upload: up };
@@ -151,6 +160,24 @@ try {
   }
 } finally {
   await node.close();
+}
+for (let k = 0; k < (REF_PAGES.length ? REPEAT : 0); k++) {
+  const fresh = await startNode(BIN, { threads: THREADS });  // its texture cache cold
+  try {
+    for (const name of REF_PAGES) {
+      for (const visitor of ['first', 'second', 'upload']) {
+        const { close, t, up } = await loadPage(fresh, name, { query: visitor === 'upload' ? '&references=off' : '' });
+        await close();
+        const rec = { references: `/demo/${name}.html`, visitor, run: k, connected_ms: +t.connected.toFixed(0),
+          complete_frame_ms: +t.complete.toFixed(0), connect_to_complete_ms: +(t.complete - t.connected).toFixed(0),
+          refs: up.refs, wire_mb: +(up.wire / 1048576).toFixed(2) };
+        emit(rec);
+        ((rows.refs ||= {})[`${name} ${visitor}`] ||= []).push(rec);
+      }
+    }
+  } finally {
+    await fresh.close();
+  }
 }
 const chromiumVersion = execFileSync(CHROMIUM, ['--version'], { stdio: ['ignore', 'pipe', 'ignore'] }).toString().trim();
 const summary = { summary: true, cpu: os.cpus()[0].model, cores: os.cpus().length, loadavg: os.loadavg().map((v) => +v.toFixed(2)),
@@ -172,5 +199,10 @@ if (MARKDOWN) {
   for (const [key, { out, size }] of Object.entries(rows.latency)) {
     const col = (k) => `${median(out.map((o) => o[k])).toFixed(1)} (${pct(out.map((o) => o[k]), 0.1).toFixed(1)}–${pct(out.map((o) => o[k]), 0.9).toFixed(1)})`;
     console.log(`| ${key} | ${size[0]}x${size[1]}, ${size[2] ?? 0} | ${col('total')} | ${col('toSend')} | ${col('sendToFrame')} | ${median(out.map((o) => o.rendering)).toFixed(1)} |`);
+  }
+  console.log('\n| page | visitor | connected → first frame of the whole scene, ms | page load → that frame, ms | references sent | WebSocket bytes sent, MB |\n| --- | --- | --- | --- | --- | --- |');
+  for (const [key, recs] of Object.entries(rows.refs || {})) {
+    const [name, visitor] = key.split(' ');
+    console.log(`| /demo/${name}.html | ${visitor} | ${ms(recs.map((r) => r.connect_to_complete_ms))} | ${ms(recs.map((r) => r.complete_frame_ms))} | ${median(recs.map((r) => r.refs))} | ${median(recs.map((r) => r.wire_mb)).toFixed(2)} |`);
   }
 }

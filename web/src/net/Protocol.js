@@ -18,12 +18,12 @@
 import {
   VERSION, MAGIC, MESSAGE_HEADER, RECORD_HEADER, NO_RECORD, REMOVE_BODY, LIMITS, ENUMS, FLAGS, RECORDS, RANGES,
   RecordType, Renderer, Display, FrameEncoding, TextureFormat, BufferType, Wrap, Filter, MaterialModel, LightType,
-  ErrorCode, MAX_ERROR_CODE, MESH_TRANSFORM, CAMERA_TRANSFORM, WORLD_LIMIT, UNIT_TOLERANCE,
+  SourceType, RefKind, ErrorCode, MAX_ERROR_CODE, MESH_TRANSFORM, CAMERA_TRANSFORM, WORLD_LIMIT, UNIT_TOLERANCE,
 } from './Wire.js';
 
 export {
   VERSION, MAGIC, MESSAGE_HEADER, RECORD_HEADER, NO_RECORD, LIMITS, RECORDS, RecordType, Renderer, Display,
-  FrameEncoding, TextureFormat, BufferType, Wrap, Filter, MaterialModel, LightType, ErrorCode,
+  FrameEncoding, TextureFormat, BufferType, Wrap, Filter, MaterialModel, LightType, SourceType, RefKind, ErrorCode,
 };
 
 export const Channel = Object.freeze(Object.fromEntries(ENUMS.channel.map((n, i) => [n, i])));
@@ -81,6 +81,8 @@ function header(w, channel, count) {
 // UTF-8 of `s`, cut to the field's longest encoding (as the C++ encoder cuts it).
 const utf8 = (s, max) => new TextEncoder().encode(s ?? '').slice(0, max);
 const maxLength = (record, field) => RECORDS[record].fields.find((f) => f.name === field).maxLength;
+// Bytes of one value of a buffer reference's source type (protocol.h source_size).
+export const sourceSize = (s) => (s === 'u16' ? 2 : s === 'u8' ? 1 : 4);
 
 function encodeClientRecord(w, r) {
   let at;
@@ -143,6 +145,18 @@ function encodeClientRecord(w, r) {
       w.vec3(r.color); w.f32(r.intensity ?? 1); w.vec3(r.position); w.vec3(r.direction); w.vec3(r.attenuation);
       w.f32(r.cutoff); w.f32(r.softness);
       break;
+    case 'buffer_ref':
+      at = w.begin(RecordType.buffer_ref);
+      w.u32(r.id); w.u8(index(BufferType, r.bufferType, 'buffer type')); w.u8(r.components);
+      w.u8(index(SourceType, r.source, 'source')); w.u8(0); w.u32(r.values); w.u32(r.byteStride ?? 0);
+      w.u64(r.byteOffset ?? 0); w.bytes(utf8(r.url, maxLength('buffer_ref', 'url')));
+      break;
+    case 'texture_ref':
+      at = w.begin(RecordType.texture_ref);
+      w.u32(r.id); w.u8(index(Wrap, r.wrapS ?? 'repeat', 'wrap')); w.u8(index(Wrap, r.wrapT ?? 'repeat', 'wrap'));
+      w.u8(index(Filter, r.filter ?? 'linear', 'filter')); w.u8(r.srgb ? 1 : 0);
+      w.bytes(utf8(r.url, maxLength('texture_ref', 'url')));
+      break;
     case 'remove':
       at = w.begin(RecordType[r.what], Op.remove); w.u32(r.id); break;
     case 'render':
@@ -177,6 +191,11 @@ function encodeServerRecord(w, r) {
       w.u16(typeof r.code === 'number' ? r.code : index(ErrorCode, r.code, 'error code')); w.u8(r.fatal ? 1 : 0); w.u8(0);
       w.u32(r.record ?? NO_RECORD); w.bytes(utf8(r.message, maxLength('error', 'message')));
       break;
+    case 'reference':
+      at = w.begin(RecordType.reference);
+      w.u8(index(RefKind, r.what, 'reference kind')); w.u8(r.ok ? 1 : 0); w.u16(0); w.u32(r.id); w.u64(r.bytes ?? 0);
+      w.bytes(utf8(r.message, maxLength('reference', 'message')));
+      break;
     case 'stats':
       at = w.begin(RecordType.stats);
       w.u32(r.frames ?? 0); w.u32(r.dropped ?? 0); w.u64(r.bytesSent ?? 0); w.u64(r.sceneBytes ?? 0);
@@ -208,6 +227,7 @@ export function clientRecordSize(r) {
   if (!spec || spec.channel !== 'client') throw new ProtocolError(`unknown client record type ${r.type}`);
   if (r.type === 'buffer') return RECORD_HEADER + spec.fixed + (r.deflated ? r.deflated.length : r.data.byteLength);
   if (r.type === 'texture') return RECORD_HEADER + spec.fixed + r.bytes.byteLength;
+  if (r.type === 'buffer_ref' || r.type === 'texture_ref') return RECORD_HEADER + spec.fixed + utf8(r.url, maxLength(r.type, 'url')).length;
   return RECORD_HEADER + spec.fixed;
 }
 
@@ -310,6 +330,13 @@ class Check {
   }
   resolution(w, h) { this.size(w, h, 'max_width', 'max_height'); }
   transform(m, field, lim) { const why = transformProblem(m, lim); if (why) this.fail('out_of_range', `${field}: ${why}`); }
+  // A reference's URL: the rest of the body, 1..max_length bytes (which URLs a node loads is
+  // its own business).
+  url(r) {
+    const max = RECORDS[this.name].fields.find((x) => x.name === 'url').maxLength;
+    if (r.left() === 0 || r.left() > max) this.fail('bad_length', `url of ${r.left()} bytes (1..${max})`);
+    return new TextDecoder().decode(r.rest());
+  }
 }
 
 // PNG: the signature, then IHDR with the big-endian width and height.
@@ -456,6 +483,33 @@ function decodeClientRecord(c, op, r, state) {
       }
       return rec;
     }
+    case 'buffer_ref': {
+      c.minLength(r.left(), spec.fixed);
+      const id = r.u32(), type = r.u8(), components = r.u8(), src = r.u8(), res = r.u8();
+      const values = r.u32(), byteStride = r.u32(), byteOffset = r.u64();
+      c.id(id, 'id');
+      const bufferType = c.enumeration(type, 'type'), source = c.enumeration(src, 'source');
+      c.reserved(res);
+      c.range(components, 'components');
+      if ((bufferType === 'f32') !== (source === 'f32'))
+        c.fail('bad_enum', `source ${source === 'f32' ? 'f32' : 'integer'} does not fit a buffer of type ${bufferType}`);
+      if (values % components) c.fail('bad_components', `${values} values are not a multiple of ${components} components`);
+      const bytes = values * 4;
+      if (bytes > lim.max_buffer_bytes) c.fail('limit_exceeded', `buffer of ${bytes} bytes exceeds the limit of ${lim.max_buffer_bytes}`);
+      if (Math.floor(values / components) > lim.max_vertices) c.fail('limit_exceeded', `${Math.floor(values / components)} elements exceed the limit of ${lim.max_vertices}`);
+      c.range(byteStride, 'byte_stride');
+      const size = sourceSize(source);
+      if (byteStride && (byteStride < components * size || byteStride % size))
+        c.fail('out_of_range', `byte_stride ${byteStride} does not hold ${components} values of ${size} bytes, or is not a multiple of ${size}`);
+      return { type: name, id, bufferType, components, source, values, byteStride, byteOffset, url: c.url(r) };
+    }
+    case 'texture_ref': {
+      c.minLength(r.left(), spec.fixed);
+      const id = r.u32(), wrapS = r.u8(), wrapT = r.u8(), filter = r.u8(), srgb = r.u8();
+      c.id(id, 'id');
+      return { type: name, id, wrapS: c.enumeration(wrapS, 'wrap_s'), wrapT: c.enumeration(wrapT, 'wrap_t'),
+        filter: c.enumeration(filter, 'filter'), srgb: c.flag(srgb, 'srgb'), url: c.url(r) };
+    }
     case 'material': {
       c.length(r.left(), spec.fixed);
       const id = r.u32(), model = r.u8(), flags = r.u8(), res = r.u16();
@@ -553,6 +607,15 @@ function decodeServerRecord(c, op, r) {
       if (code > MAX_ERROR_CODE) c.fail('bad_enum', `error code ${code}`);
       const rec = { type: name, code, codeName: ErrorCode[code], fatal: c.flag(fatal, 'fatal'), record };
       c.reserved(res);
+      rec.message = new TextDecoder().decode(r.rest());
+      return rec;
+    }
+    case 'reference': {
+      c.minLength(r.left(), spec.fixed);
+      const what = r.u8(), ok = r.u8(), res = r.u16(), id = r.u32(), bytes = r.u64();
+      const rec = { type: name, what: c.enumeration(what, 'what'), ok: c.flag(ok, 'ok'), id, bytes };
+      c.reserved(res);
+      c.id(id, 'id');
       rec.message = new TextDecoder().decode(r.rest());
       return rec;
     }

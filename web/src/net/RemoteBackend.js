@@ -1,7 +1,9 @@
 // Server rendering backend: <xml3d server="[wss://]host:port" renderer="raytracer" display="jpeg|s3tc|mjpeg"
 // nodes="N" sync-rate="30" jpeg-quality="85" ao-samples="0" max-depth="4" refine-samples="64"
-// frame-budget="33" token="...">
-// (RenderSettings.js; the access token also from the page's #tessera-token=..., AccessToken.js).
+// frame-budget="33" token="..." references="off">
+// (RenderSettings.js; the access token also from the page's #tessera-token=..., AccessToken.js;
+// references="off": every buffer and texture is uploaded, none is left for the node to load
+// from its URL).
 // The scene goes to the node over the sync channel; frames come back on the same WebSocket and
 // are shown in a display element behind a transparent input canvas (which takes the mouse).
 // While the node refines a still, the status line says "refining k/N", then "converged N", and
@@ -66,6 +68,7 @@ export class RemoteBackend {
         width: handler.width, height: handler.height },
       settings: this.readSettings(),
       rate: Math.min(120, Math.max(1, int(x, 'sync-rate', 30))),
+      references: (x.getAttribute('references') || '').trim().toLowerCase() !== 'off',
       onState: (state, detail) => this.state(state, detail),
       onFrame: (f) => this.frame(f),
       onServerError: (e) => handler.setStatus(`server:${e.codeName}:${e.message}`, `⚠ server: ${e.codeName}: ${e.message}`, true),
@@ -159,7 +162,7 @@ export class RemoteBackend {
       return;
     }
     const flush = () => {
-      if (f.frame === this.flushFrame || ch.outstanding > 0 || ch.renderWanted || ch.dirty || ch.queue.length) return;
+      if (f.frame === this.flushFrame || ch.outstanding > 0 || ch.renderWanted || ch.dirty || ch.queue.length || ch.waiting) return;
       ch.requestRender();
       this.flushFrame = ch.frameNumber;
     };

@@ -1,6 +1,8 @@
 // Turns successive SceneDescriptions into protocol records: what changed since the last call
 // (sets) and what disappeared (removes), keyed by the description's stable ids. Pure: no
 // sockets, so it is unit-tested in Node.
+import { RECORDS, sourceSize } from './Protocol.js';
+
 const clamp = (v, lo, hi) => Math.min(Math.max(Number.isFinite(v) ? v : lo, lo), hi);
 const nonNeg = (c) => c.map((v) => clamp(v, 0, 1e30));
 const sig = (o) => JSON.stringify(o, (k, v) => (ArrayBuffer.isView(v) ? Array.from(v) : v));
@@ -28,6 +30,29 @@ export function wireLight(l) {
   };
 }
 
+// References (docs/protocol.md, "References"): what the node's decoder takes of a buffer_ref or
+// texture_ref. A URL is absolute http(s), at most 4096 bytes (a longer one would be cut); a
+// stride holds an element and is a multiple of the source's value size.
+const field = (record, name) => RECORDS[record].fields.find((f) => f.name === name);
+const URL_BYTES = field('buffer_ref', 'url').maxLength, MAX_STRIDE = field('buffer_ref', 'byte_stride').range.hi;
+const referable = (url) => /^https?:\/\/./i.test(url || '') && new TextEncoder().encode(url).length <= URL_BYTES;
+
+// A buffer_ref for buffer b when it has a source the node can load (null: upload it).
+function bufferRef(b) {
+  const s = b.source, size = s && sourceSize(s.source);
+  if (!s || !referable(s.url) || s.components !== b.components || (s.source === 'f32') !== (b.type === 'f32')) return null;
+  if (s.byteStride && (s.byteStride > MAX_STRIDE || s.byteStride < s.components * size || s.byteStride % size)) return null;
+  return { type: 'buffer_ref', id: b.id, bufferType: b.type, components: b.components, source: s.source, values: s.values,
+    byteStride: s.byteStride, byteOffset: s.byteOffset, url: s.url };
+}
+
+// A texture_ref for texture t when the node can load its file as it is: not for XML3D textures,
+// which are flipped (flipY) before they are uploaded.
+function textureRef(t) {
+  if (t.flipY || !referable(t.url)) return null;
+  return { type: 'texture_ref', id: t.id, wrapS: t.wrapS, wrapT: t.wrapT, filter: t.filter, srgb: !!t.srgb, url: t.url };
+}
+
 export function wireCamera(cam, width, height) {
   const aspect = width / height;
   const fovY = cam.fovX ? 2 * Math.atan(Math.tan(cam.fovX / 2) / aspect) : cam.fovY;
@@ -35,7 +60,11 @@ export function wireCamera(cam, width, height) {
 }
 
 export class SceneSync {
-  constructor() { this.reset(); }
+  // references: send buffer_ref and texture_ref records for what the node can load itself.
+  constructor({ references = true } = {}) {
+    this.references = references;
+    this.reset();
+  }
 
   // Forget what the server holds (a new session re-sends everything).
   reset() {
@@ -45,7 +74,9 @@ export class SceneSync {
 
   // Records that bring the server from what was sent to `scene`, in a safe order: removes
   // of meshes before what they use, data before the meshes that reference it. Texture sets
-  // come as {type: 'texture', desc} for the caller to load and encode.
+  // come as {type: 'texture', desc} for the caller to load and encode. A buffer_ref or
+  // texture_ref carries `upload`, the buffer or texture record to send when the node refuses it
+  // (the caller sends references first and waits for the node's answers).
   diff(scene, { width, height, background = [0, 0, 0] }) {
     const out = [], s = this.sent;
     const removed = (map, cur, what) => {
@@ -59,13 +90,17 @@ export class SceneSync {
     for (const b of scene.buffers.values()) {
       if (s.buffers.get(b.id) === b.data) continue;
       s.buffers.set(b.id, b.data);
-      out.push({ type: 'buffer', id: b.id, bufferType: b.type, components: b.components, data: b.data });
+      const upload = { type: 'buffer', id: b.id, bufferType: b.type, components: b.components, data: b.data };
+      const ref = this.references && bufferRef(b);
+      out.push(ref ? { ...ref, upload } : upload);
     }
     for (const t of scene.textures.values()) {
       const k = `${t.url}|${t.wrapS}|${t.wrapT}|${t.filter}|${t.flipY}`;
       if (s.textures.get(t.id) === k) continue;
       s.textures.set(t.id, k);
-      out.push({ type: 'texture', id: t.id, desc: t });
+      const upload = { type: 'texture', id: t.id, desc: t };
+      const ref = this.references && textureRef(t);
+      out.push(ref ? { ...ref, upload } : upload);
     }
     for (const m of scene.materials.values()) {
       if (s.materials.has(m.id)) continue;  // content-addressed: an id never changes meaning

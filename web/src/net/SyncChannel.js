@@ -5,8 +5,11 @@
 // depth) go as a settings record after the handshake and again whenever they change, the
 // refinement target (samples per pixel of a still) likewise as a refine record, and the frame
 // budget (milliseconds an interactive frame should take) as a budget record. Frames the node
-// sends unasked while it refines a still (`refined`) answer no render request. On connection
-// loss it reconnects with back-off and re-sends the whole scene and the settings.
+// sends unasked while it refines a still (`refined`) answer no render request. Buffers and
+// textures the node can load from their URLs go as references (docs/protocol.md, "References";
+// off with the option `references: false`): in messages of their own, before the rest of the
+// scene change, which waits for the node's answers; a refused one is uploaded instead. On
+// connection loss it reconnects with back-off and re-sends the whole scene and the settings.
 import { encodeClient, decodeServer, clientRecordSize, ProtocolError } from './Protocol.js';
 import { SceneSync } from './SceneSync.js';
 import { hasCompressionStream, deflate } from './Features.js';
@@ -15,17 +18,24 @@ import { sameSettings } from './RenderSettings.js';
 import { redact } from './AccessToken.js';
 
 const DEFLATE_MIN_BYTES = 256;
+const TEXTURE_BYTES = 1 << 18;  // what a texture counts for in the upload progress (its size is not known yet)
 const MAX_OUTSTANDING_RENDERS = 2;
 // The node closes a WebSocket with 4401 when it refuses the page's access token (missing,
 // expired, invalid: the reason says which; docs/protocol.md). The same page cannot do better
 // by trying again, so the channel stops there.
 const CLOSE_BAD_TOKEN = 4401;
+const REF_KIND = { buffer_ref: 'buffer', texture_ref: 'texture' };  // a reference record's `what` in the node's answer
+const isRef = (r) => r.type in REF_KIND;
+const uploadBytes = (r) => (r.type === 'buffer' ? r.data.byteLength : TEXTURE_BYTES);
+// Refused references are uploaded, so the scene is complete all the same: one console warning
+// per page load says so, not one per reference.
+let refusalsWarned = false;
 
 export class SyncChannel {
-  constructor({ url, handshake, settings = null, rate = 30, highWater = 4 << 20, messageBytes = 1 << 20,
+  constructor({ url, handshake, settings = null, rate = 30, highWater = 4 << 20, messageBytes = 1 << 20, references = true,
     onFrame = () => {}, onState = () => {}, onServerError = () => {}, onStats = () => {}, onProgress = () => {} }) {
     Object.assign(this, { url, handshake, settings, rate, highWater, messageBytes, onFrame, onState, onServerError, onStats, onProgress });
-    this.sync = new SceneSync();
+    this.sync = new SceneSync({ references });
     this.queue = [];          // {size, record: Promise|object}
     this.frameNumber = 0;
     this.outstanding = 0;
@@ -34,6 +44,8 @@ export class SyncChannel {
     this.retry = 0;
     this.progress = { queued: 0, sent: 0 };
     this.closed = false;
+    this.session = 0;         // handshake replies so far: a wait for references belongs to one session
+    this.waiting = null;      // {refs: key -> record, answers: key -> reference, done}
   }
 
   connect() {
@@ -69,6 +81,7 @@ export class SyncChannel {
 
   lost(reason) {
     this.ws = null;
+    this.endWait();
     clearInterval(this.timer);
     this.timer = null;
     if (this.closed) return;
@@ -82,6 +95,7 @@ export class SyncChannel {
     this.closed = true;
     clearInterval(this.timer);
     clearTimeout(this.reconnectTimer);
+    this.endWait();
     if (this.ws) { const ws = this.ws; this.ws = null; ws.close(); }
   }
 
@@ -116,6 +130,8 @@ export class SyncChannel {
         this.reply = r;
         this.retry = 0;
         if (r.maxMessageBytes) this.messageBytes = Math.min(this.messageBytes, r.maxMessageBytes);
+        this.session++;
+        this.endWait();
         this.sync.reset();
         this.queue = [];
         this.outstanding = 0;
@@ -135,9 +151,14 @@ export class SyncChannel {
         if (this.renderWanted && this.outstanding < MAX_OUTSTANDING_RENDERS) this.requestRender();
       } else if (r.type === 'error') {
         if (r.fatal) this.fatal = `${r.codeName}: ${r.message}`;
+        // The node may have refused the references' message as a whole (it then answers none of
+        // them): stop waiting, and upload what is unanswered.
+        this.endWait();
         this.onServerError(r);
       } else if (r.type === 'stats') {
         this.onStats(r);
+      } else if (r.type === 'reference') {
+        this.answer(r);
       }
     }
   }
@@ -153,7 +174,7 @@ export class SyncChannel {
       return { size: r.data.byteLength, record: deflate(raw).then((z) => (z.length < raw.length ? { ...r, deflated: z } : r), () => r) };
     }
     if (r.type === 'texture') {
-      return { size: 1 << 18, record: loadTexture(r.desc).then((t) => ({ type: 'texture', id: r.id, ...t }), (e) => {
+      return { size: TEXTURE_BYTES, record: loadTexture(r.desc).then((t) => ({ type: 'texture', id: r.id, ...t }), (e) => {
         this.onServerError({ codeName: 'texture', message: `texture ${r.desc.url}: ${e.message || e}` });
         return null;
       }) };
@@ -184,8 +205,11 @@ export class SyncChannel {
     if (this.dirty && this.scene) {
       this.dirty = false;
       const records = this.sync.diff(this.scene, this.view);
-      for (const r of records) {
-        const p = this.prepare(r);
+      // The references first, as one item: what follows waits for the node's answers.
+      const refs = records.filter(isRef);
+      const items = refs.length ? [{ refs, size: refs.reduce((n, r) => n + uploadBytes(r.upload), 0) }] : [];
+      for (const r of records) if (!isRef(r)) items.push(this.prepare(r));
+      for (const p of items) {
         this.queue.push(p);
         this.progress.queued += p.size;
       }
@@ -200,10 +224,14 @@ export class SyncChannel {
     let sent = false;
     try {
       while (this.queue.length && this.ws && this.ws.bufferedAmount < this.highWater) {
+        if (this.queue[0].refs) {
+          await this.resolveRefs(this.queue.shift());
+          continue;
+        }
         // Pack records into one message up to messageBytes (a larger record goes alone).
         const batch = [];
         let bytes = 8;
-        while (this.queue.length) {
+        while (this.queue.length && !this.queue[0].refs) {
           const item = this.queue[0];
           const rec = await item.record;
           const size = rec ? clientRecordSize(rec) : 0;
@@ -226,6 +254,52 @@ export class SyncChannel {
     } finally {
       this.flushing = false;
     }
+  }
+
+  // Sends references in messages of their own and waits for the node's answers (one for each,
+  // matched by what and id); the uploads of the refused ones are queued ahead of the rest of the
+  // scene change, which may use them. A wait that ends unanswered (connection lost, new session)
+  // queues nothing: the next session sends the whole scene again.
+  async resolveRefs(item) {
+    const session = this.session, key = (r) => `${REF_KIND[r.type]}:${r.id}`;
+    const answers = new Map();
+    const answered = new Promise((done) => { this.waiting = { refs: new Map(item.refs.map((r) => [key(r), r])), answers, done }; });
+    let batch = [], bytes = 8;
+    for (const r of item.refs) {
+      const size = clientRecordSize(r);
+      if (batch.length && bytes + size > this.messageBytes) { this.send(encodeClient(batch)); batch = []; bytes = 8; }
+      batch.push(r);
+      bytes += size;
+    }
+    this.send(encodeClient(batch));
+    this.onProgress(this.progress.sent, this.progress.queued);
+    await answered;
+    if (session !== this.session || !this.ws) return;
+    const ok = (r) => !!(answers.get(key(r)) || {}).ok;  // unanswered (an error ended the wait): refused
+    const refused = item.refs.filter((r) => !ok(r));
+    for (const r of item.refs) if (ok(r)) this.progress.sent += uploadBytes(r.upload);
+    // An upload counts in the progress for the reference it replaces (already queued).
+    this.queue.unshift(...refused.map((r) => ({ ...this.prepare(r.upload), size: uploadBytes(r.upload) })));
+    if (refused.length && !refusalsWarned) {
+      refusalsWarned = true;
+      console.warn(`Tessera: the node refused ${refused.length} of ${item.refs.length} references, so they are uploaded ` +
+        `instead; the first: ${(answers.get(key(refused[0])) || { message: 'unanswered after a server error' }).message}`);
+    }
+    this.onProgress(this.progress.sent, this.progress.queued);
+  }
+
+  // A reference answer for the wait in progress; the last one ends it.
+  answer(r) {
+    const w = this.waiting, k = `${r.what}:${r.id}`;
+    if (!w || !w.refs.has(k) || w.answers.has(k)) return;  // not one of the references waited for
+    w.answers.set(k, r);
+    if (w.answers.size === w.refs.size) this.endWait();
+  }
+
+  endWait() {
+    const w = this.waiting;
+    this.waiting = null;
+    if (w) w.done();
   }
 
   requestRender() {

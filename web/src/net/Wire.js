@@ -3,7 +3,7 @@
 //   python3 protocol/gen_wire.py --js web/src/net/Wire.js
 // CTest protocol_wire_js fails while this file differs from what that writes.
 
-export const VERSION = 2;
+export const VERSION = 3;
 export const MAGIC = [0x54, 0x53];  // "TS"
 export const MESSAGE_HEADER = 8;
 export const RECORD_HEADER = 8;
@@ -42,6 +42,8 @@ export const ENUMS = Object.freeze({
   filter: Object.freeze(['nearest', 'linear']),
   material_model: Object.freeze(['matte', 'diffuse', 'phong']),
   light_type: Object.freeze(['point', 'directional', 'spot']),
+  source_type: Object.freeze(['f32', 'u32', 'u16', 'u8']),
+  ref_kind: Object.freeze(['buffer', 'texture']),
 });
 export const ChannelName = ENUMS.channel;
 export const OpName = ENUMS.op;
@@ -54,6 +56,8 @@ export const Wrap = ENUMS.wrap;
 export const Filter = ENUMS.filter;
 export const MaterialModel = ENUMS.material_model;
 export const LightType = ENUMS.light_type;
+export const SourceType = ENUMS.source_type;
+export const RefKind = ENUMS.ref_kind;
 
 export const FLAGS = Object.freeze({
   buffer: Object.freeze({ deflate: 1 }),
@@ -199,6 +203,31 @@ export const RECORDS = Object.freeze({
       { name: 'softness', type: 'f32', offset: 64, js: 'softness', range: { kind: 'closed', lo: 0, hi: 1 } },
     ]),
   }),
+  buffer_ref: Object.freeze({
+    code: 0x15, channel: 'client', fixed: 24, tail: true, removable: false,
+    fields: Object.freeze([
+      { name: 'id', type: 'u32', offset: 0, js: 'id', id: true },
+      { name: 'type', type: 'u8', offset: 4, js: 'bufferType', enum: 'buffer_type' },
+      { name: 'components', type: 'u8', offset: 5, js: 'components', error: 'bad_components', range: { kind: 'int', lo: 1, hi: 4 } },
+      { name: 'source', type: 'u8', offset: 6, js: 'source', enum: 'source_type' },
+      { name: 'reserved', type: 'u8', offset: 7, js: 'reserved', reserved: true },
+      { name: 'value_count', type: 'u32', offset: 8, js: 'values' },
+      { name: 'byte_stride', type: 'u32', offset: 12, js: 'byteStride', range: { kind: 'int', lo: 0, hi: 252 } },
+      { name: 'byte_offset', type: 'u64', offset: 16, js: 'byteOffset' },
+      { name: 'url', type: 'string', offset: 24, js: 'url', maxLength: 4096 },
+    ]),
+  }),
+  texture_ref: Object.freeze({
+    code: 0x16, channel: 'client', fixed: 8, tail: true, removable: false,
+    fields: Object.freeze([
+      { name: 'id', type: 'u32', offset: 0, js: 'id', id: true },
+      { name: 'wrap_s', type: 'u8', offset: 4, js: 'wrapS', enum: 'wrap' },
+      { name: 'wrap_t', type: 'u8', offset: 5, js: 'wrapT', enum: 'wrap' },
+      { name: 'filter', type: 'u8', offset: 6, js: 'filter', enum: 'filter' },
+      { name: 'srgb', type: 'u8', offset: 7, js: 'srgb', flag: true },
+      { name: 'url', type: 'string', offset: 8, js: 'url', maxLength: 4096 },
+    ]),
+  }),
   render: Object.freeze({
     code: 0x20, channel: 'client', fixed: 4, tail: false, removable: false,
     fields: Object.freeze([
@@ -246,6 +275,17 @@ export const RECORDS = Object.freeze({
       { name: 'reserved', type: 'u8', offset: 3, js: 'reserved', reserved: true },
       { name: 'record', type: 'u32', offset: 4, js: 'record' },
       { name: 'message', type: 'string', offset: 8, js: 'message', maxLength: 65535 },
+    ]),
+  }),
+  reference: Object.freeze({
+    code: 0x85, channel: 'server', fixed: 16, tail: true, removable: false,
+    fields: Object.freeze([
+      { name: 'what', type: 'u8', offset: 0, js: 'what', enum: 'ref_kind' },
+      { name: 'ok', type: 'u8', offset: 1, js: 'ok', flag: true },
+      { name: 'reserved', type: 'u16', offset: 2, js: 'reserved', reserved: true },
+      { name: 'id', type: 'u32', offset: 4, js: 'id', id: true },
+      { name: 'bytes', type: 'u64', offset: 8, js: 'bytes' },
+      { name: 'message', type: 'string', offset: 16, js: 'message', maxLength: 65535 },
     ]),
   }),
   stats: Object.freeze({

@@ -6,6 +6,15 @@ import { identity, multiply, translation, scaling, fromQuaternion } from '../mat
 const COMPONENTS = { SCALAR: 1, VEC2: 2, VEC3: 3, VEC4: 4, MAT4: 16 };
 const TYPES = { 5120: Int8Array, 5121: Uint8Array, 5122: Int16Array, 5123: Uint16Array, 5125: Uint32Array, 5126: Float32Array };
 const WRAP = { 33071: 'clamp', 33648: 'repeat', 10497: 'repeat' };  // mirrored repeat read as repeat
+const SOURCE = { 5126: 'f32', 5125: 'u32', 5123: 'u16', 5121: 'u8' };  // a buffer_ref's source, by componentType
+
+// Where an array the loader returned lies in an external file, so that a node can load it
+// itself (a buffer_ref, docs/protocol.md "References"): {url, byteOffset, byteStride (0:
+// packed), source, components, values}. Only for arrays that hold exactly the file's values:
+// never for data: URIs or GLB chunks, normalised or sparse accessors, or what is converted
+// (an array made from another has no entry, so conversions later on need not say so).
+const sources = new WeakMap();
+export const sourceOf = (array) => sources.get(array) ?? null;
 
 function parseGlb(buf) {
   const dv = new DataView(buf);
@@ -33,14 +42,26 @@ export async function loadGltf(body, url, fetchBinary) {
   let json = body, glbBin = null;
   if (body instanceof ArrayBuffer) ({ json, bin: glbBin } = parseGlb(body));
   if (!json.asset || !String(json.asset.version).startsWith('2')) throw new Error('only glTF 2.0 is supported');
+  // The absolute URL of each external buffer (null for data: URIs and the GLB chunk).
+  const bufferUrls = (json.buffers || []).map((b) => (b.uri === undefined || b.uri.startsWith('data:') ? null : new URL(b.uri, url).href));
   const buffers = await Promise.all((json.buffers || []).map((b, i) => {
     if (b.uri === undefined) {
       if (!glbBin) throw new Error(`buffer ${i} has no uri`);
       return glbBin;
     }
     if (b.uri.startsWith('data:')) return decodeDataUri(b.uri);
-    return fetchBinary(new URL(b.uri, url).href);
+    return fetchBinary(bufferUrls[i]);
   }));
+
+  // Records that `array` holds accessor i's values as they lie in an external file.
+  function remember(array, i) {
+    const a = json.accessors[i], n = COMPONENTS[a.type];
+    if (a.bufferView === undefined || a.sparse || a.normalized || n > 4) return;
+    const v = json.bufferViews[a.bufferView];
+    if (!bufferUrls[v.buffer]) return;
+    sources.set(array, { url: bufferUrls[v.buffer], byteOffset: (v.byteOffset || 0) + (a.byteOffset || 0),
+      byteStride: v.byteStride || 0, source: SOURCE[a.componentType], components: n, values: a.count * n });
+  }
 
   const accessorCache = new Map();
   function accessor(i) {
@@ -69,9 +90,24 @@ export async function loadGltf(body, url, fetchBinary) {
     if (a.normalized && T !== Float32Array) {
       const max = { 5120: 127, 5121: 255, 5122: 32767, 5123: 65535 }[a.componentType] || 1;
       out = Float32Array.from(out, (x) => Math.max(x / max, -1));
-    }
+    } else if (T === Float32Array || T === Uint32Array) remember(out, i);  // used as they are
     accessorCache.set(i, out);
     return out;
+  }
+  // Indices as Uint32Array, widened once per accessor: primitives that share an accessor share
+  // the array (one buffer), and a widened u16 or u8 one still names its source.
+  const indexCache = new Map();
+  function indexAccessor(i) {
+    if (!indexCache.has(i)) {
+      const a = accessor(i);
+      let out = a;
+      if (!(a instanceof Uint32Array)) {
+        out = Uint32Array.from(a);
+        if (a instanceof Uint16Array || a instanceof Uint8Array) remember(out, i);  // widened, value for value
+      }
+      indexCache.set(i, out);
+    }
+    return indexCache.get(i);
   }
   const asFloat = (a) => (a instanceof Float32Array ? a : Float32Array.from(a));
 
@@ -147,8 +183,7 @@ export async function loadGltf(body, url, fetchBinary) {
         if (mode !== 4 && mode !== 5) { result.undrawn++; return; }  // points, lines and fans are not drawn
         const at = p.attributes;
         if (at.POSITION === undefined) return;
-        let indices = p.indices !== undefined ? accessor(p.indices) : null;
-        if (indices && !(indices instanceof Uint32Array)) indices = Uint32Array.from(indices);
+        const indices = p.indices !== undefined ? indexAccessor(p.indices) : null;
         result.meshes.push({
           name: `${node.name ?? ni}${k}`,
           nodeName: node.name, meshName: mesh.name,
@@ -156,7 +191,7 @@ export async function loadGltf(body, url, fetchBinary) {
           normals: at.NORMAL !== undefined ? asFloat(accessor(at.NORMAL)) : null,
           texcoords: at.TEXCOORD_0 !== undefined ? asFloat(accessor(at.TEXCOORD_0)) : null,
           colors: vertexColors(at),
-          indices, strip: mode === 5,
+          indices, strip: mode === 5,  // unrolled by MarkupReader (a new array, without a source)
           material: p.material !== undefined ? materials[p.material] : null,
           matrix: world,
         });

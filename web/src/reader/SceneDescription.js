@@ -2,7 +2,8 @@
 // the server's scene model (core/scene.h) plus what only the browser needs (elements for
 // picking and events, vertex colours, texture image elements).
 //
-// buffers:   id -> {id, type: 'f32'|'u32', components, data: Float32Array|Uint32Array}
+// buffers:   id -> {id, type: 'f32'|'u32', components, data: Float32Array|Uint32Array,
+//                   source: where the data lies in an external file (GltfLoader.js sourceOf) or null}
 // textures:  id -> {id, url, image, wrapS, wrapT: 'clamp'|'repeat', filter: 'linear'|'nearest', flipY, srgb}
 // materials: id -> {id, model: 'matte'|'diffuse'|'phong', diffuseColor, specularColor, shininess,
 //                   emissiveColor, ambientIntensity, opacity, diffuseTexture, specularTexture,
@@ -15,6 +16,8 @@
 //                   castShadow (XML3D castShadow, default false; glTF lights true)}
 // camera:    {element, toWorld, fovY, fovX|null, near|null, far|null}
 // environment: {ambient, background, exposure, linear: false}  (XML3D: colours used as given)
+
+import { sourceOf } from './GltfLoader.js';
 
 export const MATERIAL_DEFAULTS = Object.freeze({
   model: 'phong',
@@ -59,7 +62,7 @@ export class SceneDescription {
   addBuffer(data, components, ids) {
     const id = ids.ofArray(data);
     if (!this.buffers.has(id))
-      this.buffers.set(id, { id, type: data instanceof Uint32Array ? 'u32' : 'f32', components, data });
+      this.buffers.set(id, { id, type: data instanceof Uint32Array ? 'u32' : 'f32', components, data, source: sourceOf(data) });
     return id;
   }
 

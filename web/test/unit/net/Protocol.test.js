@@ -197,3 +197,39 @@ test('vertex colours: a mesh names its colour buffer (0: none), a material flag 
   const unknown = bytes.slice(); unknown[8 + 8 + 5] = 8;
   refuses(() => decodeClient(unknown), 'bad_reserved', 0);
 });
+
+test('references: buffer_ref and texture_ref round-trip with their sizes, the node\'s reference answer too', () => {
+  const refs = [
+    { type: 'buffer_ref', id: 7, bufferType: 'f32', components: 3, source: 'f32', values: 9, byteStride: 24, byteOffset: 36,
+      url: 'http://localhost/m/scene.bin' },
+    { type: 'buffer_ref', id: 8, bufferType: 'u32', components: 1, source: 'u16', values: 3, byteStride: 0, byteOffset: 2n ** 64n - 1n,
+      url: 'https://cdn.example/é.bin' },
+    { type: 'texture_ref', id: 9, wrapS: 'clamp', wrapT: 'repeat', filter: 'nearest', srgb: true, url: 'https://cdn.example/t.png' },
+  ];
+  assert.deepEqual(decodeClient(encodeClient(refs)), refs);
+  for (const r of refs) assert.equal(clientRecordSize(r), encodeClient([r]).length - 8, r.type);
+  assert.equal(RECORDS.buffer_ref.removable, false);
+  const answers = [
+    { type: 'reference', what: 'buffer', ok: true, id: 7, bytes: 36, message: '' },
+    { type: 'reference', what: 'texture', ok: false, id: 9, bytes: 2n ** 64n - 1n, message: 'texture 9 (https://cdn.example/t.png): not allowed' },
+  ];
+  assert.deepEqual(decodeServer(encodeServer(answers)), answers);
+});
+
+test('references are refused as protocol.cpp refuses them', () => {
+  const ref = { type: 'buffer_ref', id: 7, bufferType: 'u32', components: 2, source: 'u16', values: 4, byteStride: 0, byteOffset: 0, url: 'http://h/a.bin' };
+  refuses(() => decodeClient(encodeClient([{ type: 'render', frame: 1 }, { ...ref, source: 'f32' }])), 'bad_enum', 1);
+  refuses(() => decodeClient(encodeClient([{ ...ref, bufferType: 'f32' }])), 'bad_enum', 0);
+  refuses(() => decodeClient(encodeClient([{ ...ref, values: 3 }])), 'bad_components', 0);
+  refuses(() => decodeClient(encodeClient([{ ...ref, byteStride: 2 }])), 'out_of_range', 0);  // shorter than an element
+  refuses(() => decodeClient(encodeClient([{ ...ref, byteStride: 5 }])), 'out_of_range', 0);  // not a multiple of 2
+  refuses(() => decodeClient(encodeClient([{ ...ref, byteStride: 254 }])), 'out_of_range', 0);
+  refuses(() => decodeClient(encodeClient([{ ...ref, url: '' }])), 'bad_length', 0);
+  assert.equal(decodeClient(encodeClient([{ ...ref, url: 'x'.repeat(5000) }]))[0].url.length, 4096, 'the encoder cuts a URL to 4096 bytes');
+  refuses(() => decodeClient(encodeClient([{ type: 'texture_ref', id: 0, url: 'http://h/t.png' }])), 'bad_id', 0);
+  const answer = encodeServer([{ type: 'reference', what: 'buffer', ok: false, id: 3, message: 'no' }]);
+  const ok2 = answer.slice(); ok2[8 + 8 + 1] = 2;
+  refuses(() => decodeServer(ok2), 'bad_enum', 0);
+  const id0 = answer.slice(); id0[8 + 8 + 4] = 0;
+  refuses(() => decodeServer(id0), 'bad_id', 0);
+});

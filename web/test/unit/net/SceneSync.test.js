@@ -80,3 +80,23 @@ test('vertex colours reach the wire: the mesh names its colour buffer, the mater
   assert.equal(wire.find((r) => r.type === 'mesh' && r.id === colored.id).colors, colored.colors);
   assert.equal(wire.find((r) => r.type === 'material' && r.id === colored.material).useVertexColor, true);
 });
+
+test('references only for what the node can load as it is: XML3D textures (flipped) and sources it would refuse to decode are uploaded', () => {
+  const sceneWith = (buffers, textures) => ({ buffers: new Map(buffers.map((b) => [b.id, b])), textures: new Map(textures.map((t) => [t.id, t])),
+    materials: new Map(), meshes: new Map(), lights: new Map(), camera: null, environment: { ambient: [0, 0, 0], exposure: 1 } });
+  const data = new Float32Array(6);
+  const source = { url: 'https://cdn.example/a.bin', byteOffset: 8, byteStride: 0, source: 'f32', components: 3, values: 6 };
+  const buffer = (id, s) => ({ id, type: 'f32', components: 3, data, source: s && { ...source, ...s } });
+  const texture = (id, t) => ({ id, url: 'https://cdn.example/t.png', wrapS: 'repeat', wrapT: 'clamp', filter: 'linear', flipY: false, srgb: true, ...t });
+  const recs = new SceneSync().diff(sceneWith([
+    buffer(1, {}), buffer(2, { byteStride: 16 }), buffer(3, null), buffer(4, { url: 'file:///a.bin' }), buffer(5, { url: `https://h/${'a'.repeat(4096)}` }),
+    buffer(6, { byteStride: 8 }), buffer(7, { byteStride: 14 }), buffer(8, { source: 'u16' }), buffer(9, { components: 2 }),
+  ], [texture(10, {}), texture(11, { flipY: true }), texture(12, { url: 'blob:https://cdn.example/x' })]), VIEW);
+  const kinds = Object.fromEntries(recs.filter((r) => r.id).map((r) => [r.id, r.type]));
+  assert.deepEqual(kinds, { 1: 'buffer_ref', 2: 'buffer_ref', 3: 'buffer', 4: 'buffer', 5: 'buffer', 6: 'buffer', 7: 'buffer', 8: 'buffer', 9: 'buffer',
+    10: 'texture_ref', 11: 'texture', 12: 'texture' });
+  const ref = recs.find((r) => r.id === 2);
+  assert.deepEqual(ref.upload, { type: 'buffer', id: 2, bufferType: 'f32', components: 3, data }, 'what to upload when the node refuses it');
+  assert.equal(decodeClient(encodeClient(recs.filter((r) => r.type.endsWith('_ref')))).length, 3);
+  assert.equal(new SceneSync({ references: false }).diff(sceneWith([buffer(1, {})], [texture(10, {})]), VIEW).filter((r) => r.type.endsWith('_ref')).length, 0);
+});

@@ -4,6 +4,7 @@ import { page } from '../dom.js';
 import { readRenderSettings, refineStatus, sameSettings } from '../../../src/net/RenderSettings.js';
 import { SyncChannel } from '../../../src/net/SyncChannel.js';
 import { MarkupReader } from '../../../src/reader/MarkupReader.js';
+import { Resources } from '../../../src/reader/Resources.js';
 import { encodeServer, decodeClient } from '../../../src/net/Protocol.js';
 
 const read = (attrs) => readRenderSettings(page(`<xml3d ${attrs}></xml3d>`).querySelector('xml3d'));
@@ -314,4 +315,181 @@ test('a frame smaller than the client\'s resolution (within a budget) goes to th
   ws.reply([frameRecord(1, { width: 4, height: 3 }), frameRecord(1, { refined: true, samples: 1 })]);
   assert.equal(ch.outstanding, 0, 'the scaled frame answers the request, the full-resolution still answers none');
   assert.deepEqual(shown.map((f) => [f.frame, f.width, f.height, f.refined, f.samples]), [[1, 4, 3, false, 1], [1, 8, 8, true, 1]]);
+}));
+
+// References: a glTF model whose buffers and texture the node can load from their URLs (a
+// buffer_ref each for the positions and the u16 indices, a texture_ref for the base colour),
+// beside an XML3D mesh whose positions are always uploaded.
+async function referencedScene() {
+  const bin = new ArrayBuffer(44), dv = new DataView(bin);
+  [0, 0, -2, 1, 0, -2, 0, 1, -2].forEach((v, i) => dv.setFloat32(4 * i, v, true));
+  [0, 1, 2].forEach((v, i) => dv.setUint16(36 + 2 * i, v, true));
+  const gltf = {
+    asset: { version: '2.0' }, scenes: [{ nodes: [0] }], nodes: [{ mesh: 0 }],
+    meshes: [{ primitives: [{ attributes: { POSITION: 0 }, indices: 1, material: 0 }] }],
+    materials: [{ pbrMetallicRoughness: { baseColorTexture: { index: 0 } } }], textures: [{ source: 0 }], images: [{ uri: 't.png' }],
+    accessors: [{ bufferView: 0, componentType: 5126, count: 3, type: 'VEC3' }, { bufferView: 1, componentType: 5123, count: 3, type: 'SCALAR' }],
+    bufferViews: [{ buffer: 0, byteOffset: 0, byteLength: 36 }, { buffer: 0, byteOffset: 36, byteLength: 6 }],
+    buffers: [{ uri: 'scene.bin', byteLength: 44 }],
+  };
+  const files = { 'http://localhost/m/scene.gltf': gltf, 'http://localhost/m/scene.bin': bin };
+  const fetch = async (url) => ({ ok: true, status: 200, json: async () => files[url], arrayBuffer: async () => files[url] });
+  let loaded;
+  const done = new Promise((r) => (loaded = r));
+  const reader = new MarkupReader({ resources: new Resources({ fetch, onLoad: () => loaded() }) });
+  const doc = page('<xml3d><model src="m/scene.gltf"></model><mesh><float3 name="position">0 0 -2 1 0 -2 0 1 -2</float3></mesh></xml3d>');
+  reader.read(doc.querySelector('xml3d'));
+  await done;
+  return reader.read(doc.querySelector('xml3d'));
+}
+// A channel to a FakeSocket with that scene, after the handshake reply (the references are on their way).
+async function connectedTo(scene, options = {}) {
+  const ch = new SyncChannel({ url: 'ws://x/ws', rate: 100, handshake: HANDSHAKE, ...options });
+  ch.setScene(scene, { width: 8, height: 8 });
+  ch.connect();
+  await until(() => FakeSocket.last && FakeSocket.last.sent.length === 1);
+  const ws = FakeSocket.last;
+  ws.reply([REPLY]);
+  await until(() => ws.sent.length >= 2);
+  return { ch, ws };
+}
+const isRef = (r) => r.type === 'buffer_ref' || r.type === 'texture_ref';
+// The node's answers to the references sent so far (in reverse order: they are matched by what and id).
+function answerRefs(ws, refused = new Set()) {
+  const refs = ws.sent.flat().filter(isRef);
+  ws.reply(refs.reverse().map((r) => ({ type: 'reference', what: r.type === 'buffer_ref' ? 'buffer' : 'texture', ok: !refused.has(r.id),
+    id: r.id, bytes: refused.has(r.id) ? 0 : 36, message: refused.has(r.id) ? `${r.url} is not in tessera.asset-origins` : '' })));
+}
+// loadTexture in Node: a 1x1 PNG (its header) behind fetch, createImageBitmap's size.
+const PNG = new Uint8Array([0x89, 0x50, 0x4e, 0x47, 0x0d, 0x0a, 0x1a, 0x0a, 0, 0, 0, 13, 0x49, 0x48, 0x44, 0x52, 0, 0, 0, 1, 0, 0, 0, 1, 8, 6, 0, 0, 0]);
+async function withTextures(body) {
+  const saved = { fetch: globalThis.fetch, createImageBitmap: globalThis.createImageBitmap };
+  globalThis.fetch = async () => new Response(PNG);
+  globalThis.createImageBitmap = async () => ({ width: 1, height: 1, close() {} });
+  try { await body(); } finally { Object.assign(globalThis, saved); }
+}
+
+test('references go first, alone; nothing is sent until the node answers them; an answer ok means no upload', () => withFakeSocket(async (opened) => {
+  const scene = await referencedScene();
+  const { ch, ws } = await connectedTo(scene);
+  opened.push(ch);
+  const [gltfMesh, markupMesh] = [...scene.meshes.values()];
+  const texture = scene.materials.get(gltfMesh.material).diffuseTexture;
+  assert.deepEqual(ws.sent[1], [
+    { type: 'buffer_ref', id: gltfMesh.positions, bufferType: 'f32', components: 3, source: 'f32', values: 9, byteStride: 0, byteOffset: 0,
+      url: 'http://localhost/m/scene.bin' },
+    { type: 'buffer_ref', id: gltfMesh.indices, bufferType: 'u32', components: 1, source: 'u16', values: 3, byteStride: 0, byteOffset: 36,
+      url: 'http://localhost/m/scene.bin' },
+    { type: 'texture_ref', id: texture, wrapS: 'repeat', wrapT: 'repeat', filter: 'linear', srgb: true, url: 'http://localhost/m/t.png' },
+  ]);
+  await new Promise((r) => setTimeout(r, 60));
+  assert.equal(ws.sent.length, 2, 'nothing else (no material, mesh or render request) before the answers');
+  answerRefs(ws);
+  await until(() => ws.sent.flat().some((r) => r.type === 'render'));
+  const after = ws.sent.slice(2).flat();
+  assert.deepEqual(after.filter((r) => r.type === 'buffer').map((r) => r.id), [markupMesh.positions], 'only what has no source is uploaded');
+  assert.equal(after.filter((r) => r.type === 'texture' || isRef(r)).length, 0);
+  assert.deepEqual(after.filter((r) => r.type === 'mesh').map((r) => r.id).sort(), [gltfMesh.id, markupMesh.id].sort());
+  assert.equal(ch.waiting, null);
+}));
+
+test('a refused reference is uploaded before the materials and meshes; one console warning sums the refusals up', () => withFakeSocket((opened) => withTextures(async () => {
+  const scene = await referencedScene();
+  const warnings = [];
+  const warn = console.warn;
+  console.warn = (...a) => warnings.push(a.join(' '));
+  try {
+    const { ch, ws } = await connectedTo(scene);
+    opened.push(ch);
+    const [gltfMesh] = [...scene.meshes.values()];
+    const texture = scene.materials.get(gltfMesh.material).diffuseTexture;
+    answerRefs(ws, new Set([gltfMesh.positions, texture]));
+    await until(() => ws.sent.flat().some((r) => r.type === 'render'));
+    const after = ws.sent.slice(2).flat(), at = (pred) => after.findIndex(pred);
+    const positions = after.filter((r) => r.type === 'buffer' && r.id === gltfMesh.positions);
+    assert.equal(positions.length, 1, 'the refused buffer is uploaded');
+    assert.deepEqual([...positions[0].data], [0, 0, -2, 1, 0, -2, 0, 1, -2]);
+    assert.equal(after.filter((r) => r.type === 'buffer' && r.id === gltfMesh.indices).length, 0, 'the loaded one is not');
+    const tex = after.find((r) => r.type === 'texture');
+    assert.deepEqual([tex.id, tex.format, tex.width, tex.height], [texture, 'png', 1, 1]);
+    const firstUse = Math.min(at((r) => r.type === 'material'), at((r) => r.type === 'mesh'));
+    assert.ok(at((r) => r.type === 'buffer' && r.id === gltfMesh.positions) < firstUse, 'the buffer before what uses it');
+    assert.ok(at((r) => r.type === 'texture') < firstUse, 'the texture before what uses it');
+    assert.equal(warnings.length, 1);
+    assert.match(warnings[0], /refused 2 of 3 references.*is not in tessera\.asset-origins/);
+
+    // A new session sends the references again; refusing them again warns no more.
+    ws.reply([REPLY]);
+    await until(() => ws.sent.flat().filter(isRef).length === 6);
+    answerRefs(ws, new Set([gltfMesh.positions, texture]));
+    await until(() => ws.sent.flat().filter((r) => r.type === 'buffer' && r.id === gltfMesh.positions).length === 2);
+    assert.equal(warnings.length, 1, 'one warning per page load');
+  } finally {
+    console.warn = warn;
+  }
+})));
+
+test('an error record while waiting for reference answers ends the wait: the unanswered ones are uploaded', () => withFakeSocket((opened) => withTextures(async () => {
+  const scene = await referencedScene();
+  const warn = console.warn;
+  console.warn = () => {};
+  try {
+    const { ch, ws } = await connectedTo(scene);
+    opened.push(ch);
+    const refs = ws.sent[1];
+    ws.reply([{ type: 'error', code: 8, codeName: 'bad_length', fatal: false, record: 0, message: 'record 0 (buffer_ref): body length' }]);
+    await until(() => ws.sent.flat().some((r) => r.type === 'render'));
+    const after = ws.sent.slice(2).flat();
+    for (const r of refs) {
+      const kind = r.type === 'buffer_ref' ? 'buffer' : 'texture';
+      assert.equal(after.filter((x) => x.type === kind && x.id === r.id).length, 1, `${kind} ${r.id} uploaded`);
+    }
+    assert.equal(ch.waiting, null);
+  } finally {
+    console.warn = warn;
+  }
+})));
+
+test('references: false uploads every buffer and texture, as before', () => withFakeSocket((opened) => withTextures(async () => {
+  const scene = await referencedScene();
+  const { ch, ws } = await connectedTo(scene, { references: false });
+  opened.push(ch);
+  await until(() => ws.sent.flat().some((r) => r.type === 'render'));
+  const all = ws.sent.flat();
+  assert.equal(all.filter(isRef).length, 0);
+  assert.deepEqual(all.filter((r) => r.type === 'buffer').map((r) => r.id).sort(), [...scene.buffers.keys()].sort());
+  assert.equal(all.filter((r) => r.type === 'texture').length, 1);
+  assert.ok(all.findIndex((r) => r.type === 'texture') < all.findIndex((r) => r.type === 'material'));
+})));
+
+test('a connection lost while waiting for reference answers does not hang the channel: the next session sends everything', () => withFakeSocket(async (opened) => {
+  const scene = await referencedScene();
+  const { ch, ws } = await connectedTo(scene);
+  opened.push(ch);
+  assert.ok(ch.waiting);
+  ws.readyState = 3;
+  ws.onclose({ code: 1006, reason: '' });
+  assert.equal(ch.state, 'disconnected');
+  assert.equal(ch.waiting, null);
+  await until(() => !ch.flushing);
+  assert.equal(ws.sent.length, 2, 'nothing more on the lost connection');
+  await until(() => FakeSocket.last !== ws && FakeSocket.last.sent.length === 1);  // reconnected
+  const ws2 = FakeSocket.last;
+  ws2.reply([REPLY]);
+  await until(() => ws2.sent.length >= 2);
+  assert.equal(ws2.sent[1].filter(isRef).length, 3);
+  answerRefs(ws2);
+  await until(() => ws2.sent.flat().some((r) => r.type === 'render'));
+  assert.equal(ws2.sent.flat().filter((r) => r.type === 'mesh').length, 2);
+}));
+
+test('references beyond one message are spread over several, each of references only', () => withFakeSocket(async (opened) => {
+  const { ch, ws } = await connectedTo(await referencedScene(), { messageBytes: 100 });
+  opened.push(ch);
+  await until(() => ws.sent.length >= 4);
+  await new Promise((r) => setTimeout(r, 30));
+  assert.deepEqual(ws.sent.slice(1).map((m) => m.map((r) => r.type)), [['buffer_ref'], ['buffer_ref'], ['texture_ref']]);
+  answerRefs(ws);
+  await until(() => ws.sent.flat().some((r) => r.type === 'render'));
+  assert.equal(ws.sent.flat().filter((r) => r.type === 'mesh').length, 2);
 }));

@@ -1,0 +1,100 @@
+import { test } from 'node:test';
+import assert from 'node:assert/strict';
+import { page } from '../dom.js';
+import { loadGltf, sourceOf } from '../../../src/reader/GltfLoader.js';
+import { MarkupReader } from '../../../src/reader/MarkupReader.js';
+import { Resources } from '../../../src/reader/Resources.js';
+
+// scene.bin: packed float3 positions (0..36), an interleaved view of float3 positions and
+// normals with byteStride 24 (36..108), u16 indices (108..114), normalised u8 texcoords (116..122).
+const BIN_URL = 'http://localhost/m/scene.bin';
+function sceneBin() {
+  const bin = new ArrayBuffer(124), dv = new DataView(bin);
+  [0, 0, 0, 1, 0, 0, 0, 1, 0].forEach((v, i) => dv.setFloat32(4 * i, v, true));
+  for (let k = 0; k < 3; k++)
+    for (let c = 0; c < 3; c++) {
+      dv.setFloat32(36 + 24 * k + 4 * c, 10 * k + c, true);
+      dv.setFloat32(36 + 24 * k + 12 + 4 * c, c === 2 ? 1 : 0, true);
+    }
+  [0, 1, 2].forEach((v, i) => dv.setUint16(108 + 2 * i, v, true));
+  [0, 0, 255, 0, 0, 255].forEach((v, i) => dv.setUint8(116 + i, v));
+  return bin;
+}
+const gltf = (uri) => ({
+  asset: { version: '2.0' }, scene: 0, scenes: [{ nodes: [0] }], nodes: [{ mesh: 0 }],
+  meshes: [{ primitives: [
+    { attributes: { POSITION: 0, TEXCOORD_0: 4 }, indices: 2 },
+    { attributes: { POSITION: 1, NORMAL: 3 }, indices: 2 },
+    { attributes: { POSITION: 0 }, indices: 2, mode: 5 },
+  ] }],
+  accessors: [
+    { bufferView: 0, componentType: 5126, count: 3, type: 'VEC3' },
+    { bufferView: 1, componentType: 5126, count: 3, type: 'VEC3' },
+    { bufferView: 2, componentType: 5123, count: 3, type: 'SCALAR' },
+    { bufferView: 1, byteOffset: 12, componentType: 5126, count: 3, type: 'VEC3' },
+    { bufferView: 3, componentType: 5121, normalized: true, count: 3, type: 'VEC2' },
+  ],
+  bufferViews: [{ buffer: 0, byteOffset: 0, byteLength: 36 }, { buffer: 0, byteOffset: 36, byteLength: 72, byteStride: 24 },
+    { buffer: 0, byteOffset: 108, byteLength: 6 }, { buffer: 0, byteOffset: 116, byteLength: 6 }],
+  buffers: [{ uri, byteLength: 124 }],
+});
+
+// What a node reads from the file for a source: the check that a source describes its array.
+function readSource(bin, s) {
+  const dv = new DataView(bin), size = { f32: 4, u32: 4, u16: 2, u8: 1 }[s.source];
+  const stride = s.byteStride || s.components * size, out = [];
+  for (let k = 0; k < s.values / s.components; k++)
+    for (let c = 0; c < s.components; c++) {
+      const p = s.byteOffset + k * stride + c * size;
+      out.push(s.source === 'f32' ? dv.getFloat32(p, true) : s.source === 'u16' ? dv.getUint16(p, true) : s.source === 'u8' ? dv.getUint8(p) : dv.getUint32(p, true));
+    }
+  return out;
+}
+
+test('glTF accessors read straight from an external buffer name their source: packed, strided, widened u16 indices', async () => {
+  const bin = sceneBin();
+  const g = await loadGltf(gltf('scene.bin'), 'http://localhost/m/scene.gltf', async () => bin);
+  const [a, b] = g.meshes;
+  assert.deepEqual(sourceOf(a.positions), { url: BIN_URL, byteOffset: 0, byteStride: 0, source: 'f32', components: 3, values: 9 });
+  assert.deepEqual(sourceOf(b.positions), { url: BIN_URL, byteOffset: 36, byteStride: 24, source: 'f32', components: 3, values: 9 });
+  assert.deepEqual(sourceOf(b.normals), { url: BIN_URL, byteOffset: 48, byteStride: 24, source: 'f32', components: 3, values: 9 });
+  assert.ok(a.indices instanceof Uint32Array);
+  assert.deepEqual(sourceOf(a.indices), { url: BIN_URL, byteOffset: 108, byteStride: 0, source: 'u16', components: 1, values: 3 });
+  assert.equal(b.indices, a.indices, 'an accessor shared by primitives gives one array, with its source');
+  for (const arr of [a.positions, b.positions, b.normals, a.indices]) assert.deepEqual(readSource(bin, sourceOf(arr)), [...arr]);
+  assert.equal(sourceOf(a.texcoords), null, 'normalised bytes are scaled: no source');
+  assert.deepEqual([...a.texcoords], [0, 0, 1, 0, 0, 1]);
+});
+
+test('glTF buffers in data: URIs have no source', async () => {
+  const uri = 'data:application/octet-stream;base64,' + Buffer.from(sceneBin()).toString('base64');
+  const g = await loadGltf(gltf(uri), 'http://localhost/m/scene.gltf', async () => assert.fail('nothing is fetched'));
+  const [a, b] = g.meshes;
+  for (const arr of [a.positions, a.indices, b.positions, b.normals]) assert.equal(sourceOf(arr), null);
+  assert.deepEqual([...b.positions], [0, 1, 2, 10, 11, 12, 20, 21, 22]);
+});
+
+test('the scene\'s buffers carry the sources of glTF arrays; a triangle strip\'s unrolled indices have none', async () => {
+  const bin = new Uint8Array(sceneBin());
+  const files = { 'http://localhost/m/scene.gltf': gltf('scene.bin'), [BIN_URL]: bin };
+  const fetch = async (url) => (files[url] === undefined ? { ok: false, status: 404 } : {
+    ok: true, status: 200, json: async () => files[url], arrayBuffer: async () => files[url].buffer });
+  let loaded;
+  const done = new Promise((r) => (loaded = r));
+  const reader = new MarkupReader({ resources: new Resources({ fetch, onLoad: () => loaded() }) });
+  const doc = page('<xml3d><model src="m/scene.gltf"></model><mesh><float3 name="position">0 0 0 1 0 0 0 1 0</float3></mesh></xml3d>');
+  reader.read(doc.querySelector('xml3d'));
+  await done;
+  const scene = reader.read(doc.querySelector('xml3d'));
+  assert.deepEqual(scene.errors, []);
+  const [list, interleaved, strip, markup] = [...scene.meshes.values()];
+  const source = (id) => scene.buffers.get(id).source;
+  assert.equal(source(list.positions).byteOffset, 0);
+  assert.equal(source(list.indices).source, 'u16');
+  assert.equal(source(list.texcoords), null);
+  assert.equal(source(interleaved.normals).byteStride, 24);
+  assert.equal(strip.positions, list.positions, 'the same array, the same buffer');
+  assert.notEqual(strip.indices, list.indices);
+  assert.equal(source(strip.indices), null, 'indices made by unrolling a strip');
+  assert.equal(source(markup.positions), null);
+});
