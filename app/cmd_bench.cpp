@@ -136,7 +136,9 @@ int run(const std::vector<std::string>& argv) {
   const Rect full{0, 0, scene.width(), scene.height()};
   auto sync = [&] { warnings.clear(); rt.sync(scene, warnings); };
   setup.set_frame(0);
+  const auto t_sync = std::chrono::steady_clock::now();
   sync();
+  const double first_sync_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t_sync).count();
   for (auto& w : warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
   // --compare specialised times the general kernel (render() itself picks the specialised one
   // for such scenes, so comparing it would compare a kernel with itself).
@@ -276,6 +278,11 @@ int run(const std::vector<std::string>& argv) {
               feat.secondary ? "true" : "false", feat.textures ? "true" : "false", feat.alpha_masks ? "true" : "false",
               rt.plain_kernel(settings) ? "specialised" : "general", json_str(cpu_model()).c_str(), json_str(isa_name(pl)).c_str(), pl.w, pl.h, threads);
   std::printf(", \"disturbed_packets\": %llu", (unsigned long long)disturbed_packets);
+  // Where loading went: tinygltf (JSON and buffers), the textures' images (decoded in
+  // parallel), the scene model, and the ray tracer's first sync (Embree BVHs, textures).
+  const LoadedScene::Times& lt = setup.loaded.times;
+  std::printf(", \"load\": {\"parse_ms\": %.1f, \"images_ms\": %.1f, \"convert_ms\": %.1f, \"sync_ms\": %.1f, \"total_ms\": %.1f}",
+              lt.parse_ms, lt.images_ms, lt.convert_ms, first_sync_ms, lt.parse_ms + lt.images_ms + lt.convert_ms + first_sync_ms);
   if (!cmp_ratio.empty())
     std::printf(", \"compare\": %s, \"reps\": %ld, \"compare_ms\": %.3f, \"compare_ratio\": %.4f", json_str(compare).c_str(), reps, median(cmp_ms),
                 median(cmp_ratio));

@@ -1,6 +1,8 @@
 #include "core/gltf_loader.h"
 
+#include <algorithm>
 #include <array>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -24,6 +26,7 @@
 #pragma GCC diagnostic ignored "-Wpedantic"
 #endif
 #include <tiny_gltf.h>
+#include <tbb/parallel_for.h>
 #if defined(__GNUC__)
 #pragma GCC diagnostic pop
 #endif
@@ -255,10 +258,34 @@ bool jailed_read(std::vector<unsigned char>* out, std::string* err, const std::s
   return tinygltf::ReadWholeFile(out, err, filepath, nullptr);
 }
 
+// Images are decoded after tinygltf has read the file, all at once in parallel (TBB): tinygltf
+// would decode them one after another while it parses. Its image callback only keeps the
+// encoded bytes of each image.
+struct EncodedImages {
+  std::vector<std::vector<uint8_t>> bytes;  // by image index
+};
+
+bool keep_encoded(tinygltf::Image* image, const int index, std::string*, std::string*, int, int,
+                  const unsigned char* bytes, int size, void* user) {
+  auto& images = *static_cast<EncodedImages*>(user);
+  if (index < 0) return false;
+  if (size_t(index) >= images.bytes.size()) images.bytes.resize(size_t(index) + 1);
+  images.bytes[size_t(index)].assign(bytes, bytes + std::max(size, 0));
+  image->width = image->height = -1;  // decoded later
+  return true;
+}
+
+double ms_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+
 }  // namespace
 
-LoadedScene load_gltf(const std::string& path) {
+LoadedScene load_gltf(const std::string& path, const GltfOptions& options) {
+  const auto t0 = std::chrono::steady_clock::now();
   tinygltf::TinyGLTF ctx;
+  EncodedImages encoded;
+  ctx.SetImageLoader(&keep_encoded, &encoded);
   tinygltf::Model model;
   std::string err, warn;
   bool ok = false;
@@ -279,7 +306,27 @@ LoadedScene load_gltf(const std::string& path) {
 
   check_buffer_views(model, path);
   LoadedScene out;
+  out.times.parse_ms = ms_since(t0);
   Scene& scene = out.scene;
+
+  // Every image a texture uses, decoded to RGBA8 (in parallel unless options say otherwise).
+  const auto t_images = std::chrono::steady_clock::now();
+  std::vector<char> used(model.images.size(), 0);
+  for (const auto& gt : model.textures)
+    if (gt.source >= 0 && size_t(gt.source) < used.size()) used[size_t(gt.source)] = 1;
+  std::vector<Image> decoded(model.images.size());
+  std::vector<std::string> decode_errors(model.images.size());
+  auto decode = [&](size_t i) {
+    if (!used[i] || i >= encoded.bytes.size() || encoded.bytes[i].empty()) return;
+    if (!decode_image(encoded.bytes[i].data(), encoded.bytes[i].size(), decoded[i], decode_errors[i])) decoded[i] = Image{};
+    std::vector<uint8_t>().swap(encoded.bytes[i]);
+  };
+  if (options.parallel_images)
+    tbb::parallel_for(size_t(0), model.images.size(), decode);
+  else
+    for (size_t i = 0; i < model.images.size(); ++i) decode(i);
+  out.times.images_ms = ms_since(t_images);
+  const auto t_convert = std::chrono::steady_clock::now();
   if (!warn.empty()) out.warnings.push_back(path + ": " + warn);
   Id next_id = 1;
 
@@ -291,24 +338,17 @@ LoadedScene load_gltf(const std::string& path) {
       out.warnings.push_back(path + ": texture " + std::to_string(ti) + " has no image");
       continue;
     }
-    const auto& img = model.images[gt.source];
-    int nc = img.component, bytes_per = img.bits == 16 ? 2 : 1;
-    if (img.image.empty() || img.width <= 0 || img.height <= 0 || nc < 1 || nc > 4 || (img.bits != 8 && img.bits != 16) ||
-        img.image.size() != size_t(img.width) * img.height * nc * bytes_per) {
-      out.warnings.push_back(path + ": image '" + img.uri + "' could not be decoded; texture left out");
+    const Image& img = decoded[size_t(gt.source)];
+    if (img.width <= 0 || img.height <= 0 || img.rgba.size() != size_t(img.width) * size_t(img.height) * 4) {
+      const std::string& why = decode_errors[size_t(gt.source)];
+      out.warnings.push_back(path + ": image '" + model.images[gt.source].uri + "' could not be decoded" +
+                             (why.empty() ? "" : " (" + why + ")") + "; texture left out");
       continue;
     }
     Texture tex;
     tex.width = img.width;
     tex.height = img.height;
-    tex.rgba.resize(size_t(img.width) * img.height * 4);
-    for (size_t i = 0, n = size_t(img.width) * img.height; i < n; ++i) {
-      uint8_t c[4] = {0, 0, 0, 255};
-      for (int k = 0; k < nc; ++k) c[k] = img.image[(i * nc + k) * bytes_per + (bytes_per - 1)];  // 16-bit: high byte (LE)
-      if (nc == 1) c[1] = c[2] = c[0];
-      if (nc == 2) { c[3] = c[1]; c[1] = c[2] = c[0]; }
-      std::memcpy(&tex.rgba[i * 4], c, 4);
-    }
+    tex.rgba = img.rgba;  // a texture may share its image with others
     if (gt.sampler >= 0 && size_t(gt.sampler) < model.samplers.size()) {
       const auto& s = model.samplers[gt.sampler];
       auto wrap = [](int w) { return w == TINYGLTF_TEXTURE_WRAP_CLAMP_TO_EDGE ? Sampler::Wrap::clamp : Sampler::Wrap::repeat; };
@@ -521,6 +561,7 @@ LoadedScene load_gltf(const std::string& path) {
     }
     scene.set_camera(c);
   }
+  out.times.convert_ms = ms_since(t_convert);
   return out;
 }
 

@@ -22,13 +22,21 @@ struct Bounds {
 
 struct LoadedScene {
   Scene scene;
+  // Where the load's time went (tessera bench prints them as "load"): tinygltf reading the
+  // JSON and the buffers, decoding the images the textures use, and building the scene.
+  struct Times {
+    double parse_ms = 0, images_ms = 0, convert_ms = 0;
+  } times;
   Bounds bounds;                      // world bounds of all instances
   bool has_camera = false;            // the scene's first camera node was found
   std::vector<std::string> warnings;  // things left out or repaired, each naming the file
 };
 
+struct GltfOptions {
+  bool parallel_images = true;  // decode the images on every TBB thread (false: one after another)
+};
 // Throws std::runtime_error naming the file and what is wrong; never crashes on a broken file.
-LoadedScene load_gltf(const std::string& path);
+LoadedScene load_gltf(const std::string& path, const GltfOptions& options = {});
 
 // A recorded camera loop (../shared/scenes/*/camera-loop.json).
 struct CameraLoop {

@@ -209,7 +209,8 @@ std::shared_ptr<const Image> AssetStore::texture(const AssetFile& file, int32_t 
     return nullptr;
   }
   auto img = std::make_shared<Image>();
-  if (!decode_image(b.data(), b.size(), *img, error)) {
+  const bool jpeg = jw > 0;  // libjpeg-turbo for JPEG files, stb for PNG
+  if (!(jpeg ? jpeg_decode(b.data(), b.size(), *img, error) : decode_image(b.data(), b.size(), *img, error))) {
     if (error.empty()) error = "the image does not decode";
     return nullptr;
   }

@@ -5,13 +5,21 @@
 import { parseXml3dJson } from './JsonMesh.js';
 import { loadGltf } from './GltfLoader.js';
 
+// What every Resources of the page loaded or is loading, by fetch function, kind and URL: a
+// handler that is rebuilt (an <xml3d> whose server attribute changes, say) or a second <xml3d>
+// of the same scene does not fetch and parse the files again. A failed load is forgotten.
+const SHARED = new WeakMap();  // fetch function -> Map(`${kind} ${url}` -> Promise of the data)
+const DOCUMENT_URLS = new WeakMap();  // XML documents loaded -> their URLs
+
 export class Resources {
-  constructor({ fetch: fetchFn = globalThis.fetch?.bind(globalThis), parseXml, onLoad } = {}) {
-    this.fetch = fetchFn;
+  constructor({ fetch: fetchFn, parseXml, onLoad } = {}) {
+    const base = fetchFn || globalThis.fetch;
+    this.fetch = fetchFn || globalThis.fetch?.bind(globalThis);
+    if (base && !SHARED.has(base)) SHARED.set(base, new Map());
+    this.shared = base ? SHARED.get(base) : new Map();
     this.parseXml = parseXml || ((text) => new DOMParser().parseFromString(text, 'text/xml'));
     this.onLoad = onLoad || (() => {});
     this.entries = new Map();
-    this.documentUrls = new WeakMap();
   }
 
   static kindOf(url) {
@@ -28,7 +36,9 @@ export class Resources {
     if (e) return e;
     e = { state: 'loading', kind, data: null, error: null };
     this.entries.set(key, e);
-    this.load(key, kind).then((data) => {
+    const k = `${kind} ${key}`;
+    if (!this.shared.has(k)) this.shared.set(k, this.load(key, kind).catch((err) => { this.shared.delete(k); throw err; }));
+    this.shared.get(k).then((data) => {
       e.state = 'loaded';
       e.data = data;
     }, (err) => {
@@ -62,11 +72,11 @@ export class Resources {
     const doc = this.parseXml(await r.text());
     if (!doc || !doc.documentElement || doc.getElementsByTagName('parsererror').length)
       throw new Error('not a well-formed XML document');
-    this.documentUrls.set(doc, url);
+    DOCUMENT_URLS.set(doc, url);
     return doc;
   }
 
   urlOfDocument(doc) {
-    return this.documentUrls.get(doc);
+    return DOCUMENT_URLS.get(doc);
   }
 }
