@@ -227,3 +227,47 @@ test('ao-samples / max-depth on <xml3d> reach the node: AO darkens the ambient-l
     assert.ok(!/server:/.test(st.status), `no server errors: ${st.status}`);
     await page.close();
   });
+
+test('a demo page whose glTF lies in the node\'s own /scenes/ sends references: the node loads every one, and the picture equals the uploaded scene\'s',
+  { skip: !BIN && 'TESSERA_BIN not set (CTest passes the tessera binary)' }, async () => {
+    // No AO (its noise is seeded per session) and no refinement: two sessions of the same scene
+    // and view then give the same frame.
+    const openDemo = async (query) => {
+      const page = await env.context.newPage();
+      page.logs = [];
+      page.on('console', (m) => page.logs.push(`${m.type()}: ${m.text()}`));
+      await page.addInitScript(() => {
+        window.__frames = [];
+        document.addEventListener('framedrawn', (e) => window.__frames.push(e.detail.frame), true);
+        window.__load = false;
+        document.addEventListener('load', (e) => { if (e.target.localName === 'xml3d') window.__load = true; }, true);
+      });
+      await page.goto(`${node.base}/demo/pavilion.html?server=${node.host}:${node.port}&display=jpeg&ao-samples=0&refine-samples=1&frame-budget=0${query}`);
+      await page.waitForFunction(() => window.__load, null, { timeout: 60000, polling: 100 });
+      // The whole scene on screen: two frames in a row the same, after the load event.
+      let prev = null;
+      for (let k = 0; k < 100; k++) {
+        await new Promise((r) => setTimeout(r, 300));
+        const img = await shown(page);
+        if (img && img === prev) return { page, image: Buffer.from(img, 'base64') };
+        prev = img;
+      }
+      return assert.fail(`${query}: the frame did not settle\n${page.logs.join('\n')}`);
+    };
+    const events = () => node.log.filter((l) => l.includes('"references"')).map((l) => JSON.parse(l));
+    const before = events().length;
+    const refs = await openDemo('');
+    const loaded = events().slice(before);
+    assert.ok(loaded.length >= 1, 'the node logged the references it loaded');
+    assert.equal(loaded.reduce((n, e) => n + e.refused, 0), 0, `none refused: ${JSON.stringify(loaded)}`);
+    assert.ok(loaded.reduce((n, e) => n + e.loaded, 0) > 100, 'the pavilion\'s buffers and textures went as references');
+    assert.ok(!refs.page.logs.some((l) => /refused/.test(l)), refs.page.logs.join('\n'));
+    const upload = await openDemo('&references=off');
+    assert.equal(events().length, before + loaded.length, 'references="off" sends none');
+    const same = psnr(refs.image, upload.image);
+    assert.ok(same >= 40, `the referenced scene looks as the uploaded one: ${same.toFixed(1)} dB`);
+    console.log(`# references: ${loaded.reduce((n, e) => n + e.loaded, 0)} loaded in ${loaded.map((e) => e.ms).join(', ')} ms; `
+      + `against the upload ${same.toFixed(1)} dB`);
+    await refs.page.close();
+    await upload.page.close();
+  });
