@@ -237,6 +237,8 @@ TEST_CASE("Over mutual TLS two workers render for a master; a killed worker is c
   // Each node says it runs over mutual TLS, and the cluster port bound to loopback (no
   // cluster-host given).
   for (Node* n : {&w1, &w2, &m}) {
+    // The event goes through the node's logger actor: it may reach stderr after the listening line.
+    wait_for([&] { return n->p->err_count("\"cluster_security\"") >= 1; }, 10000);
     INFO("stderr: " << n->p->err());
     CHECK(n->p->err_count("\"cluster_security\": \"mutual_tls\"") == 1);
     CHECK(n->p->err_count("\"warning\"") == 0);
@@ -429,6 +431,8 @@ TEST_CASE("The cluster port binds to loopback unless configured; without TLS els
   const Certs& c = certs();
   {
     Node w = worker("w", {});
+    // The event goes through the node's logger actor: it may reach stderr after the listening line.
+    wait_for([&] { return w.p->err_count("\"cluster_security\"") >= 1; }, 10000);
     CHECK(json_field(w.p->out(), "cluster").rfind("127.0.0.1:", 0) == 0);
     CHECK(w.p->err_count("\"cluster_security\": \"none\"") == 1);
     CHECK(w.p->err_count("\"warning\"") == 0);  // loopback: nothing crosses the network
@@ -440,6 +444,7 @@ TEST_CASE("The cluster port binds to loopback unless configured; without TLS els
   }
   {
     Node w = worker("w", {"--tessera.cluster-host=0.0.0.0"});
+    wait_for([&] { return w.p->err_count("\"cluster_security\"") >= 1; }, 10000);
     INFO("stderr: " << w.p->err());
     CHECK(w.p->err_count("\"cluster_security\": \"none\"") == 1);
     CHECK(w.p->err_count("\"warning\": \"no TLS on its cluster port on 0.0.0.0: scenes and frames cross the network "
@@ -452,6 +457,7 @@ TEST_CASE("The cluster port binds to loopback unless configured; without TLS els
     chmod(open_key.c_str(), 0644);
     Node w = worker("w", {"--tessera.cluster-host=0.0.0.0", "--tessera.cluster-tls-cert=" + c.cluster + "/w1.pem",
                           "--tessera.cluster-tls-key=" + open_key, "--tessera.cluster-tls-ca=" + c.cluster + "/ca.pem"});
+    wait_for([&] { return w.p->err_count("\"cluster_security\"") >= 1; }, 10000);
     INFO("stderr: " << w.p->err());
     CHECK(w.p->err_count("\"cluster_security\": \"mutual_tls\"") == 1);
     CHECK(w.p->err_count("\"warning\"") == 0);
