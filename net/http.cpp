@@ -326,20 +326,30 @@ bool fetch_url(const std::string& url, uint64_t max_bytes, std::vector<uint8_t>&
     error = url + ": cannot send the request";
     return false;
   }
+  // Until the server closes, or the body reaches its Content-Length (a server may keep the
+  // connection open even for HTTP/1.0).
   std::string buf;
-  bool eof = false;
-  while (!eof) {
+  size_t he = std::string::npos, want = std::string::npos;
+  while (true) {
     if (buf.size() > max_bytes + 65536) {
       error = url + ": the body exceeds " + std::to_string(max_bytes) + " bytes";
       return false;
     }
-    if (!stream.read_some(buf, deadline)) eof = true;
+    if (he == std::string::npos && (he = buf.find("\r\n\r\n")) != std::string::npos) {
+      const std::string length = header_value(buf.substr(0, he + 2), "content-length");
+      if (!length.empty()) want = he + 4 + size_t(std::strtoull(length.c_str(), nullptr, 10));
+    }
+    if (want != std::string::npos && buf.size() >= want) break;
+    if (!stream.read_some(buf, deadline)) {
+      if (Clock::now() >= deadline) {
+        error = url + ": no complete answer within " + std::to_string(timeout_ms) + " ms";
+        return false;
+      }
+      break;
+    }
   }
-  if (Clock::now() >= deadline) {
-    error = url + ": no complete answer within " + std::to_string(timeout_ms) + " ms";
-    return false;
-  }
-  const size_t he = buf.find("\r\n\r\n");
+  if (want != std::string::npos && buf.size() > want) buf.resize(want);
+  he = buf.find("\r\n\r\n");
   if (buf.compare(0, 5, "HTTP/") != 0 || he == std::string::npos) {
     error = url + ": not an HTTP answer";
     return false;

@@ -559,3 +559,53 @@ TEST_CASE("References: the node loads its own /scenes/ files, refuses other orig
   CHECK(node.settings->assets->stats().misses == 1);
   CHECK(node.count(Ev::references, [](const Event& e) { return has(e, "first_refusal", "evil.example"); }) == 1);
 }
+
+TEST_CASE("References to a listed origin are fetched over HTTP; other origins are refused", "[e2e][references]") {
+  // Node B serves a scenes folder; node A lists B's origin in its asset-origins and fetches
+  // from it with the node's own HTTP client (net/http.h fetch_url).
+  TempDir dir("refs-http");
+  const float pos[9] = {-1, -1, 0, 1, -1, 0, 0, 1, 0};
+  dir.write("tri.bin", std::string(reinterpret_cast<const char*>(pos), sizeof pos));
+  Image tex(4, 2);
+  for (auto& b : tex.rgba) b = 200;
+  write_png(dir.path + "/t.png", tex);
+  TestNode b(4, [&](NodeSettings&, ServerOptions& o) { o.scenes_root = dir.path; });
+  const std::string origin_b = "http://127.0.0.1:" + std::to_string(b.port());
+  TestNode a(4, [&](NodeSettings& s, ServerOptions&) {
+    AssetOptions o;
+    o.origins = {origin_b};
+    s.assets = std::make_shared<AssetStore>(o, [](const std::string& url, uint64_t max, std::vector<uint8_t>& body,
+                                                  std::string& error) { return http::fetch_url(url, max, body, error, 10000); });
+  });
+  using namespace protocol;
+  ProtoClient c;
+  REQUIRE(c.connect(a.port()));
+  REQUIRE(c.handshake(DisplayKind::jpeg, 32, 32, 90));
+  SetBufferRef p;
+  p.id = 1, p.components = 3, p.value_count = 9, p.url = origin_b + "/scenes/tri.bin";
+  SetTextureRef t;
+  t.id = 2, t.url = origin_b + "/scenes/t.png";
+  SetTextureRef missing = t;
+  missing.id = 3, missing.url = origin_b + "/scenes/none.png";
+  SetTextureRef other = t;
+  other.id = 4, other.url = "http://127.0.0.1:" + std::to_string(a.port()) + "/scenes/t.png";  // A's own: no scenes there
+  REQUIRE(c.send({p, t, missing, other}));
+  std::vector<Reference> got;
+  while (got.size() < 4) {
+    auto msg = c.ws.receive(int(20000 * time_scale()));
+    REQUIRE(msg);
+    auto recs = decode_server(msg->data(), msg->size(), c.limits);
+    REQUIRE(recs);
+    for (auto& r : recs.value())
+      if (auto* x = std::get_if<Reference>(&r)) got.push_back(*x);
+  }
+  INFO(got[0].message << " | " << got[1].message << " | " << got[2].message << " | " << got[3].message);
+  CHECK(got[0].ok);
+  CHECK(got[0].bytes == 36);
+  CHECK(got[1].ok);
+  CHECK(got[1].bytes == 4 * 2 * 4);
+  CHECK_FALSE(got[2].ok);
+  CHECK(got[2].message.find("HTTP 404") != std::string::npos);
+  CHECK_FALSE(got[3].ok);
+  CHECK(got[3].message.find("(and this node serves none)") != std::string::npos);
+}
