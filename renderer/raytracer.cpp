@@ -112,7 +112,10 @@ inline float max_abs(const Vec3& p) { return std::fmax(std::fabs(p.x), std::fmax
 }  // namespace
 
 // ---------------------------------------------------------------------------------------
-// Alpha masks: an Embree filter function rejects hits where the mask is transparent.
+// Alpha masks: an Embree filter function rejects hits where the mask is transparent. For
+// occlusion it also lets refracting surfaces through, and shadow rays through partly
+// transparent ones (opacity < 1 without an alpha mask) at the transmission 1 - opacity (times
+// the diffuse texture's alpha, as shading reads it): a 50%-opaque pane casts a half shadow.
 // ---------------------------------------------------------------------------------------
 
 template <bool kOcclusion>
@@ -129,7 +132,12 @@ static void alpha_filter(const RTCFilterFunctionNArguments* args) {
       args->valid[i] = 0;
       continue;
     }
-    if (!m.alpha_mask) continue;
+    const bool translucent = kOcclusion && !m.alpha_mask && m.opacity < 1;
+    if (!m.alpha_mask && !translucent) continue;
+    // Every occlusion query passes an OcclusionContext (raytracer_kernel.inc); the filter may
+    // change what it carries for this query.
+    auto* oc = kOcclusion ? reinterpret_cast<OcclusionContext*>(const_cast<RTCIntersectContext*>(args->context)) : nullptr;
+    if (translucent && !oc->shadow) continue;  // AO: an occluder
     float alpha = m.opacity;
     const auto* tex = impl.mat_diffuse_tex[mi];
     if (tex && !g->texcoords.empty()) {
@@ -144,7 +152,22 @@ static void alpha_filter(const RTCFilterFunctionNArguments* args) {
       sample_texture(*tex, w * t0[0] + u * t1[0] + v * t2[0], w * t0[1] + u * t1[1] + v * t2[1], rgba);
       alpha *= rgba[3];
     }
-    if (alpha < m.alpha_cutoff) args->valid[i] = 0;
+    if (!translucent) {
+      if (alpha < m.alpha_cutoff) args->valid[i] = 0;
+      continue;
+    }
+    const unsigned lane = RTCRayN_id(args->ray, args->N, i);
+    if (lane >= unsigned(OcclusionContext::kLanes)) continue;  // not a kernel ray: an occluder
+    const uint64_t key = uint64_t(inst) << 32 | RTCHitN_primID(args->hit, args->N, i);
+    uint8_t& n = oc->seen_count[lane];
+    bool counted = false;
+    for (int k = 0; k < n; ++k) counted = counted || oc->seen[lane][k] == key;
+    if (!counted) {
+      if (n < OcclusionContext::kSeen) oc->seen[lane][n++] = key;
+      oc->transmission[lane] *= 1.0f - std::fmin(std::fmax(alpha, 0.0f), 1.0f);
+    }
+    // Almost nothing left: occluded (traversal stops); else the ray goes on through it.
+    if (oc->transmission[lane] > 1.0f / 512) args->valid[i] = 0;
   }
 }
 
@@ -276,7 +299,7 @@ void RayTracer::Impl::sync(const Scene& scene, std::vector<std::string>& warning
     auto mit = material_index.find(m.material);
     const Material& mat = mit == material_index.end() ? materials[0] : materials[mit->second];
     needs_filter[key] = needs_filter[key] || mat.alpha_mask;
-    see_through[key] = see_through[key] || mat.refraction > 0;
+    see_through[key] = see_through[key] || mat.refraction > 0 || (mat.opacity < 1 && !mat.alpha_mask);
   }
   std::vector<std::pair<const GeomKey*, Geom*>> to_build;
   for (auto& [id, key] : mesh_key) {

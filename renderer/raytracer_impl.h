@@ -53,6 +53,26 @@ template <> struct Packet<16> {
 };
 }  // namespace
 
+// The context of every occlusion query (shadow and AO rays): Embree's, then for shadow rays
+// what passes each lane's ray (lanes are the rays' ids): the transmission left after the partly
+// transparent surfaces it crossed, which alpha_filter multiplies by 1 - opacity, and the
+// surfaces already counted (a BVH with spatial splits may report one triangle more than once).
+// AO rays (shadow false): such surfaces occlude, as before.
+struct OcclusionContext {
+  RTCIntersectContext rtc;  // first: Embree's filter functions get a pointer to it
+  bool shadow = false;
+  static constexpr int kLanes = 16, kSeen = 8;
+  float transmission[kLanes];
+  uint8_t seen_count[kLanes];
+  uint64_t seen[kLanes][kSeen];  // instance << 32 | primitive
+  void init(bool for_shadows, int lanes) {
+    rtcInitIntersectContext(&rtc);
+    rtc.flags = RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
+    shadow = for_shadows;
+    for (int i = 0; i < lanes; ++i) transmission[i] = 1.0f, seen_count[i] = 0;
+  }
+};
+
 // Compile-time features of a kernel: the general kernel has all, the specialised none.
 enum Feature : unsigned { kAO = 1, kSecondary = 2, kTextures = 4, kAll = 7, kNone = 0 };
 
@@ -204,7 +224,7 @@ struct RayTracer::Impl {
     std::vector<uint32_t> indices; // 3 per triangle
     uint64_t version = 0;          // max version of the buffers it was built from
     bool filter = false;           // alpha-mask filter attached
-    bool see_through = false;      // occlusion filter for refracting materials attached
+    bool see_through = false;      // occlusion filter for refracting and partly transparent materials attached
     bool used = false;
   };
   struct Inst {

@@ -633,6 +633,59 @@ TEST_CASE("a light with cast_shadow false lights what another surface hides from
   CHECK(differ == 0);
 }
 
+// A partly transparent surface (opacity < 1, no alpha mask) lets through 1 - opacity of the
+// light a shadow ray carries (XML3D pages use opacity for glass panes and the like): a
+// 50%-opaque pane casts a half shadow, two of them a quarter, an invisible one none. Refracting
+// surfaces still cast none, and AO still counts such a pane as an occluder.
+TEST_CASE("partly transparent surfaces cast shadows of matching transmission", "[raytracer][shadow]") {
+  const int W = 101, H = 101;
+  Scene scene;
+  scene.set_resolution(W, H);
+  scene.set_environment(plain_env({0, 0, 0}, {0.2f, 0.2f, 0.2f}));
+  Material pane = diffuse({1, 0, 0});
+  pane.opacity = 0.5f;
+  scene.set_material(1, pane);
+  scene.set_material(2, diffuse({0, 1, 0}));
+  scene.set_material(3, pane);
+  add_object(scene, 100, quad({-1, -1, 0}, {2, 0, 0}, {0, 2, 0}), 1);
+  add_object(scene, 200, quad({-4, -4, -1}, {8, 0, 0}, {0, 8, 0}), 2);
+  scene.set_light(1, directional({1, 0, -1}));  // the front pane's shadow falls one unit to +x
+  const Camera cam = look({0, 0, 5}, {0, 0, 0}, 60 * kDeg);
+  scene.set_camera(cam);
+  // (1.5, 0, -1): the camera sees it directly (beside both panes); its shadow ray crosses the
+  // front pane at x = 0.5 and the second pane (below) at x = 1.
+  float fx, fy;
+  project(cam, W, H, {1.5f, 0, -1}, fx, fy);
+  const int x = int(std::lround(fx)), y = int(std::lround(fy));
+  auto green = [&](float transmission) { return int(std::lround(255 * (0.2f + std::sqrt(0.5f) * transmission))); };
+  RayTracer rt;
+  auto probe = [&] {
+    std::vector<std::string> warnings;
+    Image img = render_full(rt, scene, no_ao(), &warnings);
+    return px(img, x, y).g;
+  };
+  CHECK(std::abs(probe() - green(0.5f)) <= 1);
+  // A second half-opaque pane on the shadow ray's way (out of the camera ray's): a quarter.
+  add_object(scene, 300, quad({0.5f, -1, -0.5f}, {0.7f, 0, 0}, {0, 2, 0}), 3);
+  CHECK(std::abs(probe() - green(0.25f)) <= 1);
+  scene.remove_mesh(300);
+  // Opacity 0.8: 20% through; an invisible pane: the full light; an opaque one: the ambient only.
+  pane.opacity = 0.8f;
+  scene.set_material(1, pane);
+  CHECK(std::abs(probe() - green(0.2f)) <= 1);
+  pane.opacity = 0;
+  scene.set_material(1, pane);
+  CHECK(std::abs(probe() - green(1)) <= 1);
+  pane.opacity = 1;
+  scene.set_material(1, pane);
+  CHECK(std::abs(probe() - green(0)) <= 1);
+  // A refracting pane casts none (as before).
+  pane.opacity = 0.5f;
+  pane.refraction = 0.5f;
+  scene.set_material(1, pane);
+  CHECK(std::abs(probe() - green(1)) <= 1);
+}
+
 // ---------------------------------------------------------------------------------------
 // Refraction: Snell offset through a tilted slab, total internal reflection.
 // ---------------------------------------------------------------------------------------
