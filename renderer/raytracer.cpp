@@ -206,7 +206,6 @@ void RayTracer::Impl::build_geom(const Scene& scene, const GeomKey& key, Geom& g
   rtcCommitGeometry(tri);
   rtcAttachGeometry(g.blas, tri);
   rtcReleaseGeometry(tri);
-  rtcCommitScene(g.blas);
 }
 
 void RayTracer::Impl::sync(const Scene& scene, std::vector<std::string>& warnings) {
@@ -318,10 +317,12 @@ void RayTracer::Impl::sync(const Scene& scene, std::vector<std::string>& warning
       to_build.emplace_back(&key, &g);
     }
   }
-  // Each geometry's BVH on its own task: a scene of many small meshes (the kitchen: 400) built
-  // one after another would use one core, since Embree parallelises a build only inside a large
-  // mesh. Builds of different Embree scenes may run concurrently; the map is not changed here.
-  tbb::parallel_for(size_t(0), to_build.size(), [&](size_t k) { build_geom(scene, *to_build[k].first, *to_build[k].second); });
+  // The scene's buffers are copied here, on the calling thread (which owns the scene); each
+  // geometry's BVH is then built on its own task: a scene of many small meshes (the kitchen: 400)
+  // built one after another would use one core, since Embree parallelises a build only inside a
+  // large mesh. Commits of different Embree scenes may run concurrently.
+  for (auto& [key, g] : to_build) build_geom(scene, *key, *g);
+  tbb::parallel_for(size_t(0), to_build.size(), [&](size_t k) { rtcCommitScene(to_build[k].second->blas); });
   stats.geometries_built += to_build.size();
 
   // Instances: one per mesh.

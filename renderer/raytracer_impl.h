@@ -308,6 +308,8 @@ struct RayTracer::Impl {
   }
 
   void sync(const Scene& scene, std::vector<std::string>& warnings);
+  // Copies the geometry's buffers out of the scene and sets up its Embree scene, uncommitted:
+  // on the calling thread. Committing (the BVH build) may then run on any thread.
   void build_geom(const Scene& scene, const GeomKey& key, Geom& g);
 };
 
