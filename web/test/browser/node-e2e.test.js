@@ -244,30 +244,32 @@ test('a demo page whose glTF lies in the node\'s own /scenes/ sends references: 
       });
       await page.goto(`${node.base}/demo/pavilion.html?server=${node.host}:${node.port}&display=jpeg&ao-samples=0&refine-samples=1&frame-budget=0${query}`);
       await page.waitForFunction(() => window.__load, null, { timeout: 60000, polling: 100 });
-      // The whole scene on screen: two frames in a row the same, after the load event.
-      let prev = null;
-      for (let k = 0; k < 100; k++) {
-        await new Promise((r) => setTimeout(r, 300));
-        const img = await shown(page);
-        if (img && img === prev) return { page, image: Buffer.from(img, 'base64') };
-        prev = img;
-      }
-      return assert.fail(`${query}: the frame did not settle\n${page.logs.join('\n')}`);
+      return page;
     };
     const events = () => node.log.filter((l) => l.includes('"references"')).map((l) => JSON.parse(l));
     const before = events().length;
     const refs = await openDemo('');
+    // The references reach the node after the page's own loads (the load event may come first).
+    const total = (list) => list.reduce((n, e) => n + e.loaded + e.refused, 0);
+    for (const t0 = Date.now(); Date.now() - t0 < 60000 && total(events().slice(before)) < 366; ) await new Promise((r) => setTimeout(r, 200));
+    await new Promise((r) => setTimeout(r, 500));
     const loaded = events().slice(before);
-    assert.ok(loaded.length >= 1, 'the node logged the references it loaded');
+    assert.equal(total(loaded), 366, `the pavilion's 366 references reached the node: ${JSON.stringify(loaded)}`);
     assert.equal(loaded.reduce((n, e) => n + e.refused, 0), 0, `none refused: ${JSON.stringify(loaded)}`);
     assert.ok(loaded.reduce((n, e) => n + e.loaded, 0) > 100, 'the pavilion\'s buffers and textures went as references');
-    assert.ok(!refs.page.logs.some((l) => /refused/.test(l)), refs.page.logs.join('\n'));
+    assert.ok(!refs.logs.some((l) => /refused/.test(l)), refs.logs.join('\n'));
     const upload = await openDemo('&references=off');
     assert.equal(events().length, before + loaded.length, 'references="off" sends none');
-    const same = psnr(refs.image, upload.image);
+    // XML3D's load event comes with the first frame after the page's own loads, before the node
+    // has the whole scene: wait (on a loaded machine, seconds) until both pages show the same.
+    let same = 0;
+    for (const t0 = Date.now(); Date.now() - t0 < 60000 && same < 40; await new Promise((r) => setTimeout(r, 250))) {
+      const [a, b] = [await shown(refs), await shown(upload)];
+      if (a && b) same = psnr(Buffer.from(a, 'base64'), Buffer.from(b, 'base64'));
+    }
     assert.ok(same >= 40, `the referenced scene looks as the uploaded one: ${same.toFixed(1)} dB`);
     console.log(`# references: ${loaded.reduce((n, e) => n + e.loaded, 0)} loaded in ${loaded.map((e) => e.ms).join(', ')} ms; `
       + `against the upload ${same.toFixed(1)} dB`);
-    await refs.page.close();
-    await upload.page.close();
+    await refs.close();
+    await upload.close();
   });
