@@ -245,44 +245,34 @@ void AssetStore::resolve(std::vector<ClientRecord>& records, const std::string& 
   };
   struct Job {
     size_t record;
+    std::string url;
     Reference answer;
     std::shared_ptr<const Image> image;  // textures
   };
   std::vector<Job> jobs;
   for (size_t i = 0; i < records.size(); ++i) {
-    if (auto* b = std::get_if<SetBufferRef>(&records[i])) {
-      jobs.push_back({i, Reference{RefKind::buffer, false, b->id, 0, {}}, nullptr});
-      Loaded& l = file_of(b->url);
-      if (!l.file.bytes) jobs.back().answer.message = l.error;
-    } else if (auto* t = std::get_if<SetTextureRef>(&records[i])) {
-      jobs.push_back({i, Reference{RefKind::texture, false, t->id, 0, {}}, nullptr});
-      Loaded& l = file_of(t->url);
-      if (!l.file.bytes) jobs.back().answer.message = l.error;
-    }
+    if (auto* b = std::get_if<SetBufferRef>(&records[i]))
+      jobs.push_back({i, b->url, Reference{RefKind::buffer, false, b->id, 0, {}}, nullptr});
+    else if (auto* t = std::get_if<SetTextureRef>(&records[i]))
+      jobs.push_back({i, t->url, Reference{RefKind::texture, false, t->id, 0, {}}, nullptr});
+    else
+      continue;
+    Loaded& l = file_of(jobs.back().url);
+    if (!l.file.bytes) jobs.back().answer.message = l.error;
   }
   // Textures decode in parallel (those in the cache are only looked up).
   tbb::parallel_for(size_t(0), jobs.size(), [&](size_t j) {
     Job& job = jobs[j];
-    auto* t = std::get_if<SetTextureRef>(&records[job.record]);
-    if (!t || !job.answer.message.empty()) return;
-    job.image = texture(files.at(t->url).file, limits.max_texture_size, job.answer.message);
+    if (job.answer.what != RefKind::texture || !job.answer.message.empty()) return;
+    job.image = texture(files.at(job.url).file, limits.max_texture_size, job.answer.message);
   });
   uint64_t payload = 0;
   for (Job& job : jobs) {
     Reference& a = job.answer;
     ClientRecord& rec = records[job.record];
-    const std::string url = std::visit(
-        [](const auto& r) -> std::string {
-          if constexpr (std::is_same_v<std::decay_t<decltype(r)>, SetBufferRef> ||
-                        std::is_same_v<std::decay_t<decltype(r)>, SetTextureRef>)
-            return r.url;
-          else
-            return "";
-        },
-        rec);
     if (a.message.empty()) {
       if (auto* b = std::get_if<SetBufferRef>(&rec)) {
-        const std::vector<uint8_t>& bytes = *files.at(b->url).file.bytes;
+        const std::vector<uint8_t>& bytes = *files.at(job.url).file.bytes;
         const uint32_t size = source_size(b->source), elem = b->components * size;
         const uint32_t stride = b->byte_stride ? b->byte_stride : elem;
         const uint64_t count = b->value_count / b->components;
@@ -343,7 +333,7 @@ void AssetStore::resolve(std::vector<ClientRecord>& records, const std::string& 
         }
       }
     }
-    if (!a.ok) a.message = std::string(kind_name(a.what)) + " " + std::to_string(a.id) + " (" + url + "): " + a.message;
+    if (!a.ok) a.message = std::string(kind_name(a.what)) + " " + std::to_string(a.id) + " (" + job.url + "): " + a.message;
     answers.push_back(std::move(a));
   }
 }

@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "tests/cluster/cluster_checks.h"
 #include "tests/e2e/node_fixture.h"
 #include "tests/cluster/serve_node.h"
 #include "tests/e2e/process.h"
@@ -28,17 +29,6 @@ Node worker(const std::string& name, uint16_t port = 0) {
   return Node({"--no-http", "--cluster-port", std::to_string(port), "--tessera.name=" + name});
 }
 
-// Requests frame k of the camera loop and checks it against the direct render.
-void check_frame(ProtoClient& c, size_t k, uint32_t number, Process& master) {
-  auto f = c.render(pavilion_loop().camera(k), number);
-  INFO("master stderr tail: " << master.err().substr(master.err().size() > 3000 ? master.err().size() - 3000 : 0));
-  REQUIRE(f);
-  CHECK(f->frame == number);
-  REQUIRE(f->encoding == protocol::FrameEncoding::jpeg);
-  const double psnr = compare(decode_jpeg(f->payload), render_direct(pavilion().scene, pavilion_loop().camera(k), W, H, 0, 0)).psnr;
-  INFO("frame " << number << " PSNR " << psnr);
-  CHECK(psnr >= 30.0);
-}
 
 }  // namespace
 

@@ -27,6 +27,7 @@
 #include <string>
 #include <vector>
 
+#include "tests/cluster/cluster_checks.h"
 #include "tests/e2e/node_fixture.h"
 #include "tests/e2e/process.h"
 
@@ -214,8 +215,6 @@ size_t count(const std::string& s, const std::string& needle) {
   return n;
 }
 
-std::string tail(const std::string& s, size_t n = 4000) { return s.substr(s.size() > n ? s.size() - n : 0); }
-
 // One `tessera serve` process (`prefix` runs it in a namespace); its first stdout line names
 // its endpoints.
 struct Node {
@@ -277,18 +276,6 @@ Node worker(const Netns& ns, const std::string& name, const Tls& tls) {
   return Node({ip_binary(), "netns", "exec", ns.name}, a);
 }
 
-// Requests frame k of the camera loop and checks it against the direct render.
-void check_frame(ProtoClient& c, size_t k, uint32_t number, Process& master) {
-  auto f = c.render(pavilion_loop().camera(k), number);
-  INFO("master stderr tail: " << tail(master.err()));
-  REQUIRE(f);
-  CHECK(f->frame == number);
-  REQUIRE(f->encoding == protocol::FrameEncoding::jpeg);
-  const double psnr =
-      compare(decode_jpeg(f->payload), render_direct(pavilion().scene, pavilion_loop().camera(k), W, H, 0, 0)).psnr;
-  INFO("frame " << number << " PSNR " << psnr);
-  CHECK(psnr >= 30.0);
-}
 
 // The master's cluster_frame line of client frame `number`.
 std::string cluster_frame(Process& master, uint32_t number) {

@@ -33,6 +33,8 @@
 #include <caf/io/all.hpp>
 
 #include "tests/cluster/serve_node.h"
+#include "tests/cluster/cluster_checks.h"
+#include "tests/cluster/cluster_checks.h"
 #include "tests/e2e/node_fixture.h"
 #include "tests/e2e/process.h"
 
@@ -101,20 +103,6 @@ Node worker(const std::string& name, const std::vector<std::string>& tls, uint16
               tls);
 }
 
-std::string tail(const std::string& s, size_t n = 3000) { return s.substr(s.size() > n ? s.size() - n : 0); }
-
-// Requests frame k of the camera loop and checks it against the direct render.
-void check_frame(ProtoClient& c, size_t k, uint32_t number, Process& master) {
-  auto f = c.render(pavilion_loop().camera(k), number);
-  INFO("master stderr tail: " << tail(master.err()));
-  REQUIRE(f);
-  CHECK(f->frame == number);
-  REQUIRE(f->encoding == protocol::FrameEncoding::jpeg);
-  const double psnr =
-      compare(decode_jpeg(f->payload), render_direct(pavilion().scene, pavilion_loop().camera(k), W, H, 0, 0)).psnr;
-  INFO("frame " << number << " PSNR " << psnr);
-  CHECK(psnr >= 30.0);
-}
 
 // The last line of a log that holds `needle` ("" if none).
 std::string last_line_with(const std::string& log, const std::string& needle) {
@@ -200,17 +188,6 @@ bool tcp_connects(const std::string& ip, uint16_t port) {
   return ok;
 }
 
-// A CAF peer as any program could be: the nodes' message types and application identifier, the
-// plain middleman.
-struct PeerConfig : caf::actor_system_config {
-  PeerConfig() {
-    register_message_types(*this);
-    load<caf::io::middleman>();
-    set("middleman.app-identifiers", std::vector<std::string>{kCafAppIdentifier});
-    set("scheduler.max-threads", size_t{2});
-    set("logger.verbosity", caf::atom("quiet"));
-  }
-};
 
 // The child_unreachable line of child `addr` in a master's log, once there is one.
 std::string unreachable_line(Process& master, const std::string& addr) {

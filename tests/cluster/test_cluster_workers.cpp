@@ -21,6 +21,7 @@
 #include <caf/io/all.hpp>
 
 #include "protocol/scene_records.h"
+#include "tests/cluster/cluster_checks.h"
 #include "tests/e2e/node_fixture.h"
 #include "tests/cluster/serve_node.h"
 #include "tests/e2e/process.h"
@@ -224,21 +225,6 @@ TEST_CASE("A master that stops answering or is killed takes its workers with it"
   }
   CHECK(w.p->wait(0) == std::nullopt);  // the worker process itself runs on
 }
-
-namespace {
-
-struct PeerConfig : caf::actor_system_config {
-  PeerConfig() {
-    register_message_types(*this);
-    load<caf::io::middleman>();
-    // A peer that names the application as the nodes do (CAF refuses other identifiers).
-    set("middleman.app-identifiers", std::vector<std::string>{kCafAppIdentifier});
-    set("scheduler.max-threads", size_t{2});
-    set("logger.verbosity", caf::atom("quiet"));
-  }
-};
-
-}  // namespace
 
 TEST_CASE("A hostile peer on the cluster port gets refusals and failed tiles; the node serves on", "[cluster][fault]") {
   Node w = worker("w", {"--tessera.max-workers=3", "--tessera.max-width=640", "--tessera.max-height=480"});
