@@ -16,6 +16,7 @@
 #include "app/common.h"
 #include "app/node_config.h"
 #include "net/http.h"
+#include "renderer/embree_device.h"
 #include "renderer/rasterizer.h"
 
 namespace tessera::app {
@@ -133,6 +134,11 @@ int run(const std::vector<std::string>& argv) {
   if (cfg.render_threads > 0)
     limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, size_t(cfg.render_threads));
   auto settings = cfg.node_settings();
+  // The ray tracers' Embree device lives as long as the node, and with it the BVHs that sessions
+  // share (renderer/geometry_cache.h): a later visitor of a scene finds its meshes built.
+  EmbreeDevice::set_geometry_cache_limit(uint64_t(cfg.geometry_cache_mb) << 20);
+  std::shared_ptr<EmbreeDevice> embree;
+  if (cfg.renders) embree = EmbreeDevice::acquire();
   if (renderer != "client")
     settings->renderer = int(renderer == "rasterizer" ? protocol::RendererKind::rasterizer : protocol::RendererKind::raytracer);
   // Probe the rasterizer once, so that the operator sees whether it can serve (a session that

@@ -82,6 +82,8 @@ NodeConfig::NodeConfig() {
       .add(max_connections_per_ip, "max-connections-per-ip", "WebSocket connections per client address (0: no limit)")
       .add(asset_cache_mb, "asset-cache-mb", "decoded textures of references kept for later sessions, in MiB (0: none)")
       .add(asset_max_file_mb, "asset-max-file-mb", "the largest file a reference may name, in MiB")
+      .add(geometry_cache_mb, "geometry-cache-mb",
+           "meshes' BVHs kept for later sessions of the same geometry, in MiB (0: only while in use)")
       .add(cluster_port, "cluster-port", "publish this node to parent nodes on this port (-1: off, 0: any)")
       .add(task_timeout_ms, "task-timeout-ms", "fail a sub-tree that has not returned its tiles after this long")
       .add(reconnect_ms, "reconnect-ms", "retry period for lost child nodes; keep-alive period to workers below")
@@ -313,6 +315,7 @@ void NodeConfig::set_admission(ServerOptions& o) const {
   if (max_connections_per_ip < 0) throw std::invalid_argument("tessera.max-connections-per-ip must be >= 0 (0: no limit)");
   if (asset_cache_mb < 0) throw std::invalid_argument("tessera.asset-cache-mb must be >= 0");
   if (asset_max_file_mb < 1) throw std::invalid_argument("tessera.asset-max-file-mb must be >= 1");
+  if (geometry_cache_mb < 0) throw std::invalid_argument("tessera.geometry-cache-mb must be >= 0");
   o.max_connections_per_ip = size_t(max_connections_per_ip);
 }
 

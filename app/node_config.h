@@ -50,6 +50,7 @@ struct NodeConfig : caf::actor_system_config {
   std::vector<std::string> asset_origins;  // origins fetched over HTTP(S) besides the node's own /scenes/
   int64_t asset_cache_mb = 512;             // decoded textures kept for later sessions
   int64_t asset_max_file_mb = 1024;         // the largest file a reference may name
+  int64_t geometry_cache_mb = 1024;         // meshes' BVHs kept for later sessions (renderer/geometry_cache.h)
   // Cluster (docs/operations.md): this node's CAF endpoint and its children.
   int cluster_port = -1;          // publish the node actor here (-1: not a child of anyone; 0: any port)
   std::string cluster_host = "127.0.0.1";  // address the cluster port binds to

@@ -9,6 +9,7 @@ namespace {
 
 std::mutex g_mu;
 std::weak_ptr<EmbreeDevice> g_device;
+std::atomic<uint64_t> g_geometry_limit{uint64_t(1) << 30};
 
 const char* code_name(RTCError code) {
   switch (code) {
@@ -38,13 +39,20 @@ size_t EmbreeDevice::live() {
   return g_device.expired() ? 0 : 1;
 }
 
-EmbreeDevice::EmbreeDevice() {
+void EmbreeDevice::set_geometry_cache_limit(uint64_t bytes) {
+  std::lock_guard<std::mutex> l(g_mu);
+  g_geometry_limit.store(bytes);
+  if (auto d = g_device.lock()) d->geometries_.set_limit(bytes);
+}
+
+EmbreeDevice::EmbreeDevice() : geometries_(g_geometry_limit.load()) {
   device_ = rtcNewDevice(nullptr);
   if (!device_) throw std::runtime_error("cannot create the Embree device: " + std::string(code_name(rtcGetDeviceError(nullptr))));
   rtcSetDeviceErrorFunction(device_, on_error, this);
 }
 
 EmbreeDevice::~EmbreeDevice() {
+  geometries_.clear();  // its scenes before the device
   rtcReleaseDevice(device_);
 }
 

@@ -13,6 +13,8 @@
 
 #include <embree3/rtcore.h>
 
+#include "renderer/geometry_cache.h"
+
 namespace tessera {
 
 class EmbreeDevice {
@@ -32,6 +34,13 @@ class EmbreeDevice {
   // "embree: <code name>: <message>" of the last error reported; empty before the first.
   std::string last_error() const;
 
+  // The bottom-level BVHs its ray tracers share (renderer/geometry_cache.h). They live as
+  // long as the device: a node holds the device for its lifetime, so that a later session
+  // finds what an earlier one built.
+  GeometryCache& geometries() { return geometries_; }
+  // The cache's byte limit, for the device now live and every later one (default 1 GiB).
+  static void set_geometry_cache_limit(uint64_t bytes);
+
  private:
   EmbreeDevice();
   static void on_error(void* self, RTCError code, const char* message);
@@ -40,6 +49,7 @@ class EmbreeDevice {
   std::atomic<uint64_t> errors_{0};
   mutable std::mutex mu_;
   std::string last_;
+  GeometryCache geometries_;  // after device_: its scenes are released before the device
 };
 
 }  // namespace tessera

@@ -120,12 +120,16 @@ inline float max_abs(const Vec3& p) { return std::fmax(std::fabs(p.x), std::fmax
 
 template <bool kOcclusion>
 static void alpha_filter(const RTCFilterFunctionNArguments* args) {
-  auto* g = static_cast<RayTracer::Impl::Geom*>(args->geometryUserPtr);
-  const RayTracer::Impl& impl = *g->owner;
+  // Every query passes a QueryContext (raytracer_kernel.inc), first in an OcclusionContext
+  // for occlusion queries: the session's ray tracer is found there, not in the geometry,
+  // which other sessions may share.
+  auto* qc = reinterpret_cast<const QueryContext*>(args->context);
+  const RayTracer::Impl& impl = *qc->impl;
   for (unsigned i = 0; i < args->N; ++i) {
     if (args->valid[i] != -1) continue;
     unsigned inst = RTCHitN_instID(args->hit, args->N, i, 0);
     if (inst >= impl.inst_by_rtc.size() || !impl.inst_by_rtc[inst]) continue;
+    const RayTracer::Impl::Geom* g = impl.inst_by_rtc[inst]->g;
     int mi = impl.inst_by_rtc[inst]->material;
     const Material& m = impl.materials[mi];
     if (kOcclusion && m.refraction > 0) {  // refracting surfaces cast no shadow and no occlusion
@@ -134,9 +138,8 @@ static void alpha_filter(const RTCFilterFunctionNArguments* args) {
     }
     const bool translucent = kOcclusion && !m.alpha_mask && m.opacity < 1;
     if (!m.alpha_mask && !translucent) continue;
-    // Every occlusion query passes an OcclusionContext (raytracer_kernel.inc); the filter may
-    // change what it carries for this query.
-    auto* oc = kOcclusion ? reinterpret_cast<OcclusionContext*>(const_cast<RTCIntersectContext*>(args->context)) : nullptr;
+    // An occlusion query's OcclusionContext: the filter may change what it carries for this query.
+    auto* oc = kOcclusion ? reinterpret_cast<OcclusionContext*>(const_cast<QueryContext*>(qc)) : nullptr;
     if (translucent && !oc->shadow) continue;  // AO: an occluder
     float alpha = m.opacity;
     const auto* tex = impl.mat_diffuse_tex[mi];
@@ -175,37 +178,57 @@ static void alpha_filter(const RTCFilterFunctionNArguments* args) {
 // Sync: only what changed since the last sync is rebuilt.
 // ---------------------------------------------------------------------------------------
 
-void RayTracer::Impl::build_geom(const Scene& scene, const GeomKey& key, Geom& g) {
+std::shared_ptr<SharedGeometry> RayTracer::Impl::build_geom(const Scene& scene, const GeomKey& key, Geom& g) {
   auto [pos_id, nrm_id, uv_id, col_id, idx_id] = key;
   const Buffer& pos = *scene.buffer(pos_id);
-  size_t nv = pos.count();
-  g.indices.clear();
+  const size_t nv = pos.count();
+  std::vector<uint32_t> implicit;  // unindexed: vertices 0, 1, 2, ...
+  const std::vector<uint32_t>* idx = &implicit;
   if (idx_id != kNoId) {
-    g.indices = scene.buffer(idx_id)->u;
+    idx = &scene.buffer(idx_id)->u;
   } else {
-    g.indices.resize(nv - nv % 3);
-    for (size_t i = 0; i < g.indices.size(); ++i) g.indices[i] = uint32_t(i);
+    implicit.resize(nv - nv % 3);
+    for (size_t i = 0; i < implicit.size(); ++i) implicit[i] = uint32_t(i);
   }
   g.normals = nrm_id != kNoId ? scene.buffer(nrm_id)->f : std::vector<float>{};
   g.texcoords = uv_id != kNoId ? scene.buffer(uv_id)->f : std::vector<float>{};
   g.colors = col_id != kNoId ? scene.buffer(col_id)->f : std::vector<float>{};
   for (float& c : g.colors) c = std::fmax(c, 0.0f);  // colours are >= 0 (validate_mesh refused NaN and Inf)
-  if (g.blas) rtcReleaseScene(g.blas);
-  g.blas = rtcNewScene(device);
-  rtcSetSceneBuildQuality(g.blas, RTC_BUILD_QUALITY_HIGH);
+  const size_t nt = idx->size() / 3;
+  GeometryContent content{pos.f.data(), nv, idx->data(), nt, g.filter, g.see_through};
+  GeometryCache& cache = shared_device->geometries();
+  const uint64_t h = cache.hash(content);
+  g.shared = cache.find(content, h);
+  if (g.shared) {
+    g.blas = g.shared->blas;
+    g.indices = g.shared->indices.data();
+    ++stats.geometries_shared;
+    return nullptr;
+  }
+  auto e = std::make_shared<SharedGeometry>();
+  e->vertex_count = nv;
+  e->triangle_count = nt;
+  e->filter = g.filter;
+  e->see_through = g.see_through;
+  e->hash = h;
+  e->bytes = GeometryCache::estimate_bytes(nv, nt);
+  e->positions.assign(pos.f.begin(), pos.f.begin() + ptrdiff_t(nv * 3));
+  e->positions.resize(nv * 3 + 4, 0.0f);  // Embree may read 16 bytes at the last vertex
+  e->indices.assign(idx->begin(), idx->begin() + ptrdiff_t(nt * 3));
+  e->blas = rtcNewScene(device);
+  rtcSetSceneBuildQuality(e->blas, RTC_BUILD_QUALITY_HIGH);
   RTCGeometry tri = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
-  auto* vb = static_cast<float*>(rtcSetNewGeometryBuffer(tri, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), nv));
-  std::memcpy(vb, pos.f.data(), nv * 3 * sizeof(float));
-  size_t nt = g.indices.size() / 3;
-  auto* ib = static_cast<uint32_t*>(rtcSetNewGeometryBuffer(tri, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, 3 * sizeof(uint32_t), nt));
-  std::memcpy(ib, g.indices.data(), nt * 3 * sizeof(uint32_t));
-  g.owner = this;
-  rtcSetGeometryUserData(tri, &g);
-  if (g.filter) rtcSetGeometryIntersectFilterFunction(tri, alpha_filter<false>);
-  if (g.filter || g.see_through) rtcSetGeometryOccludedFilterFunction(tri, alpha_filter<true>);
+  rtcSetSharedGeometryBuffer(tri, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, e->positions.data(), 0, 3 * sizeof(float), nv);
+  rtcSetSharedGeometryBuffer(tri, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, e->indices.data(), 0, 3 * sizeof(uint32_t), nt);
+  if (e->filter) rtcSetGeometryIntersectFilterFunction(tri, alpha_filter<false>);
+  if (e->filter || e->see_through) rtcSetGeometryOccludedFilterFunction(tri, alpha_filter<true>);
   rtcCommitGeometry(tri);
-  rtcAttachGeometry(g.blas, tri);
+  rtcAttachGeometry(e->blas, tri);
   rtcReleaseGeometry(tri);
+  g.shared = nullptr;
+  g.blas = nullptr;
+  g.indices = nullptr;
+  return e;
 }
 
 void RayTracer::Impl::sync(const Scene& scene, std::vector<std::string>& warnings) {
@@ -300,7 +323,7 @@ void RayTracer::Impl::sync(const Scene& scene, std::vector<std::string>& warning
     needs_filter[key] = needs_filter[key] || mat.alpha_mask;
     see_through[key] = see_through[key] || mat.refraction > 0 || (mat.opacity < 1 && !mat.alpha_mask);
   }
-  std::vector<std::pair<const GeomKey*, Geom*>> to_build;
+  std::vector<std::pair<const GeomKey*, Geom*>> to_build;  // set up anew (from the cache, or built)
   for (auto& [id, key] : mesh_key) {
     auto [p, n, t, c, i] = key;
     uint64_t v = 0;
@@ -321,8 +344,17 @@ void RayTracer::Impl::sync(const Scene& scene, std::vector<std::string>& warning
   // geometry's BVH is then built on its own task: a scene of many small meshes (the kitchen: 400)
   // built one after another would use one core, since Embree parallelises a build only inside a
   // large mesh. Commits of different Embree scenes may run concurrently.
-  for (auto& [key, g] : to_build) build_geom(scene, *key, *g);
-  tbb::parallel_for(size_t(0), to_build.size(), [&](size_t k) { rtcCommitScene(to_build[k].second->blas); });
+  // Geometries that another session (or an earlier sync) built already come from the process's
+  // geometry cache; only the others are built, and then offered to it.
+  std::vector<std::pair<Geom*, std::shared_ptr<SharedGeometry>>> fresh_builds;
+  for (auto& [key, g] : to_build)
+    if (auto e = build_geom(scene, *key, *g)) fresh_builds.emplace_back(g, std::move(e));
+  tbb::parallel_for(size_t(0), fresh_builds.size(), [&](size_t k) { rtcCommitScene(fresh_builds[k].second->blas); });
+  for (auto& [g, e] : fresh_builds) {
+    g->shared = shared_device->geometries().insert(std::move(e));  // or an equal one built meanwhile
+    g->blas = g->shared->blas;
+    g->indices = g->shared->indices.data();
+  }
   stats.geometries_built += to_build.size();
 
   // Instances: one per mesh.
@@ -362,11 +394,13 @@ void RayTracer::Impl::sync(const Scene& scene, std::vector<std::string>& warning
       top_changed = true;
     }
   }
+  bool released = false;
   for (auto it = geoms.begin(); it != geoms.end();) {
     if (it->second.used) { ++it; continue; }
-    rtcReleaseScene(it->second.blas);
     it = geoms.erase(it);
+    released = true;
   }
+  if (released || !fresh_builds.empty()) shared_device->geometries().trim();
   inst_by_rtc.assign(0, nullptr);
   for (auto& [id, inst] : insts) {
     if (inst.id >= inst_by_rtc.size()) inst_by_rtc.resize(inst.id + 1, nullptr);

@@ -44,9 +44,12 @@ class RayTracer final : public Renderer {
 
   SceneFeatures features() const;
   float scene_extent() const;  // diagonal of the world bounds
-  // Number of BLAS builds and instance updates done by the last sync (for tests of incrementality).
+  // What the last sync did (for tests of incrementality): geometries set up anew, of which
+  // `geometries_shared` took their BVH from the process's geometry cache (built by another
+  // ray tracer, or earlier) instead of building it; instances updated and removed.
   struct SyncStats {
     int geometries_built = 0, instances_updated = 0, instances_removed = 0;
+    int geometries_shared = 0;
   };
   SyncStats last_sync() const;
 

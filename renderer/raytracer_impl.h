@@ -58,16 +58,28 @@ template <> struct Packet<16> {
 // transparent surfaces it crossed, which alpha_filter multiplies by 1 - opacity, and the
 // surfaces already counted (a BVH with spatial splits may report one triangle more than once).
 // AO rays (shadow false): such surfaces occlude, as before.
-struct OcclusionContext {
+// Every query's context starts with this: Embree passes the pointer on to the filter
+// functions, which find the session's ray tracer here (its materials and instances). The
+// geometries carry no pointer of their own, since they may be shared between sessions
+// (renderer/geometry_cache.h).
+struct QueryContext {
   RTCIntersectContext rtc;  // first: Embree's filter functions get a pointer to it
+  const RayTracer::Impl* impl = nullptr;
+  void init(const RayTracer::Impl* tracer, RTCIntersectContextFlags flags) {
+    rtcInitIntersectContext(&rtc);
+    rtc.flags = flags;
+    impl = tracer;
+  }
+};
+struct OcclusionContext {
+  QueryContext q;  // first
   bool shadow = false;
   static constexpr int kLanes = 16, kSeen = 8;
   float transmission[kLanes];
   uint8_t seen_count[kLanes];
   uint64_t seen[kLanes][kSeen];  // instance << 32 | primitive
-  void init(bool for_shadows, int lanes) {
-    rtcInitIntersectContext(&rtc);
-    rtc.flags = RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
+  void init(const RayTracer::Impl* tracer, bool for_shadows, int lanes) {
+    q.init(tracer, RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT);
     shadow = for_shadows;
     for (int i = 0; i < lanes; ++i) transmission[i] = 1.0f, seen_count[i] = 0;
   }
@@ -216,12 +228,13 @@ struct RayTracer::Impl {
     uint64_t version = 0;
   };
   struct Geom {
-    Impl* owner = nullptr;
-    RTCScene blas = nullptr;
+    // The BVH and triangles, possibly shared with other sessions (renderer/geometry_cache.h).
+    std::shared_ptr<const SharedGeometry> shared;
+    RTCScene blas = nullptr;            // shared->blas
+    const uint32_t* indices = nullptr;  // shared->indices: 3 per triangle
     std::vector<float> normals;    // object space, 3 per vertex (empty: flat)
     std::vector<float> texcoords;  // 2 per vertex (empty: none)
     std::vector<float> colors;     // 3 per vertex, negatives as 0 (empty: none)
-    std::vector<uint32_t> indices; // 3 per triangle
     uint64_t version = 0;          // max version of the buffers it was built from
     bool filter = false;           // alpha-mask filter attached
     bool see_through = false;      // occlusion filter for refracting and partly transparent materials attached
@@ -296,8 +309,9 @@ struct RayTracer::Impl {
   }
   ~Impl() {
     for (auto& [id, inst] : insts) rtcReleaseGeometry(inst.geom);
-    for (auto& [k, g] : geoms) rtcReleaseScene(g.blas);
     rtcReleaseScene(top);
+    geoms.clear();
+    shared_device->geometries().trim();
   }
 
   static Material default_material() {  // XML3D: matte red
@@ -308,9 +322,11 @@ struct RayTracer::Impl {
   }
 
   void sync(const Scene& scene, std::vector<std::string>& warnings);
-  // Copies the geometry's buffers out of the scene and sets up its Embree scene, uncommitted:
-  // on the calling thread. Committing (the BVH build) may then run on any thread.
-  void build_geom(const Scene& scene, const GeomKey& key, Geom& g);
+  // Copies the geometry's buffers out of the scene and takes its BVH from the process's
+  // geometry cache; when the cache has none, returns a new entry whose Embree scene is set
+  // up but not committed: on the calling thread. Committing (the BVH build) may then run on
+  // any thread, before the entry goes into the cache.
+  std::shared_ptr<SharedGeometry> build_geom(const Scene& scene, const GeomKey& key, Geom& g);
 };
 
 namespace raytracer_detail {

@@ -92,11 +92,15 @@ async function loadPage(node, name, { noDeflate = false, display = 'jpeg', query
     const last = window.__sends.filter((s) => s.scene).pop();
     const req = last && window.__sends.find((s) => s.t >= last.t && s.render !== null);
     const d = req && window.__drawn.find((f) => f.frame >= req.render);
-    if (d) window.__complete = d.t;
+    if (d) { window.__complete = d.t; window.__lastScene = last.t; window.__completeRequest = req.t; }
     return !!d;
   }, null, { timeout: 180000, polling: 100 });
   const t = await page.evaluate(() => ({ first: window.__drawn.length ? window.__drawn[0].t : null, load: window.__load, complete: window.__complete,
-    nav: performance.getEntriesByType('navigation')[0].domContentLoadedEventEnd, frames: window.__drawn.length, connected: window.__connected }));
+    nav: performance.getEntriesByType('navigation')[0].domContentLoadedEventEnd, frames: window.__drawn.length, connected: window.__connected,
+    // Where the time after connecting goes: the last scene message sent, the render request of
+    // the frame counted as complete, and every frame drawn until then (time, rendering ms).
+    lastScene: window.__lastScene, completeRequest: window.__completeRequest,
+    drawn: window.__drawn.filter((f) => f.t <= window.__complete).map((f) => [+f.t.toFixed(0), f.frame, f.rendering === undefined ? null : +(+f.rendering).toFixed(0)]) }));
   return { page, close, t, up };
 }
 
@@ -170,7 +174,9 @@ for (let k = 0; k < (REF_PAGES.length ? REPEAT : 0); k++) {
         await close();
         const rec = { references: `/demo/${name}.html`, visitor, run: k, connected_ms: +t.connected.toFixed(0),
           complete_frame_ms: +t.complete.toFixed(0), connect_to_complete_ms: +(t.complete - t.connected).toFixed(0),
-          refs: up.refs, wire_mb: +(up.wire / 1048576).toFixed(2) };
+          refs: up.refs, wire_mb: +(up.wire / 1048576).toFixed(2),
+          last_scene_ms: +(t.lastScene - t.connected).toFixed(0), complete_request_ms: +(t.completeRequest - t.connected).toFixed(0),
+          drawn: t.drawn.map(([at, frame, rendering]) => [at - Math.round(t.connected), frame, rendering]) };
         emit(rec);
         ((rows.refs ||= {})[`${name} ${visitor}`] ||= []).push(rec);
       }
