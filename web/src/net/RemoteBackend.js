@@ -61,6 +61,10 @@ export class RemoteBackend {
     handler.container.appendChild(this.inputElement);
 
     const renderer = x.getAttribute('renderer') || 'raytracer';
+    const references = (x.getAttribute('references') || '').trim().toLowerCase() !== 'off';
+    // With references the node loads glTF buffers itself, so the page's reader need not wait
+    // for them (XML3DHandler.js): the scene goes out while the browser downloads them.
+    this.defersBuffers = references;
     this.channel = new SyncChannel({
       url: this.url,
       handshake: { renderer: renderer === 'rasterizer' ? 'rasterizer' : 'raytracer', display,
@@ -68,7 +72,7 @@ export class RemoteBackend {
         width: handler.width, height: handler.height },
       settings: this.readSettings(),
       rate: Math.min(120, Math.max(1, int(x, 'sync-rate', 30))),
-      references: (x.getAttribute('references') || '').trim().toLowerCase() !== 'off',
+      references,
       onState: (state, detail) => this.state(state, detail),
       onFrame: (f) => this.frame(f),
       onServerError: (e) => handler.setStatus(`server:${e.codeName}:${e.message}`, `⚠ server: ${e.codeName}: ${e.message}`, true),

@@ -16,6 +16,7 @@ import { hasCompressionStream, deflate } from './Features.js';
 import { loadTexture } from './TextureEncoder.js';
 import { sameSettings } from './RenderSettings.js';
 import { redact } from './AccessToken.js';
+import { pendingValues } from '../reader/GltfLoader.js';
 
 const DEFLATE_MIN_BYTES = 256;
 const TEXTURE_BYTES = 1 << 18;  // what a texture counts for in the upload progress (its size is not known yet)
@@ -169,6 +170,15 @@ export class SyncChannel {
 
   // Prepares a record for the wire: buffers deflated, textures loaded and encoded.
   prepare(r) {
+    // A buffer of a deferred glTF load (one whose reference the node refused, say) goes once its
+    // values are in; the records queued after it wait, since they may use it.
+    const pending = r.type === 'buffer' && pendingValues(r.data);
+    if (pending) {
+      return { size: r.data.byteLength, record: pending.then(() => this.prepare(r).record, (e) => {
+        this.onServerError({ codeName: 'buffer', message: `buffer ${r.id}: ${e.message || e}` });
+        return null;
+      }) };
+    }
     if (r.type === 'buffer' && r.data.byteLength >= DEFLATE_MIN_BYTES && hasCompressionStream()) {
       const raw = new Uint8Array(r.data.buffer, r.data.byteOffset, r.data.byteLength);
       return { size: r.data.byteLength, record: deflate(raw).then((z) => (z.length < raw.length ? { ...r, deflated: z } : r), () => r) };

@@ -16,6 +16,48 @@ const SOURCE = { 5126: 'f32', 5125: 'u32', 5123: 'u16', 5121: 'u8' };  // a buff
 const sources = new WeakMap();
 export const sourceOf = (array) => sources.get(array) ?? null;
 
+// Deferred loads ({defer: true}: a page whose buffers the node loads itself): the result comes
+// as soon as the JSON is read, its arrays views of zero-filled buffers that the download fills
+// in place later. This registry gives, for such an array, the promise of its values while they
+// are on their way (null once they are in, and for every other array): whatever reads values
+// (an upload the node refused, bounds, picking) waits for it or does not keep what it read.
+const deferred = new WeakMap();  // array -> {ready: Promise, done: boolean}
+export const pendingValues = (array) => {
+  const d = deferred.get(array);
+  return d && !d.done ? d.ready : null;
+};
+
+// Whether every array a deferred load would make from an external buffer is a view of the
+// file's bytes as they are (or u16/u8 indices widened, which a node widens too): those need
+// no values until the download is in. Anything converted from the values (normalised, strided,
+// sparse, RGBA colours, strips unrolled) needs them at once, so such files load whole first.
+function deferrable(json, bufferUrls) {
+  const external = (a) => a.bufferView !== undefined && json.bufferViews[a.bufferView] &&
+    !!bufferUrls[json.bufferViews[a.bufferView].buffer];
+  if ((json.buffers || []).some((b, i) => bufferUrls[i] && !(Number.isInteger(b.byteLength) && b.byteLength > 0 && b.byteLength < 2 ** 31)))
+    return false;
+  for (const mesh of json.meshes || []) {
+    for (const p of mesh.primitives || []) {
+      const mode = p.mode ?? 4;
+      if (mode !== 4 && mode !== 5) continue;
+      const uses = Object.entries(p.attributes || {}).filter(([k]) => ['POSITION', 'NORMAL', 'TEXCOORD_0', 'COLOR_0'].includes(k));
+      if (p.indices !== undefined) uses.push(['indices', p.indices]);
+      for (const [k, i] of uses) {
+        const a = json.accessors && json.accessors[i];
+        if (!a) return false;
+        if (!external(a)) continue;  // zeros, a data: URI or the GLB chunk: its values are here
+        const T = TYPES[a.componentType], n = COMPONENTS[a.type];
+        if (!T || !n || mode === 5 || a.sparse || a.normalized) return false;
+        const v = json.bufferViews[a.bufferView], elem = n * T.BYTES_PER_ELEMENT;
+        if ((v.byteStride || elem) !== elem || ((v.byteOffset || 0) + (a.byteOffset || 0)) % T.BYTES_PER_ELEMENT) return false;
+        if (k === 'indices' ? ![5125, 5123, 5121].includes(a.componentType) : a.componentType !== 5126) return false;
+        if (k === 'COLOR_0' && n !== 3) return false;
+      }
+    }
+  }
+  return true;
+}
+
 function parseGlb(buf) {
   const dv = new DataView(buf);
   if (dv.getUint32(0, true) !== 0x46546c67) throw new Error('not a GLB file');
@@ -38,20 +80,35 @@ function decodeDataUri(uri) {
   return out.buffer;
 }
 
-export async function loadGltf(body, url, fetchBinary) {
+// defer: return before the external buffers are in, where the file allows it (deferrable());
+// the result's `ready` is then the promise of their values (else null), and its `deferred`
+// says so.
+export async function loadGltf(body, url, fetchBinary, { defer = false } = {}) {
   let json = body, glbBin = null;
   if (body instanceof ArrayBuffer) ({ json, bin: glbBin } = parseGlb(body));
   if (!json.asset || !String(json.asset.version).startsWith('2')) throw new Error('only glTF 2.0 is supported');
   // The absolute URL of each external buffer (null for data: URIs and the GLB chunk).
   const bufferUrls = (json.buffers || []).map((b) => (b.uri === undefined || b.uri.startsWith('data:') ? null : new URL(b.uri, url).href));
-  const buffers = await Promise.all((json.buffers || []).map((b, i) => {
+  const later = defer && bufferUrls.some(Boolean) && deferrable(json, bufferUrls);
+  const downloads = [];  // deferred: [index, promise of the file]
+  const load = (b, i) => {
     if (b.uri === undefined) {
       if (!glbBin) throw new Error(`buffer ${i} has no uri`);
       return glbBin;
     }
     if (b.uri.startsWith('data:')) return decodeDataUri(b.uri);
-    return fetchBinary(bufferUrls[i]);
-  }));
+    if (!later) return fetchBinary(bufferUrls[i]);
+    downloads.push([i, fetchBinary(bufferUrls[i])]);
+    return new ArrayBuffer(b.byteLength);  // filled in place when the download is in
+  };
+  const buffers = later ? (json.buffers || []).map(load) : await Promise.all((json.buffers || []).map(load));
+  // Deferred: what must be redone once the values are in (indices widened), and the promise.
+  const fixups = [];
+  const state = { ready: null, done: false };
+  const isLater = (i) => {
+    const a = json.accessors[i];
+    return later && a.bufferView !== undefined && !!bufferUrls[json.bufferViews[a.bufferView].buffer];
+  };
 
   // Records that `array` holds accessor i's values as they lie in an external file.
   function remember(array, i) {
@@ -104,7 +161,9 @@ export async function loadGltf(body, url, fetchBinary) {
       if (!(a instanceof Uint32Array)) {
         out = Uint32Array.from(a);
         if (a instanceof Uint16Array || a instanceof Uint8Array) remember(out, i);  // widened, value for value
+        if (isLater(i)) fixups.push(() => out.set(a));
       }
+      if (isLater(i)) deferred.set(out, state);
       indexCache.set(i, out);
     }
     return indexCache.get(i);
@@ -220,5 +279,19 @@ export async function loadGltf(body, url, fetchBinary) {
   const scene = json.scenes ? json.scenes[sceneIndex] : { nodes: json.nodes.map((_, i) => i) };
   for (const n of scene.nodes || []) visit(n, identity());
   result.environment = scene.extras && scene.extras.environment;
+  result.deferred = later;
+  result.ready = null;
+  if (later) {
+    for (const i of accessorCache.keys()) if (isLater(i)) deferred.set(accessorCache.get(i), state);
+    state.ready = result.ready = Promise.all(downloads.map(([i, p]) => p.then((got) => {
+      const want = json.buffers[i].byteLength;
+      if (!(got.byteLength >= want)) throw new Error(`${bufferUrls[i]}: ${got.byteLength} bytes, the glTF says ${want}`);
+      new Uint8Array(buffers[i]).set(new Uint8Array(got, 0, want));
+    }))).then(() => {
+      for (const f of fixups) f();
+      state.done = true;
+    });
+    state.ready.catch(() => {});  // the caller handles it; no unhandled rejection here
+  }
   return result;
 }

@@ -12,7 +12,12 @@ const SHARED = new WeakMap();  // fetch function -> Map(`${kind} ${url}` -> Prom
 const DOCUMENT_URLS = new WeakMap();  // XML documents loaded -> their URLs
 
 export class Resources {
-  constructor({ fetch: fetchFn, parseXml, onLoad } = {}) {
+  // deferBuffers: glTF files come as soon as their JSON is read, their buffers filled in later
+  // (GltfLoader.js, "Deferred loads"): for a backend whose node loads the buffers itself. Set it
+  // before the first get(). Such an entry is 'loaded' with its data, and `filling` until the
+  // values are in; onLoad is called again then (or the entry turns to 'error').
+  constructor({ fetch: fetchFn, parseXml, onLoad, deferBuffers = false } = {}) {
+    this.deferBuffers = deferBuffers;
     const base = fetchFn || globalThis.fetch;
     this.fetch = fetchFn || globalThis.fetch?.bind(globalThis);
     if (base && !SHARED.has(base)) SHARED.set(base, new Map());
@@ -34,23 +39,32 @@ export class Resources {
     const key = url.split('#')[0];
     let e = this.entries.get(key);
     if (e) return e;
-    e = { state: 'loading', kind, data: null, error: null };
+    e = { state: 'loading', kind, data: null, error: null, filling: false };
     this.entries.set(key, e);
-    const k = `${kind} ${key}`;
-    if (!this.shared.has(k)) this.shared.set(k, this.load(key, kind).catch((err) => { this.shared.delete(k); throw err; }));
+    const defer = kind === 'gltf' && this.deferBuffers;
+    const k = `${kind}${defer ? '+deferred' : ''} ${key}`;
+    if (!this.shared.has(k)) this.shared.set(k, this.load(key, kind, defer).catch((err) => { this.shared.delete(k); throw err; }));
+    const failed = (err) => {
+      e.state = 'error';
+      e.data = null;
+      e.filling = false;
+      e.error = `${key}: ${err.message || err}`;
+    };
     this.shared.get(k).then((data) => {
       e.state = 'loaded';
       e.data = data;
-    }, (err) => {
-      e.state = 'error';
-      e.error = `${key}: ${err.message || err}`;
-    }).then(() => this.onLoad(key, e));
+      if (data && data.ready) {
+        e.filling = true;
+        data.ready.then(() => { e.filling = false; }, (err) => { this.shared.delete(k); failed(err); }).then(() => this.onLoad(key, e));
+      }
+    }, failed).then(() => this.onLoad(key, e));
     return e;
   }
 
+  // Entries still loading, or whose values are still on their way (a deferred glTF).
   get pending() {
     let n = 0;
-    for (const e of this.entries.values()) if (e.state === 'loading') n++;
+    for (const e of this.entries.values()) if (e.state === 'loading' || e.filling) n++;
     return n;
   }
 
@@ -61,19 +75,32 @@ export class Resources {
     return r;
   }
 
-  async load(url, kind) {
+  async load(url, kind, defer = false) {
     const r = await this.fetchOk(url);
     if (kind === 'json') return parseXml3dJson(await r.json(), url, (u) => this.fetchOk(u).then((x) => x.arrayBuffer()));
     if (kind === 'gltf') {
       const isGlb = url.toLowerCase().split('?')[0].endsWith('.glb');
       const body = isGlb ? await r.arrayBuffer() : await r.json();
-      return loadGltf(body, url, (u) => this.fetchOk(u).then((x) => x.arrayBuffer()));
+      return loadGltf(body, url, (u) => this.binary(u), { defer });
     }
     const doc = this.parseXml(await r.text());
     if (!doc || !doc.documentElement || doc.getElementsByTagName('parsererror').length)
       throw new Error('not a well-formed XML document');
     DOCUMENT_URLS.set(doc, url);
     return doc;
+  }
+
+  // A file's bytes. Downloads in flight are shared: a deferred and a whole load of one glTF
+  // (a handler rebuilt for the server while the WebGL one loads, say) fetch its buffers once.
+  // Only while in flight, so that the page does not keep the bytes of every file it loaded.
+  binary(url) {
+    const k = `binary ${url}`;
+    if (!this.shared.has(k)) {
+      const p = this.fetchOk(url).then((x) => x.arrayBuffer());
+      this.shared.set(k, p);
+      p.then(() => this.shared.delete(k), () => this.shared.delete(k));
+    }
+    return this.shared.get(k);
   }
 
   urlOfDocument(doc) {

@@ -1,5 +1,6 @@
 // Bounding boxes of a SceneDescription ({min, max} arrays; empty: min > max).
 import { transformPoint, invert } from '../math/Mat4.js';
+import { pendingValues } from '../reader/GltfLoader.js';
 
 const localCache = new WeakMap();
 
@@ -21,7 +22,7 @@ function localBox(positions) {
       if (v < b.min[k]) b.min[k] = v;
       if (v > b.max[k]) b.max[k] = v;
     }
-  localCache.set(positions, b);
+  if (!pendingValues(positions)) localCache.set(positions, b);  // zeros until a deferred load is in
   return b;
 }
 

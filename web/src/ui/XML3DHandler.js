@@ -64,6 +64,9 @@ export class XML3DHandler {
     this.status.className = 'tessera-status';
     this.messages = new Map();  // key -> {text, error}
     this.backend = createBackend(this);
+    // A node that loads the page's glTF buffers itself needs only their URLs: the scene is sent
+    // before the browser has downloaded them (Resources.js, deferBuffers).
+    this.resources.deferBuffers = !!this.backend.defersBuffers;
     this.inputElement = this.backend.inputElement || this.backend.element;
     c.appendChild(this.status);  // above the display and input elements
 

@@ -273,3 +273,30 @@ test('a demo page whose glTF lies in the node\'s own /scenes/ sends references: 
     await refs.close();
     await upload.close();
   });
+
+test('the references go out before the browser has downloaded the glTF\'s buffers; XML3D\'s load event waits for them',
+  { skip: !BIN && 'TESSERA_BIN not set (CTest passes the tessera binary)' }, async () => {
+    const page = await env.context.newPage();
+    let release;
+    const held = new Promise((r) => (release = r));
+    let binRequested = false;
+    await page.route('**/scenes/pavilion/*.bin', async (route) => { binRequested = true; await held; await route.continue(); });
+    await page.addInitScript(() => {
+      window.__load = false;
+      document.addEventListener('load', (e) => { if (e.target.localName === 'xml3d') window.__load = true; }, true);
+    });
+    const events = () => node.log.filter((l) => l.includes('"references"')).map((l) => JSON.parse(l));
+    const before = events().length;
+    try {
+      await page.goto(`${node.base}/demo/pavilion.html?server=${node.host}:${node.port}&display=jpeg&ao-samples=0`);
+      const total = () => events().slice(before).reduce((n, e) => n + e.loaded + e.refused, 0);
+      for (const t0 = Date.now(); Date.now() - t0 < 60000 && total() < 366; ) await new Promise((r) => setTimeout(r, 200));
+      assert.ok(binRequested, 'the page asked for the buffer');
+      assert.equal(total(), 366, 'every reference reached the node while the buffer was held back');
+      assert.equal(await page.evaluate(() => window.__load), false, 'no load event while the buffer is on its way');
+    } finally {
+      release();
+    }
+    await page.waitForFunction(() => window.__load, null, { timeout: 60000, polling: 100 });
+    await page.close();
+  });

@@ -320,7 +320,9 @@ test('a frame smaller than the client\'s resolution (within a budget) goes to th
 // References: a glTF model whose buffers and texture the node can load from their URLs (a
 // buffer_ref each for the positions and the u16 indices, a texture_ref for the base colour),
 // beside an XML3D mesh whose positions are always uploaded.
-async function referencedScene() {
+// deferBuffers: the Resources' glTF comes before its buffer (the page of a node that loads
+// them itself); `download` then resolves the buffer's bytes.
+async function referencedScene({ deferBuffers = false, download = null } = {}) {
   const bin = new ArrayBuffer(44), dv = new DataView(bin);
   [0, 0, -2, 1, 0, -2, 0, 1, -2].forEach((v, i) => dv.setFloat32(4 * i, v, true));
   [0, 1, 2].forEach((v, i) => dv.setUint16(36 + 2 * i, v, true));
@@ -333,10 +335,11 @@ async function referencedScene() {
     buffers: [{ uri: 'scene.bin', byteLength: 44 }],
   };
   const files = { 'http://localhost/m/scene.gltf': gltf, 'http://localhost/m/scene.bin': bin };
-  const fetch = async (url) => ({ ok: true, status: 200, json: async () => files[url], arrayBuffer: async () => files[url] });
+  const fetch = async (url) => ({ ok: true, status: 200, json: async () => files[url],
+    arrayBuffer: async () => (download && url.endsWith('.bin') ? download.then(() => files[url]) : files[url]) });
   let loaded;
   const done = new Promise((r) => (loaded = r));
-  const reader = new MarkupReader({ resources: new Resources({ fetch, onLoad: () => loaded() }) });
+  const reader = new MarkupReader({ resources: new Resources({ fetch, deferBuffers, onLoad: () => loaded() }) });
   const doc = page('<xml3d><model src="m/scene.gltf"></model><mesh><float3 name="position">0 0 -2 1 0 -2 0 1 -2</float3></mesh></xml3d>');
   reader.read(doc.querySelector('xml3d'));
   await done;
@@ -493,3 +496,31 @@ test('references beyond one message are spread over several, each of references 
   await until(() => ws.sent.flat().some((r) => r.type === 'render'));
   assert.equal(ws.sent.flat().filter((r) => r.type === 'mesh').length, 2);
 }));
+
+test('a refused reference of a deferred glTF is uploaded with its values once they are in; the materials and meshes wait for it', () => withFakeSocket((opened) => withTextures(async () => {
+  let arrive;
+  const download = new Promise((r) => (arrive = r));
+  const scene = await referencedScene({ deferBuffers: true, download });
+  const warn = console.warn;
+  console.warn = () => {};
+  try {
+    const { ch, ws } = await connectedTo(scene);
+    opened.push(ch);
+    const [gltfMesh] = [...scene.meshes.values()];
+    assert.deepEqual([...scene.buffers.get(gltfMesh.positions).data], [0, 0, 0, 0, 0, 0, 0, 0, 0], 'sent before the values are in');
+    answerRefs(ws, new Set([gltfMesh.positions]));
+    await new Promise((r) => setTimeout(r, 60));
+    const early = ws.sent.slice(2).flat();
+    assert.equal(early.filter((r) => r.type === 'buffer' && r.id === gltfMesh.positions).length, 0, 'no upload of zeros');
+    assert.equal(early.filter((r) => r.type === 'mesh' && r.id === gltfMesh.id).length, 0, 'nor the mesh that uses it');
+    arrive();
+    await until(() => ws.sent.flat().some((r) => r.type === 'mesh' && r.id === gltfMesh.id));
+    const after = ws.sent.slice(2).flat(), at = (pred) => after.findIndex(pred);
+    const positions = after.filter((r) => r.type === 'buffer' && r.id === gltfMesh.positions);
+    assert.equal(positions.length, 1);
+    assert.deepEqual([...positions[0].data], [0, 0, -2, 1, 0, -2, 0, 1, -2], 'the file\'s values');
+    assert.ok(at((r) => r.type === 'buffer' && r.id === gltfMesh.positions) < at((r) => r.type === 'mesh'));
+  } finally {
+    console.warn = warn;
+  }
+})));

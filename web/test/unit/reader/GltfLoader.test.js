@@ -1,7 +1,7 @@
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
 import { page } from '../dom.js';
-import { loadGltf, sourceOf } from '../../../src/reader/GltfLoader.js';
+import { loadGltf, sourceOf, pendingValues } from '../../../src/reader/GltfLoader.js';
 import { MarkupReader } from '../../../src/reader/MarkupReader.js';
 import { Resources } from '../../../src/reader/Resources.js';
 
@@ -97,4 +97,92 @@ test('the scene\'s buffers carry the sources of glTF arrays; a triangle strip\'s
   assert.notEqual(strip.indices, list.indices);
   assert.equal(source(strip.indices), null, 'indices made by unrolling a strip');
   assert.equal(source(markup.positions), null);
+});
+
+// Deferred loads: a packed file (float3 positions and normals, u16 indices) whose arrays are all
+// views of the file's bytes or widened indices, so that nothing needs the values at once.
+const packed = () => ({
+  asset: { version: '2.0' }, scenes: [{ nodes: [0] }], nodes: [{ mesh: 0 }],
+  meshes: [{ primitives: [{ attributes: { POSITION: 0, NORMAL: 1 }, indices: 2 }] }],
+  accessors: [{ bufferView: 0, componentType: 5126, count: 3, type: 'VEC3' }, { bufferView: 1, componentType: 5126, count: 3, type: 'VEC3' },
+    { bufferView: 2, componentType: 5123, count: 3, type: 'SCALAR' }],
+  bufferViews: [{ buffer: 0, byteOffset: 0, byteLength: 36 }, { buffer: 0, byteOffset: 36, byteLength: 36 },
+    { buffer: 0, byteOffset: 72, byteLength: 6 }],
+  buffers: [{ uri: 'packed.bin', byteLength: 80 }],
+});
+function packedBin() {
+  const bin = new ArrayBuffer(80), dv = new DataView(bin);
+  [0, 0, 0, 1, 0, 0, 0, 1, 0].forEach((v, i) => dv.setFloat32(4 * i, v, true));
+  [0, 0, 1, 0, 0, 1, 0, 0, 1].forEach((v, i) => dv.setFloat32(36 + 4 * i, v, true));
+  [2, 1, 0].forEach((v, i) => dv.setUint16(72 + 2 * i, v, true));
+  return bin;
+}
+const later = () => { let resolve; const p = new Promise((r) => (resolve = r)); return { p, resolve }; };
+
+test('a deferred load returns before its buffers are in: views of zeros with their sources, filled in place when the download is in', async () => {
+  const download = later();
+  const g = await loadGltf(packed(), 'http://localhost/m/packed.gltf', () => download.p, { defer: true });
+  assert.equal(g.deferred, true);
+  const [m] = g.meshes;
+  for (const arr of [m.positions, m.normals, m.indices]) {
+    assert.ok(arr.every((v) => v === 0), 'zeros until the values are in');
+    assert.ok(pendingValues(arr), 'and said to be pending');
+  }
+  assert.deepEqual(sourceOf(m.positions), { url: 'http://localhost/m/packed.bin', byteOffset: 0, byteStride: 0, source: 'f32', components: 3, values: 9 });
+  assert.equal(sourceOf(m.indices).source, 'u16');
+  download.resolve(packedBin());
+  await g.ready;
+  assert.deepEqual([...m.positions], [0, 0, 0, 1, 0, 0, 0, 1, 0]);
+  assert.deepEqual([...m.normals], [0, 0, 1, 0, 0, 1, 0, 0, 1]);
+  assert.deepEqual([...m.indices], [2, 1, 0], 'widened again from the values');
+  for (const arr of [m.positions, m.normals, m.indices]) assert.equal(pendingValues(arr), null);
+  // Without defer the same file waits for its buffers, as before.
+  const whole = await loadGltf(packed(), 'http://localhost/m/packed.gltf', async () => packedBin());
+  assert.equal(whole.deferred, false);
+  assert.equal(whole.ready, null);
+  assert.deepEqual([...whole.meshes[0].indices], [2, 1, 0]);
+});
+
+test('a file with arrays converted from its values (strided, normalised, strips) loads whole even when deferred', async () => {
+  let fetched = 0;
+  const g = await loadGltf(gltf('scene.bin'), 'http://localhost/m/scene.gltf', async () => { fetched++; return sceneBin(); }, { defer: true });
+  assert.equal(g.deferred, false);
+  assert.equal(fetched, 1);
+  assert.deepEqual([...g.meshes[1].positions], [0, 1, 2, 10, 11, 12, 20, 21, 22]);
+  assert.equal(pendingValues(g.meshes[1].positions), null);
+});
+
+test('a deferred download shorter than the glTF says fails with the file and both sizes', async () => {
+  const g = await loadGltf(packed(), 'http://localhost/m/packed.gltf', async () => new ArrayBuffer(40), { defer: true });
+  await assert.rejects(g.ready, /packed\.bin: 40 bytes, the glTF says 80/);
+  assert.ok(pendingValues(g.meshes[0].positions), 'never filled');
+});
+
+test('Resources with deferBuffers: loaded at once and filling until the values are in; a whole load of the same file shares the download', async () => {
+  const download = later();
+  const fetches = [];
+  const fetch = async (url) => {
+    fetches.push(url);
+    return { ok: true, status: 200, json: async () => packed(), arrayBuffer: () => download.p };
+  };
+  const calls = [];
+  const deferredRes = new Resources({ fetch, deferBuffers: true, onLoad: (k, e) => calls.push(['deferred', e.state, e.filling]) });
+  const wholeRes = new Resources({ fetch, onLoad: (k, e) => calls.push(['whole', e.state, e.filling]) });
+  const d = deferredRes.get('http://localhost/m/packed.gltf');
+  const w = wholeRes.get('http://localhost/m/packed.gltf');
+  await new Promise((r) => setTimeout(r, 20));
+  assert.equal(d.state, 'loaded');
+  assert.equal(d.filling, true);
+  assert.equal(deferredRes.pending, 1, 'counted as pending (the load event waits)');
+  assert.equal(w.state, 'loading');
+  assert.deepEqual(calls, [['deferred', 'loaded', true]]);
+  download.resolve(packedBin());
+  await new Promise((r) => setTimeout(r, 20));
+  assert.equal(d.filling, false);
+  assert.equal(deferredRes.pending, 0);
+  assert.equal(w.state, 'loaded');
+  assert.deepEqual([...d.data.meshes[0].indices], [2, 1, 0]);
+  assert.deepEqual([...w.data.meshes[0].indices], [2, 1, 0]);
+  assert.equal(fetches.filter((u) => u.endsWith('.bin')).length, 1, 'one download for both loads');
+  assert.deepEqual(calls.filter((c) => c[0] === 'deferred'), [['deferred', 'loaded', true], ['deferred', 'loaded', false]]);
 });
