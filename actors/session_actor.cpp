@@ -74,6 +74,15 @@ void start_frame(self_ptr self, uint32_t client_frame, bool refine) {
     // resolution unasked.
     st.still = {};
     st.still.target = st.refine.value_or(st.settings->refine_samples);
+    st.frame_triangles = st.scene->triangle_count();
+    if (st.budget && st.budget_triangles) {
+      // A scene that has grown or shrunk this much is not the one the cost model measured
+      // (the page's scene after frames of an empty one): start again from the smallest scale,
+      // rather than render a full frame that takes many budgets.
+      constexpr uint64_t kMinChange = 10000;
+      const uint64_t was = *st.budget_triangles, now = st.frame_triangles;
+      if (now > 2 * was + kMinChange || 2 * now + kMinChange < was) st.budget->restart();
+    }
     if (st.budget) st.frame_scale = st.budget->scale();
     st.still.after_scaled = st.frame_scale < 1;
     st.still.active = st.still.after_scaled || (st.still.target > 1 && can_refine);
@@ -138,8 +147,10 @@ void start_frame(self_ptr self, uint32_t client_frame, bool refine) {
           [self](uint32_t) {
             auto& st = self->state;
             if (st.frame_scale == 1) st.still.samples++;  // a sample of the still, not a scaled frame
-            if (st.budget && st.frame_requested)  // an interactive frame: its time steers the next scale
+            if (st.budget && st.frame_requested) {  // an interactive frame: its time steers the next scale
               st.budget->observe(st.frame_scale, double(steady_ns() - st.frame_t0_ns) / 1e6);
+              st.budget_triangles = st.frame_triangles;
+            }
             frame_done(self);
           },
           [self](caf::error& e) {

@@ -110,33 +110,44 @@ static bool is_reference(const ClientRecord& r) {
 
 // References (docs/protocol.md, "References"): the node's AssetStore turns each buffer_ref and
 // texture_ref of the message into a buffer or texture record, or refuses it (it stays a
-// reference, and the loop below skips it). The client gets one reference record for each, all
+// reference, and apply_records skips it). The client gets one reference record for each, all
 // in one message, before anything of this message is applied: it sends what depends on a
 // reference only after that answer. Loaded content counts against the node's memory budget as
 // an upload does (admit_payloads could not: a reference declares no size).
-static void resolve_references(self_ptr self, std::vector<ClientRecord>& recs) {
-  auto& st = self->state;
-  std::vector<size_t> at;
-  for (size_t i = 0; i < recs.size(); ++i)
-    if (is_reference(recs[i])) at.push_back(i);
-  if (at.empty()) return;
-  const int64_t t0 = steady_ns();
-  const AssetStats before = st.settings->assets ? st.settings->assets->stats() : AssetStats{};
+//
+// Loading (files, HTTP fetches, texture decoding) runs on a thread of its own: a slow origin
+// must not hold one of CAF's few scheduler threads, which every session of the node shares.
+// Meanwhile the session goes on with its frame; the client's later messages wait (st.held).
+struct ReferenceJob {
+  std::vector<ClientRecord> recs;
+  std::vector<uint32_t> kept;
+  std::vector<size_t> at;  // the references' positions in recs
   std::vector<Reference> answers;
-  if (st.settings->assets) {
-    st.settings->assets->resolve(recs, st.sink->node_origin(), st.settings->limits, answers);
-  } else {
+  int64_t t0 = 0;
+  AssetStats before;
+
+  // Every reference refused with `why` (and skipped when the message is applied).
+  void refuse_all(const std::string& why) {
+    answers.clear();
     for (size_t i : at) {
       const bool buffer = std::holds_alternative<SetBufferRef>(recs[i]);
       const Id id = buffer ? std::get<SetBufferRef>(recs[i]).id : std::get<SetTextureRef>(recs[i]).id;
-      answers.push_back(Reference{buffer ? RefKind::buffer : RefKind::texture, false, id, 0,
-                                  "this node loads no references"});
+      answers.push_back(Reference{buffer ? RefKind::buffer : RefKind::texture, false, id, 0, why});
+      recs[i] = SetBufferRef{};
     }
   }
+};
+using resolve_atom = caf::atom_constant<caf::atom("resolve")>;
+
+static void apply_records(self_ptr self, std::vector<ClientRecord>& recs, const std::vector<uint32_t>& kept);
+
+// Sends the answers (after the budget's say) and logs the `references` event.
+static void answer_references(self_ptr self, ReferenceJob& job) {
+  auto& st = self->state;
   uint64_t loaded = 0, bytes = 0;
   std::string first_refusal;
-  for (size_t k = 0; k < at.size(); ++k) {
-    Reference& a = answers[k];
+  for (size_t k = 0; k < job.at.size() && k < job.answers.size(); ++k) {
+    Reference& a = job.answers[k];
     if (a.ok && st.settings->budget && !st.share.reserve(a.bytes)) {
       const MemoryBudget& b = *st.settings->budget;
       a.ok = false;
@@ -144,28 +155,94 @@ static void resolve_references(self_ptr self, std::vector<ClientRecord>& recs) {
                   std::to_string(a.bytes) + " bytes would exceed the node's memory budget (" + std::to_string(b.used()) +
                   " of " + std::to_string(b.limit()) + " bytes in use by all clients)";
       a.bytes = 0;
-      recs[at[k]] = SetBufferRef{};  // refused after all: skipped like the others
+      job.recs[job.at[k]] = SetBufferRef{};  // refused after all: skipped like the others
     }
     if (a.ok) loaded++, bytes += a.bytes;
     else if (first_refusal.empty()) first_refusal = a.message;
   }
-  st.sink->send(encode(std::vector<ServerRecord>(answers.begin(), answers.end())));
+  st.sink->send(encode(std::vector<ServerRecord>(job.answers.begin(), job.answers.end())));
   const AssetStats after = st.settings->assets ? st.settings->assets->stats() : AssetStats{};
-  Event e(Ev::references, int64_t(at.size()));
-  e.with("loaded", loaded).with("bytes", bytes).with("refused", uint64_t(at.size() - loaded))
-      .with("cache_hits", after.hits - before.hits).with("cache_misses", after.misses - before.misses)
-      .with("ms", Json::number(double(steady_ns() - t0) / 1e6));
+  Event e(Ev::references, int64_t(job.at.size()));
+  e.with("loaded", loaded).with("bytes", bytes).with("refused", uint64_t(job.at.size() - loaded))
+      .with("cache_hits", after.hits - job.before.hits).with("cache_misses", after.misses - job.before.misses)
+      .with("ms", Json::number(double(steady_ns() - job.t0) / 1e6));
   if (!first_refusal.empty()) e.with("first_refusal", first_refusal.substr(0, 512));
   log(self, std::move(e));
+}
+
+// What became of a message's references: it had none; they were answered and the message
+// applied (a node that loads none); or they are loading, and the message is applied after.
+enum class Refs { none, answered, loading };
+
+static Refs start_references(self_ptr self, std::vector<ClientRecord>& recs, const std::vector<uint32_t>& kept) {
+  auto& st = self->state;
+  auto job = std::make_shared<ReferenceJob>();
+  for (size_t i = 0; i < recs.size(); ++i)
+    if (is_reference(recs[i])) job->at.push_back(i);
+  if (job->at.empty()) return Refs::none;
+  job->t0 = steady_ns();
+  const std::shared_ptr<AssetStore> assets = st.settings->assets;
+  if (!assets) {
+    job->recs = std::move(recs);
+    job->refuse_all("this node loads no references");
+    answer_references(self, *job);
+    apply_records(self, job->recs, kept);
+    return Refs::answered;
+  }
+  job->before = assets->stats();
+  job->recs = std::move(recs);
+  job->kept = kept;
+  st.resolving = true;
+  const std::string origin = st.sink->node_origin();
+  const protocol::Limits limits = st.settings->limits;
+  auto load = [job, assets, origin, limits](caf::event_based_actor* a) -> caf::behavior {
+    return {[=](resolve_atom) {
+      a->quit();
+      try {
+        assets->resolve(job->recs, origin, limits, job->answers);
+      } catch (const std::exception& e) {
+        job->refuse_all(std::string("the node could not load the references: ") + e.what());
+      }
+      return true;
+    }};
+  };
+  // Deterministic tests run every actor on the test scheduler.
+  auto worker = st.settings->detached ? self->spawn<caf::detached + caf::hidden>(load) : self->spawn<caf::hidden>(load);
+  auto done = [=] {
+    auto& s = self->state;
+    s.resolving = false;
+    if (s.closed) return;
+    answer_references(self, *job);
+    apply_records(self, job->recs, job->kept);
+    if (!s.closed) settle_budget(self);
+    // The messages that waited, in order (one of them may start another wait).
+    while (!s.held.empty() && !s.resolving && !s.closed) {
+      std::vector<uint8_t> next = std::move(s.held.front());
+      s.held.pop_front();
+      on_client(self, next);
+    }
+  };
+  self->request(worker, caf::infinite, resolve_atom::value)
+      .then([=](bool) { done(); },
+            [=](caf::error&) {
+              job->refuse_all("the node's reference loader ended");
+              done();
+            });
+  return Refs::loading;
 }
 
 void on_client(self_ptr self, std::vector<uint8_t>& bytes) {
   auto& st = self->state;
   if (st.closed) return;
+  if (st.resolving) {  // after the references being loaded, in order
+    st.still.active = false;
+    st.held.push_back(std::move(bytes));
+    return;
+  }
   std::vector<uint32_t> kept;  // empty: every record of the message
   if (admit_payloads(self, bytes, kept)) on_client_records(self, bytes, kept);
   bytes = {};
-  if (!st.closed) settle_budget(self);  // gives back what was reserved and not kept
+  if (!st.closed && !st.resolving) settle_budget(self);  // gives back what was reserved and not kept
 }
 
 static void on_client_records(self_ptr self, std::vector<uint8_t>& bytes, const std::vector<uint32_t>& kept) {
@@ -185,8 +262,14 @@ static void on_client_records(self_ptr self, std::vector<uint8_t>& bytes, const 
   }
   auto& recs = res.value();
   if (Status order = check_session_order(st.handshake_done, recs); !order) return fail(self, order.error());
-  resolve_references(self, recs);
   st.still.active = false;  // the client has spoken: the still it saw is no longer refined
+  if (start_references(self, recs, kept) == Refs::none) apply_records(self, recs, kept);
+}
+
+// The message's records in order: each applied, cached (a frame is in flight) or acted on.
+static void apply_records(self_ptr self, std::vector<ClientRecord>& recs, const std::vector<uint32_t>& kept) {
+  auto& st = self->state;
+  auto original = [&](uint32_t i) { return i < kept.size() ? kept[i] : i; };
   for (uint32_t i = 0; i < recs.size() && !st.closed; ++i) {
     ClientRecord& rec = recs[i];
     if (is_reference(rec)) continue;  // refused, and answered

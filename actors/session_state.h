@@ -1,4 +1,5 @@
 #pragma once
+#include <deque>
 // The session (sync) actor's state and the functions on it, shared by session_actor.cpp (its
 // behaviour, handshake and frames) and session_input.cpp (the client's messages: admission,
 // decoding, applying or caching updates). Private to those two files.
@@ -65,6 +66,8 @@ struct session_state {
   // client's own resolution (the scene's is the scaled one while an interactive frame renders),
   // and what the frame in flight is.
   std::optional<FrameBudget> budget;
+  uint64_t frame_triangles = 0;                 // the scene's, when the frame in flight started
+  std::optional<uint64_t> budget_triangles;     // the scene's when the budget last observed a frame
   int32_t full_w = 0, full_h = 0;
   double frame_scale = 1;            // of the frame in flight (1: it is a sample of the still)
   bool frame_requested = false;      // the frame in flight answers a render request
@@ -72,6 +75,10 @@ struct session_state {
   // The still's average in the frame actor (Accumulation::bytes), counted in `share`.
   uint64_t acc_bytes = 0;
   std::pair<uint32_t, uint64_t> checked{0, 0};  // AO samples and environment version last checked for them
+  // References being loaded on a thread of their own (session_input.cpp): the client's later
+  // messages wait here, in order, until the answers are sent and the message applied.
+  bool resolving = false;
+  std::deque<std::vector<uint8_t>> held;
   static inline const char* name = "tessera.session";
 };
 

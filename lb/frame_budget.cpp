@@ -36,6 +36,11 @@ void FrameBudget::observe(double scale, double ms) {
   scale_ = std::clamp(want, min_scale_, 1.0);
 }
 
+void FrameBudget::restart() {
+  cost_ = 0;
+  scale_ = min_scale_;
+}
+
 void FrameBudget::scaled(int32_t w, int32_t h, double scale, int32_t& sw, int32_t& sh) {
   sw = std::max<int32_t>(1, int32_t(std::lround(double(w) * scale)));
   sh = std::max<int32_t>(1, int32_t(std::lround(double(h) * scale)));

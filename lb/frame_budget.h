@@ -8,7 +8,9 @@
 // unit of full-resolution area (the cost maps' sum, per pixel, scales with the area). The cost
 // is smoothed over frames; a frame whose cost is more than twice or less than half the
 // smoothed one replaces it at once (a cut, a new object in view), so the scale adapts within a
-// frame. Scales are quantised (steps of 1/32), and the scale changes only when the predicted
+// frame. When the scene itself changes much (session_actor.cpp: its triangle count more than
+// doubles or halves), the model restarts from the smallest scale instead of predicting from a
+// different scene. Scales are quantised (steps of 1/32), and the scale changes only when the predicted
 // time at the current one is more than 15% off the budget: a resolution change makes the
 // next frame's tiling start from an even split (its SATs no longer match), so it should be rare.
 #include <cstdint>
@@ -24,6 +26,10 @@ class FrameBudget {
   double scale() const { return scale_; }
   // A frame rendered at `scale` took `ms` (its time from start to its pixels being in).
   void observe(double scale, double ms);
+  // The cost model no longer applies: the scene changed under it (a page's scene arrived after
+  // frames of an empty one, say), and a frame at the old scale could take many budgets. The
+  // next frame renders at the smallest scale, and its time sets the cost again.
+  void restart();
   // The smoothed cost of a full-resolution frame (ms), 0 before any observation.
   double full_cost_ms() const { return cost_; }
   // Width and height at `scale` of a w x h frame: at least 1 each, rounded to nearest.

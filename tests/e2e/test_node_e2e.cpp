@@ -424,6 +424,42 @@ TEST_CASE("Within a frame budget, interactive frames shrink and the still after 
   CHECK_FALSE(c.next<protocol::Frame>(500));  // converged: nothing more
 }
 
+TEST_CASE("Within a frame budget, the first frame after a page's scene arrives starts from the smallest scale, "
+          "not from the empty scene's cost", "[e2e][budget]") {
+  // A budget every frame here meets at full resolution (5 s): frames of the empty scene come at
+  // full resolution. Then the pavilion arrives (far more than twice the triangles): the frame
+  // that follows is rendered at the smallest scale instead of at the empty scene's, and those
+  // after it, their cost measured, at full resolution again (the first one's time includes the
+  // BVH build, so the way up may take a frame or two).
+  TestNode node(8, [](NodeSettings& s, ServerOptions&) { s.frame_budget_ms = 5000; });
+  ProtoClient c;
+  REQUIRE(c.connect(node.port()));
+  REQUIRE(c.handshake(protocol::DisplayKind::jpeg, 320, 180, 80));
+  for (uint32_t f = 1; f <= 2; ++f) {
+    auto empty = c.render(pavilion_loop().camera(0), f);
+    REQUIRE(empty);
+    CHECK(empty->width == 320);
+  }
+  REQUIRE(pavilion().scene.triangle_count() > 2 * 10000);
+  REQUIRE(c.upload(pavilion().scene));
+  auto first = c.render(pavilion_loop().camera(0), 3);
+  REQUIRE(first);
+  CHECK(first->width == 80);
+  CHECK(first->height == 45);
+  auto still = c.next<protocol::Frame>();  // the still after a scaled frame, unasked
+  REQUIRE(still);
+  CHECK(still->refined);
+  CHECK(still->width == 320);
+  int32_t width = 0;
+  for (uint32_t f = 4; f <= 8 && width != 320; ++f) {
+    auto next = c.render(pavilion_loop().camera(f), f);
+    REQUIRE(next);
+    width = next->width;
+    if (width < 320) REQUIRE(c.next<protocol::Frame>());  // its still
+  }
+  CHECK(width == 320);
+}
+
 TEST_CASE("References: the node loads its own /scenes/ files, refuses other origins, and a second session hits its cache",
           "[e2e][references]") {
   // A textured quad whose positions, uvs and u16 indices lie in one file and whose texture is
@@ -608,4 +644,72 @@ TEST_CASE("References to a listed origin are fetched over HTTP; other origins ar
   CHECK(got[2].message.find("HTTP 404") != std::string::npos);
   CHECK_FALSE(got[3].ok);
   CHECK(got[3].message.find("(and this node serves none)") != std::string::npos);
+}
+
+TEST_CASE("References load off CAF's threads: while a slow origin holds two sessions, a third gets frames; "
+          "a waiting session's later messages follow its answers in order",
+          "[e2e][references]") {
+  // The origin answers only when the test opens the gate. The node has two CAF scheduler
+  // threads (TestConfig): two sessions loading on them would leave none for anyone else.
+  std::promise<void> gate;
+  std::shared_future<void> open = gate.get_future().share();
+  std::atomic<int> entered{0};
+  TestNode node(8, [&](NodeSettings& s, ServerOptions&) {
+    AssetOptions o;
+    o.origins = {"http://slow.example"};
+    s.assets = std::make_shared<AssetStore>(o, [open, &entered](const std::string&, uint64_t, std::vector<uint8_t>&,
+                                                                 std::string& error) {
+      ++entered;
+      open.wait_for(std::chrono::seconds(120));
+      error = "the slow origin gave up";
+      return false;
+    });
+  });
+  using namespace protocol;
+  SetBufferRef slow;
+  slow.id = 1, slow.components = 3, slow.value_count = 9, slow.url = "http://slow.example/scene.bin";
+  ProtoClient a1, a2;
+  for (ProtoClient* c : {&a1, &a2}) {
+    REQUIRE(c->connect(node.port()));
+    REQUIRE(c->handshake(DisplayKind::jpeg, 16, 16, 90));
+    REQUIRE(c->send({slow}));
+  }
+  REQUIRE(a1.send({RenderRequest{7}}));  // waits behind its references
+  const auto t0 = std::chrono::steady_clock::now();
+  while (entered < 2 && std::chrono::steady_clock::now() - t0 < std::chrono::seconds(20) * time_scale())
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  REQUIRE(entered == 2);
+
+  ProtoClient b;
+  REQUIRE(b.connect(node.port()));
+  REQUIRE(b.handshake(DisplayKind::jpeg, 16, 16, 90));
+  const Camera cam{Mat4::look_at({0, 0, 2.5f}, {0, 0, 0}, {0, 1, 0}), 0.9f};
+  auto frame = b.render(cam, 1);
+  CHECK(frame.has_value());
+  CHECK(entered == 2);  // both still loading
+
+  gate.set_value();
+  // a1: the answer first, then the frame it asked for after sending the references.
+  bool answered = false, framed_after = false;
+  for (int k = 0; k < 50 && !framed_after; ++k) {
+    auto msg = a1.ws.receive(int(20000 * time_scale()));
+    REQUIRE(msg);
+    auto recs = decode_server(msg->data(), msg->size(), a1.limits);
+    REQUIRE(recs);
+    for (auto& r : recs.value()) {
+      if (auto* x = std::get_if<Reference>(&r)) {
+        CHECK_FALSE(x->ok);
+        CHECK(x->message.find("the slow origin gave up") != std::string::npos);
+        answered = true;
+      }
+      if (auto* f = std::get_if<Frame>(&r)) {
+        CHECK(answered);
+        if (f->frame == 7) framed_after = true;
+      }
+    }
+  }
+  CHECK(framed_after);
+  auto other = a2.next<Reference>();
+  REQUIRE(other);
+  CHECK_FALSE(other->ok);
 }

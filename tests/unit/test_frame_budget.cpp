@@ -106,3 +106,19 @@ TEST_CASE("Scaled sizes round to the nearest pixel and never vanish", "[budget]"
   CHECK(w == 1);
   CHECK(h == 1);
 }
+
+TEST_CASE("A restart renders the next frame at the smallest scale and learns the cost from it", "[budget]") {
+  const double budget = 33;
+  FrameBudget b(budget);
+  Model cheap{10};  // the empty scene: full resolution is within the budget
+  run(b, cheap, 5);
+  CHECK(b.scale() == 1.0);
+  b.restart();  // the page's scene arrived
+  CHECK(b.scale() == 0.25);
+  CHECK(b.full_cost_ms() == 0);
+  Model heavy{450};
+  auto t = run(b, heavy, 10);
+  CHECK(t[0] < 2 * budget);  // the first frame of the new scene: small, not 450 ms
+  CHECK(within(t, 1, budget, 0.20) >= t.size() - 2);
+  CHECK(b.scale() < 0.35);
+}
