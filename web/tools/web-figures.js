@@ -11,6 +11,9 @@
 //    scene for a first visitor (the node loads the files, its texture cache cold), a second
 //    visitor (another fresh browser profile: the node's cache warm) and a visitor that uploads
 //    everything (`references=off`), on a fresh node per repeat (--ref-pages, default the three).
+//    That first frame may be a scaled one (the node's frame budget); the time to the same
+//    scene at the element's full width is reported beside it, and each record says where the
+//    time went (the last scene message sent, the frames drawn until then).
 // Uses playwright-core with /usr/bin/chromium (headless, software GL) and a fresh `tessera serve`.
 import fs from 'node:fs';
 import os from 'node:os';
@@ -41,7 +44,8 @@ function instrument(noDeflate) {
   window.__drawn = []; window.__sends = []; window.__inputs = []; window.__load = null; window.__connected = null;
   if (noDeflate) { delete window.CompressionStream; }
   document.addEventListener('framedrawn', (e) => window.__drawn.push({ t: performance.now(), frame: e.detail.frame,
-    rendering: e.detail.timings && e.detail.timings.rendering, pipeline: e.detail.timings && e.detail.timings.pipeline }), true);
+    rendering: e.detail.timings && e.detail.timings.rendering, pipeline: e.detail.timings && e.detail.timings.pipeline,
+    width: e.detail.width }), true);
   document.addEventListener('load', (e) => { if (e.target.localName === 'xml3d' && window.__load === null) window.__load = performance.now(); }, true);
   document.addEventListener('mousemove', () => window.__inputs.push(performance.now()), true);
   const send = WebSocket.prototype.send;
@@ -92,14 +96,19 @@ async function loadPage(node, name, { noDeflate = false, display = 'jpeg', query
     const last = window.__sends.filter((s) => s.scene).pop();
     const req = last && window.__sends.find((s) => s.t >= last.t && s.render !== null);
     const d = req && window.__drawn.find((f) => f.frame >= req.render);
-    if (d) { window.__complete = d.t; window.__lastScene = last.t; window.__completeRequest = req.t; }
-    return !!d;
+    // Within a frame budget that frame may be a scaled one: the first at the element's full
+    // width (the still that follows it) is recorded too.
+    const full = d && window.__drawn.find((f) => f.frame >= req.render && f.width >= document.querySelector('xml3d').tessera.width);
+    if (d) { window.__complete = d.t; window.__lastScene = last.t; window.__completeRequest = req.t; window.__completeWidth = d.width; }
+    if (full) window.__completeFull = full.t;
+    return !!full;
   }, null, { timeout: 180000, polling: 100 });
   const t = await page.evaluate(() => ({ first: window.__drawn.length ? window.__drawn[0].t : null, load: window.__load, complete: window.__complete,
     nav: performance.getEntriesByType('navigation')[0].domContentLoadedEventEnd, frames: window.__drawn.length, connected: window.__connected,
     // Where the time after connecting goes: the last scene message sent, the render request of
     // the frame counted as complete, and every frame drawn until then (time, rendering ms).
-    lastScene: window.__lastScene, completeRequest: window.__completeRequest,
+    lastScene: window.__lastScene, completeRequest: window.__completeRequest, completeWidth: window.__completeWidth,
+    completeFull: window.__completeFull,
     drawn: window.__drawn.filter((f) => f.t <= window.__complete).map((f) => [+f.t.toFixed(0), f.frame, f.rendering === undefined ? null : +(+f.rendering).toFixed(0)]) }));
   return { page, close, t, up };
 }
@@ -176,6 +185,7 @@ for (let k = 0; k < (REF_PAGES.length ? REPEAT : 0); k++) {
           complete_frame_ms: +t.complete.toFixed(0), connect_to_complete_ms: +(t.complete - t.connected).toFixed(0),
           refs: up.refs, wire_mb: +(up.wire / 1048576).toFixed(2),
           last_scene_ms: +(t.lastScene - t.connected).toFixed(0), complete_request_ms: +(t.completeRequest - t.connected).toFixed(0),
+          complete_width: t.completeWidth, connect_to_full_ms: +(t.completeFull - t.connected).toFixed(0),
           drawn: t.drawn.map(([at, frame, rendering]) => [at - Math.round(t.connected), frame, rendering]) };
         emit(rec);
         ((rows.refs ||= {})[`${name} ${visitor}`] ||= []).push(rec);
@@ -206,9 +216,9 @@ if (MARKDOWN) {
     const col = (k) => `${median(out.map((o) => o[k])).toFixed(1)} (${pct(out.map((o) => o[k]), 0.1).toFixed(1)}–${pct(out.map((o) => o[k]), 0.9).toFixed(1)})`;
     console.log(`| ${key} | ${size[0]}x${size[1]}, ${size[2] ?? 0} | ${col('total')} | ${col('toSend')} | ${col('sendToFrame')} | ${median(out.map((o) => o.rendering)).toFixed(1)} |`);
   }
-  console.log('\n| page | visitor | connected → first frame of the whole scene, ms | page load → that frame, ms | references sent | WebSocket bytes sent, MB |\n| --- | --- | --- | --- | --- | --- |');
+  console.log('\n| page | visitor | connected → first frame of the whole scene, ms | its width | connected → that scene at full resolution, ms | page load → first frame of the whole scene, ms | references sent | WebSocket bytes sent, MB |\n| --- | --- | --- | --- | --- | --- | --- | --- |');
   for (const [key, recs] of Object.entries(rows.refs || {})) {
     const [name, visitor] = key.split(' ');
-    console.log(`| /demo/${name}.html | ${visitor} | ${ms(recs.map((r) => r.connect_to_complete_ms))} | ${ms(recs.map((r) => r.complete_frame_ms))} | ${median(recs.map((r) => r.refs))} | ${median(recs.map((r) => r.wire_mb)).toFixed(2)} |`);
+    console.log(`| /demo/${name}.html | ${visitor} | ${ms(recs.map((r) => r.connect_to_complete_ms))} | ${recs.map((r) => r.complete_width).join(', ')} | ${ms(recs.map((r) => r.connect_to_full_ms))} | ${ms(recs.map((r) => r.complete_frame_ms))} | ${median(recs.map((r) => r.refs))} | ${median(recs.map((r) => r.wire_mb)).toFixed(2)} |`);
   }
 }

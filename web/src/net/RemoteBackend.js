@@ -65,6 +65,12 @@ export class RemoteBackend {
     // With references the node loads glTF buffers itself, so the page's reader need not wait
     // for them (XML3DHandler.js): the scene goes out while the browser downloads them.
     this.defersBuffers = references;
+    // Their downloads wait until the node has answered the references (or a few seconds, or the
+    // session ended): the scene's way to the node comes first.
+    let openGate;
+    this.downloadGate = new Promise((r) => (openGate = r));
+    this.openDownloads = openGate;
+    this.gateTimer = setTimeout(openGate, 3000);
     this.channel = new SyncChannel({
       url: this.url,
       handshake: { renderer: renderer === 'rasterizer' ? 'rasterizer' : 'raytracer', display,
@@ -73,6 +79,7 @@ export class RemoteBackend {
       settings: this.readSettings(),
       rate: Math.min(120, Math.max(1, int(x, 'sync-rate', 30))),
       references,
+      onReferencesAnswered: () => this.openDownloads(),
       onState: (state, detail) => this.state(state, detail),
       onFrame: (f) => this.frame(f),
       onServerError: (e) => handler.setStatus(`server:${e.codeName}:${e.message}`, `⚠ server: ${e.codeName}: ${e.message}`, true),
@@ -109,6 +116,7 @@ export class RemoteBackend {
     h.setStatus('connection', text, state === 'disconnected' || state === 'failed');
     // The end of this page's session: one console error that says why (the node's close reason).
     if (state === 'failed') console.error(`Tessera: the node ${this.host} refused the session: ${detail}`);
+    if (state === 'failed' || state === 'disconnected') this.openDownloads();  // no answers are coming
     if (state === 'ready') {
       this.serverInfo = detail;
       if (this.frameView.start) this.frameView.start();
@@ -186,6 +194,8 @@ export class RemoteBackend {
   draw() { return null; }  // frames arrive asynchronously
 
   dispose() {
+    clearTimeout(this.gateTimer);
+    this.openDownloads();
     clearTimeout(this.flushTimer);
     this.channel.close();
     this.frameView.dispose();

@@ -34,8 +34,10 @@ let refusalsWarned = false;
 
 export class SyncChannel {
   constructor({ url, handshake, settings = null, rate = 30, highWater = 4 << 20, messageBytes = 1 << 20, references = true,
-    onFrame = () => {}, onState = () => {}, onServerError = () => {}, onStats = () => {}, onProgress = () => {} }) {
-    Object.assign(this, { url, handshake, settings, rate, highWater, messageBytes, onFrame, onState, onServerError, onStats, onProgress });
+    onFrame = () => {}, onState = () => {}, onServerError = () => {}, onStats = () => {}, onProgress = () => {},
+    onReferencesAnswered = () => {} }) {
+    Object.assign(this, { url, handshake, settings, rate, highWater, messageBytes, onFrame, onState, onServerError, onStats, onProgress,
+      onReferencesAnswered });
     this.sync = new SceneSync({ references });
     this.queue = [];          // {size, record: Promise|object}
     this.frameNumber = 0;
@@ -284,6 +286,7 @@ export class SyncChannel {
     this.send(encodeClient(batch));
     this.onProgress(this.progress.sent, this.progress.queued);
     await answered;
+    this.onReferencesAnswered();
     if (session !== this.session || !this.ws) return;
     const ok = (r) => !!(answers.get(key(r)) || {}).ok;  // unanswered (an error ended the wait): refused
     const refused = item.refs.filter((r) => !ok(r));

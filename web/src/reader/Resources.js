@@ -18,6 +18,10 @@ export class Resources {
   // values are in; onLoad is called again then (or the entry turns to 'error').
   constructor({ fetch: fetchFn, parseXml, onLoad, deferBuffers = false } = {}) {
     this.deferBuffers = deferBuffers;
+    // Deferred loads start their buffer downloads when this promise settles (null: at once): the
+    // remote backend opens it once the node has answered the references, so that the download
+    // does not compete with the scene's way to the node for the page's CPU and the node's.
+    this.downloadGate = null;
     const base = fetchFn || globalThis.fetch;
     this.fetch = fetchFn || globalThis.fetch?.bind(globalThis);
     if (base && !SHARED.has(base)) SHARED.set(base, new Map());
@@ -81,7 +85,7 @@ export class Resources {
     if (kind === 'gltf') {
       const isGlb = url.toLowerCase().split('?')[0].endsWith('.glb');
       const body = isGlb ? await r.arrayBuffer() : await r.json();
-      return loadGltf(body, url, (u) => this.binary(u), { defer });
+      return loadGltf(body, url, (u) => this.binary(u, defer ? this.downloadGate : null), { defer });
     }
     const doc = this.parseXml(await r.text());
     if (!doc || !doc.documentElement || doc.getElementsByTagName('parsererror').length)
@@ -93,10 +97,11 @@ export class Resources {
   // A file's bytes. Downloads in flight are shared: a deferred and a whole load of one glTF
   // (a handler rebuilt for the server while the WebGL one loads, say) fetch its buffers once.
   // Only while in flight, so that the page does not keep the bytes of every file it loaded.
-  binary(url) {
+  binary(url, gate = null) {
     const k = `binary ${url}`;
     if (!this.shared.has(k)) {
-      const p = this.fetchOk(url).then((x) => x.arrayBuffer());
+      const start = () => this.fetchOk(url).then((x) => x.arrayBuffer());
+      const p = gate ? gate.then(start, start) : start();
       this.shared.set(k, p);
       p.then(() => this.shared.delete(k), () => this.shared.delete(k));
     }

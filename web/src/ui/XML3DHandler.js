@@ -67,6 +67,7 @@ export class XML3DHandler {
     // A node that loads the page's glTF buffers itself needs only their URLs: the scene is sent
     // before the browser has downloaded them (Resources.js, deferBuffers).
     this.resources.deferBuffers = !!this.backend.defersBuffers;
+    this.resources.downloadGate = this.backend.downloadGate || null;
     this.inputElement = this.backend.inputElement || this.backend.element;
     c.appendChild(this.status);  // above the display and input elements
 

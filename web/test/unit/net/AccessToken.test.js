@@ -89,8 +89,9 @@ test('the failed session is one console error naming the reason, and the status 
   const saved = console.error;
   console.error = (m) => errors.push(m);
   const doc = page('<div></div>');
+  let downloads = 0;  // a failed session opens the deferred glTF downloads: no reference answers are coming
   const self = { host: 'node.example:8080', url: 'ws://node.example:8080/ws?access_token=secret-token-value', frameView: {},
-    handler: { container: doc.querySelector('div'), setStatus: (k, t) => statuses.push(t) } };
+    handler: { container: doc.querySelector('div'), setStatus: (k, t) => statuses.push(t) }, openDownloads: () => downloads++ };
   try {
     RemoteBackend.prototype.state.call(self, 'connecting', '');
     RemoteBackend.prototype.state.call(self, 'failed', 'access token expired');
@@ -98,6 +99,7 @@ test('the failed session is one console error naming the reason, and the status 
     console.error = saved;
   }
   assert.deepEqual(errors, ['Tessera: the node node.example:8080 refused the session: access token expired']);
+  assert.equal(downloads, 1);
   assert.ok(statuses.every((t) => !t.includes('secret-token-value')), statuses.join('\n'));
   assert.ok(statuses[0].includes('access_token=…'));
 });

@@ -374,7 +374,8 @@ async function withTextures(body) {
 
 test('references go first, alone; nothing is sent until the node answers them; an answer ok means no upload', () => withFakeSocket(async (opened) => {
   const scene = await referencedScene();
-  const { ch, ws } = await connectedTo(scene);
+  let answeredCalls = 0;  // the remote backend opens the deferred glTF downloads then
+  const { ch, ws } = await connectedTo(scene, { onReferencesAnswered: () => answeredCalls++ });
   opened.push(ch);
   const [gltfMesh, markupMesh] = [...scene.meshes.values()];
   const texture = scene.materials.get(gltfMesh.material).diffuseTexture;
@@ -387,11 +388,13 @@ test('references go first, alone; nothing is sent until the node answers them; a
   ]);
   await new Promise((r) => setTimeout(r, 60));
   assert.equal(ws.sent.length, 2, 'nothing else (no material, mesh or render request) before the answers');
+  assert.equal(answeredCalls, 0);
   answerRefs(ws);
   await until(() => ws.sent.flat().some((r) => r.type === 'render'));
   const after = ws.sent.slice(2).flat();
   assert.deepEqual(after.filter((r) => r.type === 'buffer').map((r) => r.id), [markupMesh.positions], 'only what has no source is uploaded');
   assert.equal(after.filter((r) => r.type === 'texture' || isRef(r)).length, 0);
+  assert.equal(answeredCalls, 1);
   assert.deepEqual(after.filter((r) => r.type === 'mesh').map((r) => r.id).sort(), [gltfMesh.id, markupMesh.id].sort());
   assert.equal(ch.waiting, null);
 }));

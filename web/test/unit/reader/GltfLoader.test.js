@@ -186,3 +186,28 @@ test('Resources with deferBuffers: loaded at once and filling until the values a
   assert.equal(fetches.filter((u) => u.endsWith('.bin')).length, 1, 'one download for both loads');
   assert.deepEqual(calls.filter((c) => c[0] === 'deferred'), [['deferred', 'loaded', true], ['deferred', 'loaded', false]]);
 });
+
+test('deferred loads start their buffer downloads when the download gate opens; whole loads do not wait for it', async () => {
+  const fetches = [];
+  const fetch = async (url) => {
+    fetches.push(url);
+    return { ok: true, status: 200, json: async () => packed(), arrayBuffer: async () => packedBin() };
+  };
+  let open;
+  const res = new Resources({ fetch, deferBuffers: true });
+  res.downloadGate = new Promise((r) => (open = r));
+  const e = res.get('http://localhost/m/packed.gltf');
+  await new Promise((r) => setTimeout(r, 20));
+  assert.equal(e.state, 'loaded');
+  assert.deepEqual(fetches, ['http://localhost/m/packed.gltf'], 'the JSON only, until the gate opens');
+  open();
+  await new Promise((r) => setTimeout(r, 20));
+  assert.equal(e.filling, false);
+  assert.deepEqual([...e.data.meshes[0].positions], [0, 0, 0, 1, 0, 0, 0, 1, 0]);
+  // A Resources without deferral fetches at once, whatever its gate.
+  const whole = new Resources({ fetch });
+  whole.downloadGate = new Promise(() => {});
+  const w = whole.get('http://localhost/m/other.gltf');
+  await new Promise((r) => setTimeout(r, 20));
+  assert.equal(w.state, 'loaded');
+});
