@@ -136,7 +136,9 @@ static void alpha_filter(const RTCFilterFunctionNArguments* args) {
       args->valid[i] = 0;
       continue;
     }
-    const bool translucent = kOcclusion && !m.alpha_mask && m.opacity < 1;
+    // Partly transparent as shading sees it: opacity below 1, or a diffuse texture whose alpha
+    // is (the kernel multiplies the opacity by it where there is no alpha mask).
+    const bool translucent = kOcclusion && !m.alpha_mask && (m.opacity < 1 || (impl.mat_diffuse_tex[mi] && impl.mat_diffuse_tex[mi]->translucent));
     if (!m.alpha_mask && !translucent) continue;
     // An occlusion query's OcclusionContext: the filter may change what it carries for this query.
     auto* oc = kOcclusion ? reinterpret_cast<OcclusionContext*>(const_cast<QueryContext*>(qc)) : nullptr;
@@ -258,15 +260,20 @@ void RayTracer::Impl::sync(const Scene& scene, std::vector<std::string>& warning
     t.version = e.version;
     t.texels.resize(size_t(src.width) * size_t(src.height));
     // In parallel: a scene's textures hold tens of millions of texels (the kitchen: 46 M).
+    std::atomic<bool> translucent{false};
     tbb::parallel_for(tbb::blocked_range<size_t>(0, t.texels.size(), 1 << 16), [&](const tbb::blocked_range<size_t>& r) {
+      uint8_t min_alpha = 255;
       for (size_t i = r.begin(); i < r.end(); ++i) {
         const uint8_t* p = &src.rgba[i * 4];
+        min_alpha = std::min(min_alpha, p[3]);
         uint64_t v = uint64_t(p[3]) * 257 << 48;
         for (int c = 0; c < 3; ++c)
           v |= uint64_t(decode ? std::lround(to_linear[p[c]] * 65535.0f) : p[c] * 257) << (16 * c);
         t.texels[i] = v;
       }
+      if (min_alpha < 255) translucent.store(true, std::memory_order_relaxed);
     });
+    t.translucent = translucent.load();
   }
   // Materials (rebuilt whole: they are small).
   materials.assign(1, default_material());
@@ -321,7 +328,9 @@ void RayTracer::Impl::sync(const Scene& scene, std::vector<std::string>& warning
     auto mit = material_index.find(m.material);
     const Material& mat = mit == material_index.end() ? materials[0] : materials[mit->second];
     needs_filter[key] = needs_filter[key] || mat.alpha_mask;
-    see_through[key] = see_through[key] || mat.refraction > 0 || (mat.opacity < 1 && !mat.alpha_mask);
+    const Tex* diffuse = tex_of(mat.diffuse_texture);
+    see_through[key] = see_through[key] || mat.refraction > 0 ||
+                       (!mat.alpha_mask && (mat.opacity < 1 || (diffuse && diffuse->translucent && m.texcoords != kNoId)));
   }
   std::vector<std::pair<const GeomKey*, Geom*>> to_build;  // set up anew (from the cache, or built)
   for (auto& [id, key] : mesh_key) {

@@ -225,6 +225,7 @@ struct RayTracer::Impl {
     std::vector<uint64_t> texels;
     raytracer_detail::TexelAddressing addr;  // size, wrap modes and filter
     bool decoded = false;  // colour channels decoded from sRGB
+    bool translucent = false;  // some texel's alpha is below 1: a material without an alpha mask lets light through there
     uint64_t version = 0;
   };
   struct Geom {

@@ -160,6 +160,29 @@ inline Light directional(Vec3 travel, float intensity = 1, Vec3 color = {1, 1, 1
   return l;
 }
 
+// A red quad (x, y in [-1, 1], z = 0) textured with a 2x2 nearest texture (id 1) whose right
+// half has alpha 0, masked at 0.5 when `alpha_mask`, in front of a green quad (x, y in [-4, 4],
+// z = -1), under a blue sky with 0.2 ambient and a directional light (id 1) travelling along
+// (1, 0, -1): shadows fall one unit to +x on the back quad. Meshes and buffers from `base`
+// (front) and base + 100 (back); materials 1 and 2. Resolution and camera are the caller's.
+inline void add_cutout(Scene& scene, Id base, bool alpha_mask) {
+  scene.set_environment(plain_env({0, 0, 1}, {0.2f, 0.2f, 0.2f}));
+  Texture tex;
+  tex.width = tex.height = 2;
+  tex.rgba = {255, 255, 255, 255, 255, 255, 255, 0, 255, 255, 255, 255, 255, 255, 255, 0};
+  tex.sampler.filter = Sampler::Filter::nearest;
+  scene.set_texture(1, tex);
+  Material front = diffuse({1, 0, 0});
+  front.diffuse_texture = 1;
+  front.alpha_mask = alpha_mask;
+  front.alpha_cutoff = 0.5f;
+  scene.set_material(1, front);
+  scene.set_material(2, diffuse({0, 1, 0}));
+  add_object(scene, base, quad({-1, -1, 0}, {2, 0, 0}, {0, 2, 0}), 1);
+  add_object(scene, base + 100, quad({-4, -4, -1}, {8, 0, 0}, {0, 8, 0}), 2);
+  scene.set_light(1, directional({1, 0, -1}));
+}
+
 inline Camera look(Vec3 eye, Vec3 target, float fov_y, Vec3 up = {0, 1, 0}) {
   Camera c;
   c.to_world = Mat4::look_at(eye, target, up);

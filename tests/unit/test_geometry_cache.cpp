@@ -42,26 +42,12 @@ bool same_image(const Image& a, const Image& b) {
   return a.width == b.width && a.height == b.height && a.rgba == b.rgba;
 }
 
-// The alpha-mask scene of test_raytracer: a quad whose right half is cut out, over a back quad,
-// lit at an angle. Buffers and meshes from id `base` on.
+// The alpha-mask scene of test_raytracer (scene_builders.h add_cutout): a quad whose right half
+// is cut out, over a back quad, lit at an angle. Buffers and meshes from id `base`.
 Scene cutout_scene(Id base, bool alpha_mask) {
   Scene scene;
   scene.set_resolution(64, 64);
-  scene.set_environment(plain_env({0, 0, 1}, {0.2f, 0.2f, 0.2f}));
-  Texture tex;
-  tex.width = tex.height = 2;
-  tex.rgba = {255, 255, 255, 255, 255, 255, 255, 0, 255, 255, 255, 255, 255, 255, 255, 0};
-  tex.sampler.filter = Sampler::Filter::nearest;
-  scene.set_texture(1, tex);
-  Material front = diffuse({1, 0, 0});
-  front.diffuse_texture = 1;
-  front.alpha_mask = alpha_mask;
-  front.alpha_cutoff = 0.5f;
-  scene.set_material(1, front);
-  scene.set_material(2, diffuse({0, 1, 0}));
-  add_object(scene, base, quad({-1, -1, 0}, {2, 0, 0}, {0, 2, 0}), 1);
-  add_object(scene, base + 100, quad({-4, -4, -1}, {8, 0, 0}, {0, 8, 0}), 2);
-  scene.set_light(1, directional({1, 0, -1}));
+  add_cutout(scene, base, alpha_mask);
   scene.set_camera(look({0, 0, 5}, {0, 0, 0}, 60 * kPi / 180));
   return scene;
 }

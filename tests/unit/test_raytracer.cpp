@@ -546,23 +546,9 @@ TEST_CASE("alpha-masked cut-outs are transparent to camera rays and cast no shad
   Scene scene;
   const int W = 101, H = 101;
   scene.set_resolution(W, H);
-  scene.set_environment(plain_env({0, 0, 1}, {0.2f, 0.2f, 0.2f}));
-  // Left half opaque, right half cut out (alpha 0).
-  Texture tex;
-  tex.width = tex.height = 2;
-  tex.rgba = {255, 255, 255, 255, 255, 255, 255, 0, 255, 255, 255, 255, 255, 255, 255, 0};
-  tex.sampler.filter = Sampler::Filter::nearest;
-  scene.set_texture(1, tex);
-  Material front = diffuse({1, 0, 0});
-  front.diffuse_texture = 1;
-  front.alpha_mask = true;
-  front.alpha_cutoff = 0.5f;
-  scene.set_material(1, front);
-  scene.set_material(2, diffuse({0, 1, 0}));
-  add_object(scene, 100, quad({-1, -1, 0}, {2, 0, 0}, {0, 2, 0}), 1);
-  add_object(scene, 200, quad({-4, -4, -1}, {8, 0, 0}, {0, 8, 0}), 2);
-  // Light travels along (1, 0, -1): shadows fall one unit to +x on the back quad.
-  scene.set_light(1, directional({1, 0, -1}));
+  // Left half opaque, right half cut out (alpha 0); light along (1, 0, -1): shadows fall one
+  // unit to +x on the back quad.
+  add_cutout(scene, 100, true);
   Camera cam = look({0, 0, 5}, {0, 0, 0}, 60 * kDeg);
   scene.set_camera(cam);
   RayTracer rt;
@@ -679,6 +665,27 @@ TEST_CASE("partly transparent surfaces cast shadows of matching transmission", "
   pane.opacity = 1;
   scene.set_material(1, pane);
   CHECK(std::abs(probe() - green(0)) <= 1);
+  // Opacity 1, but a diffuse texture whose alpha is 64 of 255 and no alpha mask: shading makes
+  // the pane that see-through, and its shadow lets 1 - 64/255 of the light through.
+  Texture faint;
+  faint.width = faint.height = 1;
+  faint.rgba = {255, 255, 255, 64};
+  scene.set_texture(1, faint);
+  pane.diffuse_texture = 1;
+  scene.set_material(1, pane);
+  CHECK(std::abs(probe() - green(1 - 64 / 255.0f)) <= 1);
+  // The same texture as an alpha mask (alpha below the cutoff): cut out, the full light.
+  pane.alpha_mask = true;
+  pane.alpha_cutoff = 0.5f;
+  scene.set_material(1, pane);
+  CHECK(std::abs(probe() - green(1)) <= 1);
+  // An opaque texture: the full shadow.
+  faint.rgba = {255, 255, 255, 255};
+  scene.set_texture(1, faint);
+  pane.alpha_mask = false;
+  scene.set_material(1, pane);
+  CHECK(std::abs(probe() - green(0)) <= 1);
+  pane.diffuse_texture = kNoId;
   // A refracting pane casts none (as before).
   pane.opacity = 0.5f;
   pane.refraction = 0.5f;
