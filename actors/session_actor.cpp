@@ -7,6 +7,7 @@
 #include "actors/session_state.h"
 #include "protocol/scene_records.h"
 #include "renderer/accumulation.h"
+#include "renderer/embree_device.h"
 #include "renderer/raytracer.h"
 #include "update/scene_update.h"
 
@@ -241,6 +242,12 @@ session_actor::behavior_type session_impl(self_ptr self, std::shared_ptr<ClientS
   self->attach_functor([settings = st.settings, id](const caf::error&) {
     Event closed(Ev::closed, true);
     closed.scope = {{"session", id}};
+    // The node's shared BVHs (renderer/geometry_cache.h) as this session leaves them: how many
+    // are kept, their bytes, and the lookups that found one or built anew so far.
+    GeometryCache::Stats g;
+    if (EmbreeDevice::geometry_stats(g))
+      closed.with("geometry_cache", Json::object({{"entries", uint64_t(g.entries)}, {"bytes", g.bytes}, {"hits", g.hits},
+                                                  {"misses", g.misses}, {"evictions", g.evictions}}));
     node_log(*settings, std::move(closed));
     schedule_heap_trim();  // its scene, BVH and frames are freed as its linked actors end
   });

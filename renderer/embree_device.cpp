@@ -45,6 +45,17 @@ void EmbreeDevice::set_geometry_cache_limit(uint64_t bytes) {
   if (auto d = g_device.lock()) d->geometries_.set_limit(bytes);
 }
 
+bool EmbreeDevice::geometry_stats(GeometryCache::Stats& out) {
+  std::shared_ptr<EmbreeDevice> d;
+  {
+    std::lock_guard<std::mutex> l(g_mu);
+    d = g_device.lock();
+  }
+  if (!d) return false;
+  out = d->geometries_.stats();
+  return true;  // `d` may be the last holder: released here, outside g_mu
+}
+
 EmbreeDevice::EmbreeDevice() : geometries_(g_geometry_limit.load()) {
   device_ = rtcNewDevice(nullptr);
   if (!device_) throw std::runtime_error("cannot create the Embree device: " + std::string(code_name(rtcGetDeviceError(nullptr))));

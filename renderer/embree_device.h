@@ -40,6 +40,8 @@ class EmbreeDevice {
   GeometryCache& geometries() { return geometries_; }
   // The cache's byte limit, for the device now live and every later one (default 1 GiB).
   static void set_geometry_cache_limit(uint64_t bytes);
+  // The live device's cache figures; false (and nothing made) when no device lives.
+  static bool geometry_stats(GeometryCache::Stats& out);
 
  private:
   EmbreeDevice();

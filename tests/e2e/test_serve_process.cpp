@@ -6,6 +6,8 @@
 // and a non-zero status.
 #include <catch2/catch.hpp>
 
+#include <sstream>
+
 #include <fcntl.h>
 #include <poll.h>
 #include <signal.h>
@@ -89,6 +91,60 @@ TEST_CASE("tessera serve as a process serves a client and the pages, and exits 0
   // The connection is gone: nothing more arrives and the client sees it closed.
   CHECK_FALSE(c.ws.receive(2000).has_value());
   CHECK(c.ws.closed());
+}
+
+// The integer after "KEY": in `line`, or -1.
+static long long field(const std::string& line, const std::string& key) {
+  const auto at = line.find("\"" + key + "\": ");
+  return at == std::string::npos ? -1 : std::stoll(line.substr(at + key.size() + 4));
+}
+
+TEST_CASE("tessera serve keeps the meshes' BVHs for later sessions: a second visitor of a scene builds none; "
+          "with geometry-cache-mb=0 it keeps none", "[e2e]") {
+  for (const bool keep : {true, false}) {
+    INFO("geometry-cache-mb " << (keep ? "default" : "0"));
+    std::vector<std::string> args{"--port", "0"};
+    if (!keep) args.push_back("--tessera.geometry-cache-mb=0");
+    Process p(serve(args));
+    auto line = p.first_line(30000);
+    INFO("stderr: " << p.err());
+    REQUIRE(line);
+    const uint16_t port = listening_port(*line);
+    // The session-closed lines logged so far (each with the node's geometry cache figures).
+    auto closed = [&] {
+      std::vector<std::string> out;
+      std::istringstream in(p.err());
+      for (std::string l; std::getline(in, l);)
+        if (l.find("\"closed\": true") != std::string::npos && l.find("\"geometry_cache\"") != std::string::npos) out.push_back(l);
+      return out;
+    };
+    for (size_t visitor = 1; visitor <= 2; ++visitor) {
+      {
+        ProtoClient c;
+        REQUIRE(c.connect(port));
+        REQUIRE(c.handshake(protocol::DisplayKind::jpeg, 64, 48, 85));
+        REQUIRE(c.upload(pavilion().scene));
+        REQUIRE(c.render(pavilion_loop().camera(0), 1));
+      }  // the client goes: the session ends
+      for (int k = 0; k < 300 && closed().size() < visitor; ++k) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+      REQUIRE(closed().size() == visitor);
+      std::this_thread::sleep_for(std::chrono::milliseconds(500));  // its renderer, and so its ray tracer, ends after it
+    }
+    const auto lines = closed();
+    INFO(lines[0] << "\n" << lines[1]);
+    const long long built = field(lines[0], "misses");
+    CHECK(field(lines[0], "hits") == 0);
+    CHECK(built > 50);  // the pavilion's unique geometries, each built once
+    if (keep) {
+      CHECK(field(lines[1], "hits") == built);  // every one taken from the cache
+      CHECK(field(lines[1], "misses") == built);  // none built again
+    } else {
+      CHECK(field(lines[1], "hits") == 0);
+      CHECK(field(lines[1], "misses") == 2 * built);
+    }
+    p.signal(SIGTERM);
+    REQUIRE(p.wait(15000));
+  }
 }
 
 TEST_CASE("tessera serve exits non-zero with a clear error on a missing config, a bad setting or a port in use",
