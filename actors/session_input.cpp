@@ -219,6 +219,7 @@ static Refs start_references(self_ptr self, std::vector<ClientRecord>& recs, con
     while (!s.held.empty() && !s.resolving && !s.closed) {
       std::vector<uint8_t> next = std::move(s.held.front());
       s.held.pop_front();
+      s.held_bytes -= next.size();
       on_client(self, next);
     }
   };
@@ -236,6 +237,17 @@ void on_client(self_ptr self, std::vector<uint8_t>& bytes) {
   if (st.closed) return;
   if (st.resolving) {  // after the references being loaded, in order
     st.still.active = false;
+    // Held messages are not admitted yet: bounded by one message's worth in all (a client waits
+    // for the answers before it sends what depends on them; camera moves and render requests
+    // are small). Beyond it a message is refused with its reason, not buffered without end.
+    if (st.held_bytes + bytes.size() > st.settings->limits.max_message_bytes) {
+      fail(self, Error{ErrorCode::limit_exceeded,
+                       "message refused: more than " + std::to_string(st.settings->limits.max_message_bytes) +
+                           " bytes of messages arrived while the session's references were loading",
+                       kNoRecord});
+      return;
+    }
+    st.held_bytes += bytes.size();
     st.held.push_back(std::move(bytes));
     return;
   }

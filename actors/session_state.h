@@ -79,6 +79,7 @@ struct session_state {
   // messages wait here, in order, until the answers are sent and the message applied.
   bool resolving = false;
   std::deque<std::vector<uint8_t>> held;
+  uint64_t held_bytes = 0;                      // their sizes, at most Limits::max_message_bytes
   static inline const char* name = "tessera.session";
 };
 

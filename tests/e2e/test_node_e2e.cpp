@@ -713,3 +713,54 @@ TEST_CASE("References load off CAF's threads: while a slow origin holds two sess
   REQUIRE(other);
   CHECK_FALSE(other->ok);
 }
+
+TEST_CASE("Messages that arrive while references load are held up to one message's worth; beyond it they are "
+          "refused with the reason and the session goes on", "[e2e][references]") {
+  std::promise<void> gate;
+  std::shared_future<void> open = gate.get_future().share();
+  std::atomic<int> entered{0};
+  TestNode node(8, [&](NodeSettings& s, ServerOptions&) {
+    s.limits.max_message_bytes = 4096;
+    AssetOptions o;
+    o.origins = {"http://slow.example"};
+    s.assets = std::make_shared<AssetStore>(o, [open, &entered](const std::string&, uint64_t, std::vector<uint8_t>&,
+                                                                 std::string& error) {
+      ++entered;
+      open.wait_for(std::chrono::seconds(120));
+      error = "the slow origin gave up";
+      return false;
+    });
+  });
+  using namespace protocol;
+  SetBufferRef slow;
+  slow.id = 1, slow.components = 3, slow.value_count = 9, slow.url = "http://slow.example/scene.bin";
+  ProtoClient c;
+  REQUIRE(c.connect(node.port()));
+  REQUIRE(c.handshake(DisplayKind::jpeg, 16, 16, 90));
+  REQUIRE(c.send({slow}));
+  const auto t0 = std::chrono::steady_clock::now();
+  while (entered < 1 && std::chrono::steady_clock::now() - t0 < std::chrono::seconds(20) * time_scale())
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  REQUIRE(entered == 1);
+  const Camera cam{Mat4::look_at({0, 0, 2.5f}, {0, 0, 0}, {0, 1, 0}), 0.9f};
+  REQUIRE(c.send({SetCamera{cam}, RenderRequest{3}}));  // small: held
+  SetBuffer big;
+  big.id = 2;
+  big.buffer.components = 3;
+  big.buffer.f.assign(1002, 0.5f);  // 4 KB: with the first message, beyond 4096 bytes
+  REQUIRE(c.send({big}));
+  std::vector<ErrorReply> errors;
+  auto none = c.next<Reference>(3000, &errors);  // nothing answered yet; the refusal comes at once
+  CHECK_FALSE(none);
+  REQUIRE(errors.size() == 1);
+  CHECK(errors[0].code == ErrorCode::limit_exceeded);
+  CHECK_FALSE(errors[0].fatal);
+  CHECK(errors[0].message.find("references were loading") != std::string::npos);
+  gate.set_value();
+  auto answer = c.next<Reference>();
+  REQUIRE(answer);
+  CHECK_FALSE(answer->ok);
+  auto frame = c.next<Frame>();  // the held render request, after the answer
+  REQUIRE(frame);
+  CHECK(frame->frame == 3);
+}
