@@ -10,8 +10,9 @@
 //
 // Needs root (CAP_NET_ADMIN, and CAP_SYS_ADMIN for `ip netns exec`) and iproute2's `ip`.
 // Without them, or with TESSERA_NO_NETNS=1, it prints why and exits 77 (CTest: skipped).
-#define CATCH_CONFIG_RUNNER
 #include <catch2/catch.hpp>
+
+#include "tests/catch_runner.h"
 
 #include <errno.h>
 #include <fcntl.h>
@@ -457,10 +458,10 @@ TEST_CASE("Over mutual TLS workers in two network namespaces survive a cut link 
   cut_link_and_rejoin(Tls({"master", "wa=10.213." + std::to_string(k) + ".2", "wb=10.213." + std::to_string(k + 1) + ".2"}));
 }
 
-int main(int argc, char** argv) {
+int test_prelude() {
   if (std::string why = unavailable(); !why.empty()) {
     std::printf("test_cluster_netns: skipped: %s\n", why.c_str());
     return 77;
   }
-  return Catch::Session().run(argc, argv);
+  return 0;
 }
