@@ -3,6 +3,7 @@
 // Implemented by the network layer (net/server.cpp) and by tests. Calls come from actor
 // threads; implementations must be thread-safe and must not block.
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -20,6 +21,14 @@ class ClientSink {
   virtual void send_frame(std::vector<uint8_t> message) { send(std::move(message)); }
   // Frames replaced that way so far (reported in Stats.dropped). Any thread.
   virtual uint32_t frames_dropped() const { return 0; }
+  // Frames given to send_frame that the network layer has not yet handed to the socket (nor
+  // replaced). Any thread. The H.264 display encodes its next frame only when this is 0, so no
+  // frame of a video stream is ever replaced: the decoder needs every one (actors/display_actor.cpp).
+  virtual uint32_t frames_unsent() const { return 0; }
+  // `f` is called (on the network layer's thread) whenever a frame given to send_frame has
+  // been written to the socket or replaced, i.e. when frames_unsent() has fallen. Set once,
+  // before the first frame; the display actor uses it to encode its waiting frame.
+  virtual void on_frame_gone(std::function<void()> f) { (void)f; }
   // One JPEG for the session's MJPEG streams (multipart/x-mixed-replace on HTTP).
   virtual void send_mjpeg(std::shared_ptr<const std::vector<uint8_t>> jpeg) = 0;
   // Ends the connection after a fatal protocol error (the session has sent the error).

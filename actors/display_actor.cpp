@@ -32,9 +32,17 @@ struct display_state {
   // render) must not queue rendered frames without bound. A newer frame replaces the waiting
   // one, which is counted as dropped, as the connection does with frames the client has not
   // read (net/server.cpp).
+  //
+  // An H.264 stream cannot lose a frame (each is predicted from the one before), so the
+  // connection must never replace one. Instead the display holds back: it encodes the next
+  // frame only once the connection has written the last one (ClientSink::frames_unsent() is
+  // 0), and meanwhile the newest rendered frame waits here, replacing older ones (dropped
+  // before encoding, so the stream stays whole). A slow link thus gets fewer frames, each
+  // the newest, and never a queue.
   bool encoding = false;
   std::optional<EncodeJob> waiting;
   uint64_t replaced = 0;
+
   static inline const char* name = "tessera.display";
 };
 
@@ -103,8 +111,9 @@ void send_encoded(display_state& st, EncodedFrame& ef) {
   f.frame = m.client_frame;
   f.width = m.width;
   f.height = m.height;
-  f.encoding = DisplayKind(m.display) == DisplayKind::s3tc ? protocol::FrameEncoding::dxt1
-                                                           : protocol::FrameEncoding::jpeg;
+  f.encoding = DisplayKind(m.display) == DisplayKind::s3tc   ? protocol::FrameEncoding::dxt1
+               : DisplayKind(m.display) == DisplayKind::h264 ? protocol::FrameEncoding::h264
+                                                             : protocol::FrameEncoding::jpeg;
   f.refined = m.refined;
   f.samples = uint16_t(std::min<uint32_t>(m.samples, 65535));
   f.timings.kernel_ms = float(m.kernel_ms);
@@ -139,7 +148,11 @@ void send_encoded(display_state& st, EncodedFrame& ef) {
   Event e(Ev::frame, m.client_frame);
   e.scope = {{"session", st.session}};
   e.with("seq", m.seq).with("width", m.width).with("height", m.height);
-  e.with("display", mjpeg ? "mjpeg" : (f.encoding == protocol::FrameEncoding::dxt1 ? "s3tc" : "jpeg"));
+  e.with("display", mjpeg                                          ? "mjpeg"
+                    : f.encoding == protocol::FrameEncoding::dxt1 ? "s3tc"
+                    : f.encoding == protocol::FrameEncoding::h264 ? "h264"
+                                                                  : "jpeg");
+  if (f.encoding == protocol::FrameEncoding::h264) e.with("keyframe", ef.keyframe);
   e.with("kernel_ms", Json::number(m.kernel_ms)).with("rendering_ms", Json::number(m.rendering_ms));
   e.with("sat_ms", Json::number(m.sat_ms)).with("tiling_ms", Json::number(m.tiling_ms));
   e.with("encode_ms", Json::number(ef.encode_ms)).with("pipeline_ms", Json::number(f.timings.pipeline_ms));
@@ -153,6 +166,21 @@ void send_encoded(display_state& st, EncodedFrame& ef) {
   node_log(*st.settings, std::move(e));
 }
 
+bool is_video(const EncodeJob& job) { return DisplayKind(job.meta.display) == DisplayKind::h264; }
+
+void encode(display_ptr self, EncodeJob job);
+
+// The waiting frame goes to the encoder, if there is one and (H.264) the connection has
+// written the last frame; otherwise the sink's on_frame_gone brings a tick_atom when it has.
+void next(display_ptr self) {
+  auto& st = self->state;
+  if (st.encoding || !st.waiting) return;
+  if (is_video(*st.waiting) && st.sink->frames_unsent() > 0) return;
+  EncodeJob job = std::move(*st.waiting);
+  st.waiting.reset();
+  encode(self, std::move(job));
+}
+
 // Hands `job` to the encoder; when it is back, the waiting frame (if any) goes next.
 void encode(display_ptr self, EncodeJob job) {
   self->state.encoding = true;
@@ -162,11 +190,7 @@ void encode(display_ptr self, EncodeJob job) {
         auto& st = self->state;
         st.encoding = false;
         send_encoded(st, ef);
-        if (st.waiting) {
-          EncodeJob next = std::move(*st.waiting);
-          st.waiting.reset();
-          encode(self, std::move(next));
-        }
+        next(self);
       });
 }
 
@@ -178,16 +202,22 @@ display_actor::behavior_type display_impl(display_ptr self, std::shared_ptr<Clie
   st.settings = std::move(settings);
   st.session = session;
   st.t0_ns = steady_ns();
+  // A frame left the connection: a waiting H.264 frame may go (next()).
+  st.sink->on_frame_gone([weak = caf::actor_cast<caf::weak_actor_ptr>(self)] {
+    if (auto strong = caf::actor_cast<caf::strong_actor_ptr>(weak))
+      caf::anon_send(caf::actor_cast<display_actor>(strong), tick_atom::value);
+  });
   return {
       [=](display_atom, FrameTiles& ft) {
         auto& st = self->state;
         EncodeJob job;
         job.meta = ft.meta;
         job.rgba = compose(ft);
-        if (!st.encoding) return encode(self, std::move(job));
         if (st.waiting) st.replaced++;
         st.waiting = std::move(job);
+        next(self);
       },
+      [=](tick_atom) { next(self); },
   };
 }
 

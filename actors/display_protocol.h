@@ -20,6 +20,7 @@ typename Inspector::result_type inspect(Inspector& f, FrameTiles& x) {
   return f(caf::meta::type_name("tessera::frame_tiles"), x.meta, x.tiles);
 }
 
-using display_actor = caf::typed_actor<caf::reacts_to<display_atom, FrameTiles>>;
+// tick_atom: the connection has written (or replaced) a frame (ClientSink::on_frame_gone).
+using display_actor = caf::typed_actor<caf::reacts_to<display_atom, FrameTiles>, caf::reacts_to<tick_atom>>;
 
 }  // namespace tessera

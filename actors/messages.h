@@ -134,12 +134,17 @@ struct FrameMeta {
   // whether it refines the last requested frame (sent unasked, with that frame's number).
   uint32_t samples = 1;
   bool refined = false;
+  // The H.264 display: the bitrate to encode at (kbit/s), and how many keyframes the client has
+  // asked for so far; a frame whose count is above the encoder's last one is a keyframe (a count,
+  // not a flag, so that a frame replaced before encoding does not lose the request).
+  uint32_t video_kbps = 0;
+  uint32_t keyframe_requests = 0;
 };
 template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, FrameMeta& x) {
   return f(caf::meta::type_name("tessera::frame_meta"), x.seq, x.client_frame, x.width, x.height, x.display,
            x.quality, x.kernel_ms, x.rendering_ms, x.sat_ms, x.tiling_ms, x.render_start_ns, x.render_end_ns, x.nodes,
-           x.dropped, x.scene_bytes, x.triangles, x.samples, x.refined);
+           x.dropped, x.scene_bytes, x.triangles, x.samples, x.refined, x.video_kbps, x.keyframe_requests);
 }
 
 }  // namespace tessera

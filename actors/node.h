@@ -70,6 +70,8 @@ struct NodeSettings {
   // Samples per pixel a still refines to after each requested frame, for a client that does
   // not say (protocol record refine); 0 or 1: no refinement.
   uint32_t refine_samples = 0;
+  // The H.264 display's bitrate (kbit/s) for a client that does not say (protocol record video).
+  uint32_t video_kbps = 8000;
   // Interactive frames (requested while the view changes) are rendered at a scale that keeps
   // them within this many ms (lb/frame_budget.h); the still after them at full resolution.
   // 0: every frame at the client's resolution.

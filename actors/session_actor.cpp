@@ -126,6 +126,8 @@ void start_frame(self_ptr self, uint32_t client_frame, bool refine) {
   m.height = st.scene->height();
   m.display = uint8_t(st.hs.display);
   m.quality = st.hs.jpeg_quality;
+  m.video_kbps = st.video_kbps ? st.video_kbps : st.settings->video_kbps;
+  m.keyframe_requests = st.keyframe_requests;
   m.render_start_ns = steady_ns();
   m.dropped = st.dropped;  // for the display channel's Stats record
   m.scene_bytes = scene_bytes(*st.scene);

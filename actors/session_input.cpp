@@ -292,6 +292,10 @@ static void apply_records(self_ptr self, std::vector<ClientRecord>& recs, const 
       st.render = *s;  // read when the next frame starts
     } else if (auto* rf = std::get_if<protocol::Refine>(&rec)) {
       st.refine = rf->samples;  // from the next requested frame on
+    } else if (auto* v = std::get_if<protocol::Video>(&rec)) {
+      // The H.264 display's bitrate and keyframe requests, from the next frame on.
+      if (v->bitrate_kbps) st.video_kbps = v->bitrate_kbps;
+      if (v->keyframe) st.keyframe_requests++;
     } else if (auto* b = std::get_if<protocol::Budget>(&rec)) {
       // The client's frame budget replaces the node's frame-budget-ms, from the next requested frame on.
       if (b->frame_ms > 0) st.budget.emplace(double(b->frame_ms)); else st.budget.reset();

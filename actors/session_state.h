@@ -54,6 +54,10 @@ struct session_state {
   // client message arrives, the session renders the still's next sample as soon as the last
   // one is rendered, up to its target; any client message ends it.
   std::optional<uint32_t> refine;    // the client's refine record (else NodeSettings::refine_samples)
+  // The H.264 display (protocol record video): the client's bitrate (0: NodeSettings::video_kbps)
+  // and the keyframes it has asked for so far (FrameMeta::keyframe_requests).
+  uint32_t video_kbps = 0;
+  uint32_t keyframe_requests = 0;
   struct Still {
     bool active = false;             // more samples are wanted
     uint32_t target = 0;             // samples per pixel it refines to

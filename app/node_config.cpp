@@ -10,6 +10,7 @@
 
 #include "app/cluster_tls.h"
 #include "app/common.h"
+#include "codecs/h264.h"
 #include "core/gltf_loader.h"
 
 namespace tessera::app {
@@ -72,6 +73,8 @@ NodeConfig::NodeConfig() {
       .add(max_texture_size, "max-texture-size", "largest texture width/height")
       .add(refine_samples, "refine-samples",
            "samples per pixel a still refines to after a requested frame, for clients that do not say (0: none)")
+      .add(video_kbps, "video-kbps",
+           "H.264 display: the bitrate (kbit/s) for clients that do not say (100..200000)")
       .add(frame_budget_ms, "frame-budget-ms",
            "interactive frames are rendered at a lower resolution to take about this long (0: never)")
       .add(handshake_timeout_ms, "handshake-timeout-ms", "close a WebSocket without a valid handshake after this long")
@@ -201,6 +204,10 @@ std::shared_ptr<NodeSettings> NodeConfig::node_settings() const {
   if (refine_samples < 0 || uint32_t(refine_samples) > s->limits.max_refine_samples)
     throw std::invalid_argument("tessera.refine-samples must be in 0.." + std::to_string(s->limits.max_refine_samples));
   s->refine_samples = uint32_t(refine_samples);
+  if (video_kbps < int(kH264MinKbps) || video_kbps > int(kH264MaxKbps))
+    throw std::invalid_argument("tessera.video-kbps must be in " + std::to_string(kH264MinKbps) + ".." +
+                                std::to_string(kH264MaxKbps));
+  s->video_kbps = uint32_t(video_kbps);
   if (frame_budget_ms < 0 || frame_budget_ms > 60000) throw std::invalid_argument("tessera.frame-budget-ms must be in 0..60000");
   s->frame_budget_ms = uint32_t(frame_budget_ms);
   s->budget = std::make_shared<MemoryBudget>(max_node_bytes > 0 ? uint64_t(max_node_bytes) : MemoryBudget::default_limit());

@@ -33,6 +33,7 @@ struct NodeConfig : caf::actor_system_config {
   bool log_frames = true;
   // Resource bounds (docs/operations.md, "Resource bounds").
   int refine_samples = 0;
+  int video_kbps = 8000;
   int frame_budget_ms = 0;  // interactive frames scaled to take about this long (0: never scaled)  // a still's samples per pixel for clients that send no refine record
   int handshake_timeout_ms = 5000;  // a WebSocket without a valid handshake by then is closed
   int64_t max_node_bytes = 0;       // node-wide memory budget over all clients (0: half the physical memory)

@@ -11,6 +11,9 @@ find_package(Catch2 2 REQUIRED)
 # cluster's mutual TLS (CAF's OpenSSL module, and the node's own checks of its certificate files,
 # app/cluster_tls.h).
 find_package(OpenSSL REQUIRED COMPONENTS Crypto SSL)
+# OpenH264 2.3 (libopenh264-dev, BSD-2-Clause): the H.264 video display (codecs/h264.h).
+find_package(PkgConfig REQUIRED)
+pkg_check_modules(openh264 REQUIRED IMPORTED_TARGET openh264)
 
 # CAF 0.17.6: no CMake config and no .pc file.
 find_path(CAF_INCLUDE_DIR caf/all.hpp REQUIRED)

@@ -211,7 +211,8 @@ struct Endpoint final : Server::Impl, std::enable_shared_from_this<Endpoint<Conf
   void on_message(connection_hdl h, message_ptr msg);
   void on_fail(connection_hdl h);
   void on_http(connection_hdl h);
-  void enqueue(connection_hdl h, std::shared_ptr<const std::vector<uint8_t>> msg, bool frame);
+  // Queues a message for the connection; false when the connection is gone or closing.
+  bool enqueue(connection_hdl h, std::shared_ptr<const std::vector<uint8_t>> msg, bool frame);
   void flush(connection_hdl h, Conn& c);
   void arm_poll();
   void close_conn(connection_hdl h, Conn& c, websocketpp::close::status::value code, const std::string& reason);
@@ -261,12 +262,33 @@ struct Sink : ClientSink {
     auto h = hdl;
     post([h, p](Impl& i) { i.enqueue(h, p, false); });
   }
+  // Frames posted and not yet written or replaced (frames_unsent); shared with the posted work.
+  std::shared_ptr<std::atomic<uint32_t>> unsent = std::make_shared<std::atomic<uint32_t>>(0);
+  std::function<void()> frame_gone;  // on_frame_gone's callback (set before the first frame)
+  void on_frame_gone(std::function<void()> f) override { frame_gone = std::move(f); }
+  // A frame left: it was written, replaced, or its connection is gone.
+  static void gone(const std::shared_ptr<std::atomic<uint32_t>>& u, const std::function<void()>& f) {
+    --*u;
+    if (f) f();
+  }
   void send_frame(std::vector<uint8_t> message) override {
     auto p = std::make_shared<const std::vector<uint8_t>>(std::move(message));
     auto h = hdl;
-    post([h, p](Impl& i) { i.enqueue(h, p, true); });
+    auto u = unsent;
+    ++*u;
+    auto i = impl.lock();
+    if (!i || !open) {
+      --*u;
+      return;
+    }
+    std::weak_ptr<Impl> w = i;
+    i->ws.get_io_service().post([w, h, p, u, f = frame_gone] {
+      auto i = w.lock();
+      if (!i || !i->enqueue(h, p, true)) gone(u, f);  // the connection is gone: nothing waits
+    });
   }
   uint32_t frames_dropped() const override { return dropped; }
+  uint32_t frames_unsent() const override { return *unsent; }
   void send_mjpeg(std::shared_ptr<const std::vector<uint8_t>> jpeg) override {
     auto t = tok;
     post([t, jpeg](Impl& i) {
@@ -300,13 +322,13 @@ struct Sink : ClientSink {
 // records sent after a waiting frame wait behind it, so the client sees them in order. A
 // client costs at most three frames: one being written, one queued behind it, one waiting.
 template <class Config>
-void Endpoint<Config>::enqueue(connection_hdl h, std::shared_ptr<const std::vector<uint8_t>> msg, bool frame) {
+bool Endpoint<Config>::enqueue(connection_hdl h, std::shared_ptr<const std::vector<uint8_t>> msg, bool frame) {
   auto it = conns.find(h);
-  if (it == conns.end() || it->second->closing) return;
+  if (it == conns.end() || it->second->closing) return false;
   Conn& c = *it->second;
   if (frame) {
     if (c.frame_waiting) flush(h, c);  // it may go now, rather than be replaced
-    if (c.closing) return;
+    if (c.closing) return false;
     if (c.frame_waiting) {
       for (auto o = c.out.begin(); o != c.out.end(); ++o)
         if (o->frame) {
@@ -315,6 +337,7 @@ void Endpoint<Config>::enqueue(connection_hdl h, std::shared_ptr<const std::vect
           break;
         }
       c.sink->dropped++;
+      Sink<Config>::gone(c.sink->unsent, c.sink->frame_gone);  // the replaced frame will not be written
     }
     c.frame_waiting = true;
     c.largest_frame = std::max(c.largest_frame, msg->size());
@@ -322,6 +345,7 @@ void Endpoint<Config>::enqueue(connection_hdl h, std::shared_ptr<const std::vect
   c.out_bytes += msg->size();
   c.out.push_back(Out{std::move(msg), frame});
   flush(h, c);
+  return true;
 }
 
 template <class Config>
@@ -334,7 +358,10 @@ void Endpoint<Config>::flush(connection_hdl h, Conn& c) {
     if (o.frame && con->get_buffered_amount() > 0) break;
     con->send(o.bytes->data(), o.bytes->size(), websocketpp::frame::opcode::binary);  // copies the bytes
     c.out_bytes -= o.bytes->size();
-    if (o.frame) c.frame_waiting = false;
+    if (o.frame) {
+      c.frame_waiting = false;
+      Sink<Config>::gone(c.sink->unsent, c.sink->frame_gone);
+    }
     c.out.pop_front();
   }
   const uint64_t backlog = c.out_bytes + con->get_buffered_amount();

@@ -58,6 +58,7 @@ const char* to_string(RecordType t) {
     case RecordType::settings: return "settings";
     case RecordType::refine: return "refine";
     case RecordType::budget: return "budget";
+    case RecordType::video: return "video";
     case RecordType::resolution: return "resolution";
     case RecordType::camera: return "camera";
     case RecordType::environment: return "environment";
@@ -172,6 +173,15 @@ struct ClientEncoder {
   void operator()(const Budget& b) {
     size_t at = w.begin_record(RecordType::budget, Op::set);
     w.u32(b.frame_ms);
+    w.end_record(at);
+  }
+  void operator()(const Video& v) {
+    size_t at = w.begin_record(RecordType::video, Op::set);
+    w.u32(v.bitrate_kbps);
+    w.u8(v.keyframe ? 1 : 0);
+    w.u8(0);
+    w.u8(0);
+    w.u8(0);
     w.end_record(at);
   }
   void operator()(const Resolution& r) {
@@ -610,6 +620,23 @@ class ClientDecoder {
         Refine rf{r.u32()};
         if (!c.at_most(rf.samples, lim_.max_refine_samples, "refine samples")) return false;
         out = rf;
+        return true;
+      }
+      case RecordType::video: {
+        if (!c.length(r.left(), wire::video::kFixed)) return false;
+        Video v;
+        v.bitrate_kbps = r.u32();
+        const uint8_t key = r.u8();
+        const uint32_t reserved = uint32_t(r.u8()) | uint32_t(r.u8()) << 8 | uint32_t(r.u8()) << 16;
+        if (!c.range(v.bitrate_kbps, wire::video::bitrate_kbps, "video bitrate_kbps") || !c.flag(key, "keyframe") ||
+            !c.reserved(reserved))
+          return false;
+        if (v.bitrate_kbps != 0 && v.bitrate_kbps < kMinVideoKbps)
+          return c.fail(ErrorCode::out_of_range, "video bitrate_kbps " + std::to_string(v.bitrate_kbps) + " outside " +
+                                                     std::to_string(kMinVideoKbps) + ".." +
+                                                     std::to_string(wire::video::bitrate_kbps.hi) + " (0: unchanged)");
+        v.keyframe = key != 0;
+        out = v;
         return true;
       }
       case RecordType::budget: {

@@ -148,6 +148,14 @@ struct Refine {
   uint32_t samples = 0;
 };
 
+// The H.264 display (docs/protocol.md, "Video"): the target bitrate (0: unchanged; else
+// kMinVideoKbps..200000) and a keyframe request, for the frames after it.
+constexpr uint32_t kMinVideoKbps = 100;
+struct Video {
+  uint32_t bitrate_kbps = 0;
+  bool keyframe = false;
+};
+
 // Interactive frames are rendered at a lower resolution to take about frame_ms (docs/protocol.md,
 // "Refinement"); 0: always the client's resolution.
 struct Budget {
@@ -223,7 +231,7 @@ struct RenderRequest {
 
 using ClientRecord = std::variant<Handshake, Settings, Resolution, SetCamera, SetEnvironment, SetBuffer, SetTexture,
                                   SetMaterial, SetMesh, SetLight, Remove, RenderRequest, Refine, Budget, SetBufferRef,
-                                  SetTextureRef>;
+                                  SetTextureRef, Video>;
 
 // ---------------------------------------------------------------------------------------
 // Server -> client records.

@@ -11,6 +11,7 @@ pkgs=(build-essential cmake ninja-build pkg-config
       libsquish-dev libwebsocketpp-dev libasio-dev zlib1g-dev catch2
       libssl-dev  # libcrypto: HMAC-SHA256 of the access tokens (net/admission.h); libssl: HTTPS/WSS (net/tls.h), cluster TLS
       openssl     # the CLI: scripts/tls-cert.sh and scripts/cluster-certs.sh (certificates for tests and the demo)
+      libopenh264-dev  # the H.264 video display (codecs/h264.h; BSD-2-Clause)
       libtinygltf-dev nlohmann-json3-dev libstb-dev clang libclang-rt-14-dev
       libegl-dev libgles-dev libegl-mesa0  # the rasterizer: EGL + GLES 3 headers, Mesa's EGL (llvmpipe)
       python3)  # tests/check_layers.py (CTest), bench report scripts

@@ -77,6 +77,7 @@ Status apply(Scene& scene, ClientRecord&& record, const Limits& lim) {
     Status operator()(Settings&) { return apply_error(ErrorCode::not_scene_update, "settings are not a scene update"); }
     Status operator()(Refine&) { return apply_error(ErrorCode::not_scene_update, "a refine record is not a scene update"); }
     Status operator()(Budget&) { return apply_error(ErrorCode::not_scene_update, "a budget record is not a scene update"); }
+    Status operator()(Video&) { return apply_error(ErrorCode::not_scene_update, "a video record is not a scene update"); }
     // The session resolves references into buffer and texture records first (update/asset_store.h).
     Status operator()(SetBufferRef&) {
       return apply_error(ErrorCode::not_scene_update, "a buffer_ref is resolved before it is applied");

@@ -1,6 +1,7 @@
 #pragma once
 // Shared by the deterministic actor tests: a sink that records what a session sends its
 // client, and a tiny scene that renders in well under a millisecond.
+#include <atomic>
 #include <mutex>
 #include <string>
 #include <vector>
@@ -25,6 +26,12 @@ struct RecordingSink : ClientSink {
   std::vector<ServerRecord> records;
   int closes = 0;
   size_t mjpeg = 0;
+  // What frames_unsent() says: a test sets it to hold the H.264 display back, as a connection
+  // that has not yet written the last frame does.
+  std::atomic<uint32_t> unsent{0};
+  uint32_t frames_unsent() const override { return unsent; }
+  std::function<void()> gone;  // on_frame_gone's callback: the test calls it after lowering `unsent`
+  void on_frame_gone(std::function<void()> f) override { gone = std::move(f); }
   void send(std::vector<uint8_t> message) override {
     auto r = decode_server(message.data(), message.size(), Limits{});
     if (!r.ok()) CAF_FAIL("the session sent what a client cannot decode: " << r.error().message);

@@ -10,6 +10,7 @@
 
 #include "actors/checks.h"
 #include "actors/node.h"
+#include "codecs/h264.h"
 #include "codecs/jpeg.h"
 #include "protocol/protocol.h"
 #include "renderer/accumulation.h"
@@ -30,7 +31,7 @@ struct fixture : test_coordinator_fixture<TestConfig> {
   session_actor session;
   caf::actor renderer, tiler, encoder, display, frame, subtree;
 
-  fixture() {
+  explicit fixture(DisplayKind display_kind = DisplayKind::jpeg) {
     settings->detached = false;  // everything on the test coordinator
     settings->packet_layout = {4, 4};
     settings->log = [](const Event&) {};
@@ -50,6 +51,7 @@ struct fixture : test_coordinator_fixture<TestConfig> {
     Handshake hs;
     hs.width = 16;
     hs.height = 16;
+    hs.display = display_kind;
     client({hs});
     client(tiny_scene());
     run();
@@ -634,6 +636,62 @@ CAF_TEST(a first message that does not decode ends the session with bad_handshak
   sched.run();
   check_closed_with_bad_handshake();
   CAF_CHECK(sink->all<ErrorReply>()[0].message.find("bad_enum") != std::string::npos);
+}
+
+CAF_TEST_FIXTURE_SCOPE_END()
+
+namespace {
+
+// A session whose client asked for H.264 frames.
+struct video_fixture : fixture {
+  video_fixture() : fixture(DisplayKind::h264) {}
+  bool keyframe(const Frame& f) {
+    const auto t = h264_nal_types(f.payload.data(), f.payload.size());
+    return std::find(t.begin(), t.end(), 5) != t.end();
+  }
+};
+
+}  // namespace
+
+CAF_TEST_FIXTURE_SCOPE(video_tests, video_fixture)
+
+CAF_TEST(an H.264 frame waits until the connection has written the last one and the newest wins) {
+  // The connection still holds a frame: the display renders on, but encodes nothing (an H.264
+  // frame must never be replaced at the connection, so it is dropped before encoding instead).
+  sink->unsent = 1;
+  client({SetCamera{camera_at(3)}, RenderRequest{1}});
+  run();
+  for (uint32_t f : {2u, 3u}) {
+    client({SetCamera{camera_at(3.f + 0.1f * float(f))}, RenderRequest{f}});
+    run();
+  }
+  CAF_CHECK_EQUAL(frames_sent(), std::vector<uint32_t>{});
+  // Written: the newest frame goes, as the stream's keyframe, and decodes.
+  sink->unsent = 0;
+  CAF_REQUIRE(sink->gone);
+  sink->gone();
+  run();
+  CAF_REQUIRE_EQUAL(frames_sent(), std::vector<uint32_t>{3});
+  Frame f3 = last_frame();
+  CAF_CHECK_EQUAL(f3.encoding, FrameEncoding::h264);
+  CAF_CHECK(keyframe(f3));
+  H264Decoder dec;
+  Image img;
+  std::string err;
+  CAF_CHECK(dec.decode(f3.payload.data(), f3.payload.size(), img, err, 16, 16));
+  // With the connection free, the next frame goes at once, predicted from the last one.
+  client({SetCamera{camera_at(3.5f)}, RenderRequest{4}});
+  run();
+  CAF_REQUIRE_EQUAL(frames_sent(), (std::vector<uint32_t>{3, 4}));
+  Frame f4 = last_frame();
+  CAF_CHECK(!keyframe(f4));
+  CAF_CHECK(dec.decode(f4.payload.data(), f4.payload.size(), img, err, 16, 16));
+  // A keyframe when the client asks for one (its decoder lost its place).
+  client({Video{0, true}, RenderRequest{5}});
+  run();
+  CAF_REQUIRE_EQUAL(frames_sent(), (std::vector<uint32_t>{3, 4, 5}));
+  CAF_CHECK(keyframe(last_frame()));
+  CAF_CHECK_EQUAL(sink->all<ErrorReply>().size(), 0u);
 }
 
 CAF_TEST_FIXTURE_SCOPE_END()

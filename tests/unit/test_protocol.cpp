@@ -511,7 +511,7 @@ TEST_CASE("Handshake rules", "[protocol]") {
     m[kBody] = 2;
     CHECK(mentions(fails(m, ErrorCode::bad_enum), "renderer"));
     m = good;
-    m[kBody + 1] = 3;
+    m[kBody + 1] = 4;
     CHECK(mentions(fails(m, ErrorCode::bad_enum), "display"));
   }
   SECTION("jpeg quality 1..100") {
@@ -1167,7 +1167,7 @@ TEST_CASE("Server-side rules: handshake reply, frame and stats fields", "[protoc
   good = encode(ServerRecord{f});
   REQUIRE(decode_server(good.data(), good.size(), Limits{}).ok());
   m = good;
-  m[kBody + 12] = 2;
+  m[kBody + 12] = 3;  // encoding: jpeg, dxt1, h264
   server_fails(m, ErrorCode::bad_enum);
   m = good;
   m[kBody + 13] = 2;  // refined is a flag

@@ -194,6 +194,9 @@ struct ClientJs {
   std::string operator()(const RenderRequest& r) { return Obj{}.f("type", q("render")).f("frame", num(r.frame)).str(); }
   std::string operator()(const Refine& r) { return Obj{}.f("type", q("refine")).f("samples", num(r.samples)).str(); }
   std::string operator()(const Budget& b) { return Obj{}.f("type", q("budget")).f("frameMs", num(b.frame_ms)).str(); }
+  std::string operator()(const Video& v) {
+    return Obj{}.f("type", q("video")).f("bitrateKbps", num(v.bitrate_kbps)).f("keyframe", v.keyframe ? "true" : "false").str();
+  }
   std::string operator()(const SetBufferRef& b) {
     static const char* sources[] = {"f32", "u32", "u16", "u8"};
     return Obj{}.f("type", q("buffer_ref")).f("id", num(b.id)).f("bufferType", q(b.type == Buffer::Type::f32 ? "f32" : "u32"))
@@ -615,6 +618,8 @@ void valid_messages() {
   client("render requests", {RenderRequest{0}, RenderRequest{42}, RenderRequest{kMaxU32}});
   client("refine: off, one sample, a target, the limit", {Refine{0}, Refine{1}, Refine{64}, Refine{Limits{}.max_refine_samples}});
   client("budget: off, 1 ms, 33 ms, the limit", {Budget{0}, Budget{1}, Budget{33}, Budget{Limits{}.max_frame_budget_ms}});
+  client("video: unchanged, a keyframe alone, both ends of the bitrate",
+         {Video{0, false}, Video{0, true}, Video{kMinVideoKbps, false}, Video{wire::video::bitrate_kbps.hi, true}});
   {
     SetBufferRef packed = buffer_ref(), u16 = buffer_ref(), u8 = buffer_ref(), u32 = buffer_ref();
     packed.byte_stride = 0, packed.byte_offset = 0, packed.components = 4, packed.value_count = 0;
@@ -632,7 +637,7 @@ void valid_messages() {
     client("texture references: every sampler field", {texture_ref(), srgb});
   }
   client("every client record in one message",
-         {Settings{16, 5}, Refine{32}, Budget{33}, Resolution{640, 360}, camera(), environment(),
+         {Settings{16, 5}, Refine{32}, Budget{33}, Video{4000, true}, Resolution{640, 360}, camera(), environment(),
           f32_buffer(7, {0, 0, 0, 1, 0, 0, 0, 1, 0}, 3), u32_buffer(8, {0, 1, 2}, 1), rgba_texture(9, 1, 2), material(),
           mesh(), light(Light::Type::spot), Remove{RecordType::mesh, 5}, RenderRequest{42}, buffer_ref(), texture_ref()});
 
@@ -796,7 +801,8 @@ void client_records() {
       {"handshake", handshake()}, {"settings", Settings{16, 5}}, {"resolution", Resolution{640, 360}},
       {"camera", camera()},       {"environment", environment()}, {"material", material()},
       {"mesh", mesh()},           {"light", light(Light::Type::spot)}, {"render", RenderRequest{1}},
-      {"remove", Remove{RecordType::mesh, 5}}, {"refine", Refine{64}}, {"budget", Budget{33}}};
+      {"remove", Remove{RecordType::mesh, 5}}, {"refine", Refine{64}}, {"budget", Budget{33}},
+      {"video", Video{4000, false}}};
   for (const auto& [n, r] : fixed) {
     const Bytes m = one(r);
     const size_t len = m.size() - kB;
@@ -807,7 +813,7 @@ void client_records() {
   for (const auto& [n, r] : std::vector<std::pair<std::string, ClientRecord>>{
            {"handshake", handshake()}, {"settings", Settings{}}, {"resolution", Resolution{}}, {"camera", camera()},
            {"environment", environment()}, {"render", RenderRequest{1}}, {"refine", Refine{64}},
-           {"budget", Budget{33}}})
+           {"budget", Budget{33}}, {"video", Video{4000, false}}})
     bad_client(n + ": op remove", put<uint8_t>(one(r), 9, 1), ErrorCode::bad_op);
   for (auto t : {RecordType::buffer, RecordType::texture, RecordType::material, RecordType::mesh, RecordType::light})
     bad_client(std::string("remove ") + to_string(t) + ": id 0", one(Remove{t, 0}), ErrorCode::bad_id);
@@ -817,7 +823,7 @@ void client_records() {
     const Bytes h = one(handshake());
     using namespace wire::handshake;
     bad_client("handshake: renderer 2", put<uint8_t>(h, kB + at::renderer, 2), ErrorCode::bad_enum);
-    bad_client("handshake: display 3", put<uint8_t>(h, kB + at::display, 3), ErrorCode::bad_enum);
+    bad_client("handshake: display 4", put<uint8_t>(h, kB + at::display, 4), ErrorCode::bad_enum);
     bad_client("handshake: display 255", put<uint8_t>(h, kB + at::display, 255), ErrorCode::bad_enum);
     bad_client("handshake: reserved", put<uint8_t>(h, kB + at::reserved, 1), ErrorCode::bad_reserved);
     bad_client("handshake: jpeg_quality 0", put<uint8_t>(h, kB + at::jpeg_quality, 0), ErrorCode::out_of_range);
@@ -860,6 +866,15 @@ void client_records() {
     Limits quick;
     quick.max_frame_budget_ms = 32;
     bad_client("budget: frame_ms beyond a node's lower limit", b, ErrorCode::limit_exceeded, quick);
+    const Bytes v = one(Video{4000, false});
+    bad_client("video: bitrate_kbps 1 (below 100, not 0)", put<uint32_t>(v, kB + wire::video::at::bitrate_kbps, 1),
+               ErrorCode::out_of_range);
+    bad_client("video: bitrate_kbps 99", put<uint32_t>(v, kB + wire::video::at::bitrate_kbps, kMinVideoKbps - 1),
+               ErrorCode::out_of_range);
+    bad_client("video: bitrate_kbps beyond 200000",
+               put<uint32_t>(v, kB + wire::video::at::bitrate_kbps, wire::video::bitrate_kbps.hi + 1), ErrorCode::out_of_range);
+    bad_client("video: keyframe 2", put<uint8_t>(v, kB + wire::video::at::keyframe, 2), ErrorCode::bad_enum);
+    bad_client("video: reserved byte set", put<uint8_t>(v, kB + wire::video::at::keyframe + 2, 1), ErrorCode::bad_reserved);
     bad_client("resolution: width 0", put<uint32_t>(r, kB + wire::resolution::at::width, 0), ErrorCode::out_of_range);
     bad_client("resolution: height 0", put<uint32_t>(r, kB + wire::resolution::at::height, 0), ErrorCode::out_of_range);
     bad_client("resolution: width beyond the limit", put<uint32_t>(r, kB + wire::resolution::at::width, kMaxU32),
@@ -1124,7 +1139,7 @@ void server_records() {
     bad_server("handshake reply: version length too short", put<uint8_t>(h, kB + at::version_length, 12),
                ErrorCode::bad_length);
     bad_server("handshake reply: renderer 2", put<uint8_t>(h, kB + at::renderer, 2), ErrorCode::bad_enum);
-    bad_server("handshake reply: display 3", put<uint8_t>(h, kB + at::display, 3), ErrorCode::bad_enum);
+    bad_server("handshake reply: display 4", put<uint8_t>(h, kB + at::display, 4), ErrorCode::bad_enum);
     bad_server("handshake reply: jpeg_quality 0", put<uint8_t>(h, kB + at::jpeg_quality, 0), ErrorCode::out_of_range);
     bad_server("handshake reply: jpeg_quality 200", put<uint8_t>(h, kB + at::jpeg_quality, 200), ErrorCode::out_of_range);
     bad_server("handshake reply: width 0", put<uint32_t>(h, kB + at::width, 0), ErrorCode::out_of_range);
@@ -1136,7 +1151,7 @@ void server_records() {
     const Bytes f = one(frame(FrameEncoding::dxt1, 5, 3)), j = one(frame(FrameEncoding::jpeg, 5, 3));
     using namespace wire::frame;
     bad_server("frame: body shorter than its fixed part", body_length(j, kFixed - 1), ErrorCode::bad_length);
-    bad_server("frame: encoding 2", put<uint8_t>(f, kB + at::encoding, 2), ErrorCode::bad_enum);
+    bad_server("frame: encoding 3", put<uint8_t>(f, kB + at::encoding, 3), ErrorCode::bad_enum);
     bad_server("frame: refined 2", put<uint8_t>(f, kB + at::refined, 2), ErrorCode::bad_enum);
     bad_server("frame: refined 255", put<uint8_t>(j, kB + at::refined, 255), ErrorCode::bad_enum);
     bad_server("frame: refined 2 and width 0 (the flag first)",

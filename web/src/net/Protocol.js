@@ -31,6 +31,8 @@ export const Op = Object.freeze(Object.fromEntries(ENUMS.op.map((n, i) => [n, i]
 export const BUFFER_DEFLATE = FLAGS.buffer.deflate;
 export const MATERIAL_ALPHA_MASK = FLAGS.material.alpha_mask, MATERIAL_DOUBLE_SIDED = FLAGS.material.double_sided;
 export const MATERIAL_USE_VERTEX_COLOR = FLAGS.material.use_vertex_color;
+// The H.264 display's lowest bitrate (kbit/s); a video record's 0 leaves the bitrate unchanged (protocol.h kMinVideoKbps).
+export const MIN_VIDEO_KBPS = 100;
 const TYPE_NAME = Object.fromEntries(Object.entries(RecordType).map(([k, v]) => [v, k]));
 
 // `code`: the C++ ErrorCode's name ('truncated', 'bad_enum', ...) for a decoding error, null for
@@ -98,6 +100,8 @@ function encodeClientRecord(w, r) {
       at = w.begin(RecordType.refine); w.u32(r.samples ?? 0); break;
     case 'budget':
       at = w.begin(RecordType.budget); w.u32(r.frameMs ?? 0); break;
+    case 'video':
+      at = w.begin(RecordType.video); w.u32(r.bitrateKbps ?? 0); w.u8(r.keyframe ? 1 : 0); w.u8(0); w.u8(0); w.u8(0); break;
     case 'resolution':
       at = w.begin(RecordType.resolution); w.u32(r.width); w.u32(r.height); break;
     case 'camera':
@@ -401,6 +405,15 @@ function decodeClientRecord(c, op, r, state) {
       const samples = r.u32();
       c.limit(samples, 'max_refine_samples', 'samples');
       return { type: name, samples };
+    }
+    case 'video': {
+      c.length(r.left(), spec.fixed);
+      const bitrateKbps = r.u32(), key = r.u8(), res = r.reserved3();
+      c.range(bitrateKbps, 'bitrate_kbps'); c.flag(key, 'keyframe'); c.reserved(res);
+      if (bitrateKbps !== 0 && bitrateKbps < MIN_VIDEO_KBPS) {
+        c.fail('out_of_range', `bitrate_kbps = ${bitrateKbps} outside ${MIN_VIDEO_KBPS}..${RANGES.video.bitrate_kbps.hi} (0: unchanged)`);
+      }
+      return { type: name, bitrateKbps, keyframe: key !== 0 };
     }
     case 'budget': {
       c.length(r.left(), spec.fixed);

@@ -34,8 +34,8 @@ export const ENUMS = Object.freeze({
   channel: Object.freeze(['client', 'server']),
   op: Object.freeze(['set', 'remove']),
   renderer: Object.freeze(['raytracer', 'rasterizer']),
-  display: Object.freeze(['jpeg', 's3tc', 'mjpeg']),
-  frame_encoding: Object.freeze(['jpeg', 'dxt1']),
+  display: Object.freeze(['jpeg', 's3tc', 'mjpeg', 'h264']),
+  frame_encoding: Object.freeze(['jpeg', 'dxt1', 'h264']),
   texture_format: Object.freeze(['rgba8', 'png', 'jpeg']),
   buffer_type: Object.freeze(['f32', 'u32']),
   wrap: Object.freeze(['clamp', 'repeat']),
@@ -90,6 +90,14 @@ export const RECORDS = Object.freeze({
     code: 0x06, channel: 'client', fixed: 4, tail: false, removable: false,
     fields: Object.freeze([
       { name: 'samples', type: 'u32', offset: 0, js: 'samples', limit: 'max_refine_samples' },
+    ]),
+  }),
+  video: Object.freeze({
+    code: 0x08, channel: 'client', fixed: 8, tail: false, removable: false,
+    fields: Object.freeze([
+      { name: 'bitrate_kbps', type: 'u32', offset: 0, js: 'bitrateKbps', range: { kind: 'int', lo: 0, hi: 200000 } },
+      { name: 'keyframe', type: 'u8', offset: 4, js: 'keyframe', flag: true },
+      { name: 'reserved', type: 'u8x3', offset: 5, js: 'reserved', reserved: true },
     ]),
   }),
   budget: Object.freeze({
