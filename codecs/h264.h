@@ -37,7 +37,9 @@ struct H264Unit {
 
 class H264Encoder {
  public:
-  H264Encoder() = default;
+  // threads > 1: OpenH264 codes that many slices of each picture in parallel (a few percent
+  // more bytes; the node uses 1, as its encoder runs beside the render threads).
+  explicit H264Encoder(int threads = 1) : threads_(threads < 1 ? 1 : (threads > 4 ? 4 : threads)) {}
   ~H264Encoder();
   H264Encoder(const H264Encoder&) = delete;
   H264Encoder& operator=(const H264Encoder&) = delete;
@@ -62,6 +64,7 @@ class H264Encoder {
   void close();
 
   ISVCEncoder* enc_ = nullptr;
+  int threads_ = 1;
   int width_ = 0, height_ = 0;  // the picture's size (even; the frames' may be one less)
   uint32_t kbps_ = 0;
   float fps_ = 0;
