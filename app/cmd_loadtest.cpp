@@ -1,4 +1,4 @@
-// tessera loadtest --scene S.gltf --camera-loop L.json [--clients N] [--display jpeg|s3tc|mjpeg]
+// tessera loadtest --scene S.gltf --camera-loop L.json [--clients N] [--display jpeg|s3tc|mjpeg|h264]
 //                  [--seconds S | --frames F] [--warmup K] [--size W H] [--ao A] [--quality Q] [--host H --port P [--token T]] [--threads T]
 //                  [--tls [--tls-ca F] | --tls-cert C --tls-key K]
 // Uploads the scene from N simultaneous WebSocket clients; each replays the camera loop with two
@@ -40,7 +40,7 @@ struct FrameRecord {
 int run(const std::vector<std::string>& argv) {
   Args args(argv);
   if (args.flag("--help")) {
-    std::puts("tessera loadtest --scene S.gltf --camera-loop L.json [--clients N] [--display jpeg|s3tc|mjpeg]\n"
+    std::puts("tessera loadtest --scene S.gltf --camera-loop L.json [--clients N] [--display jpeg|s3tc|mjpeg|h264]\n"
               "                 [--seconds S | --frames F] [--warmup K] [--size W H] [--ao A] [--quality Q]\n"
               "                 [--host H --port P [--token T]] [--threads T]\n"
               "                 [--tls [--tls-ca F] | --tls-cert C --tls-key K]\n"
@@ -77,8 +77,8 @@ int run(const std::vector<std::string>& argv) {
   if (!tls_cert.empty()) tls = true;
   if (clients < 1 || clients > 64 || seconds < 1 || warmup < 1 || frames_wanted < 0)
     throw std::invalid_argument("--clients 1..64, --seconds >= 1, --warmup >= 1, --frames >= 0");
-  if (display != "jpeg" && display != "s3tc" && display != "mjpeg")
-    throw std::invalid_argument("--display must be jpeg, s3tc or mjpeg");
+  if (display != "jpeg" && display != "s3tc" && display != "mjpeg" && display != "h264")
+    throw std::invalid_argument("--display must be jpeg, s3tc, mjpeg or h264");
   const int W = setup.loaded.scene.width(), H = setup.loaded.scene.height();
 
   // An in-process node unless --port names one.
@@ -128,8 +128,10 @@ int run(const std::vector<std::string>& argv) {
       if (!ws.connect(host, uint16_t(port), resource, &err)) return fail(err);
       tls_sessions[size_t(ci)] = ws.tls_session();
       protocol::Handshake hs;
-      hs.display = display == "s3tc" ? protocol::DisplayKind::s3tc
-                                      : display == "mjpeg" ? protocol::DisplayKind::mjpeg : protocol::DisplayKind::jpeg;
+      hs.display = display == "s3tc"    ? protocol::DisplayKind::s3tc
+                   : display == "mjpeg" ? protocol::DisplayKind::mjpeg
+                   : display == "h264"  ? protocol::DisplayKind::h264
+                                        : protocol::DisplayKind::jpeg;
       hs.jpeg_quality = uint8_t(quality);
       hs.width = W;
       hs.height = H;

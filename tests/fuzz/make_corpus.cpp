@@ -120,6 +120,7 @@ void protocol_corpus() {
   put("protocol", "settings", encode(ClientRecord{Settings{4, 3}}));
   put("protocol", "refine", encode(ClientRecord{Refine{64}}));
   put("protocol", "budget", encode(ClientRecord{Budget{33}}));
+  put("protocol", "video", encode(ClientRecord{Video{4000, true}}));
   put("protocol", "resolution", encode(ClientRecord{Resolution{1280, 720}}));
   SetCamera cam = camera_at({0, 1, 5});
   put("protocol", "camera", encode(ClientRecord{cam}));
