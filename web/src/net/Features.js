@@ -1,5 +1,7 @@
 // Browser features the server path uses, probed once each (with one warning when missing).
-let s3tc;
+import { H264_CODEC } from './FrameDisplay.js';
+
+let s3tc, h264;
 const warned = new Set();
 
 export function warnOnce(key, message) {
@@ -30,4 +32,32 @@ export const hasCompressionStream = () => {
 export async function deflate(bytes) {
   const stream = new Blob([bytes]).stream().pipeThrough(new CompressionStream('deflate'));
   return new Uint8Array(await new Response(stream).arrayBuffer());
+}
+
+// Whether WebCodecs can decode the node's H.264 stream (display="h264"/"auto"): a promise of
+// {ok, reason}, asked once per page (isConfigSupported is asynchronous, and the answer does not
+// change). The configuration is constrained baseline at level 3.1 (up to 1280x720), the level
+// VideoDisplay uses for such sizes.
+export function probeH264() {
+  if (!h264) {
+    h264 = (async () => {
+      const { VideoDecoder, EncodedVideoChunk } = globalThis;
+      if (typeof VideoDecoder !== 'function' || typeof EncodedVideoChunk !== 'function') {
+        return { ok: false, reason: 'the browser has no VideoDecoder (WebCodecs)' };
+      }
+      try {
+        const r = await VideoDecoder.isConfigSupported({ codec: H264_CODEC, optimizeForLatency: true });
+        return r && r.supported ? { ok: true, reason: '' } : { ok: false, reason: `VideoDecoder does not support H.264 (${H264_CODEC})` };
+      } catch (e) {
+        return { ok: false, reason: `VideoDecoder.isConfigSupported(${H264_CODEC}) failed: ${e && e.message}` };
+      }
+    })();
+  }
+  return h264;
+}
+
+// Unit tests: forget every probe and warning, as a new page would.
+export function resetFeatures() {
+  s3tc = h264 = undefined;
+  warned.clear();
 }

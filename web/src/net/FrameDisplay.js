@@ -2,7 +2,8 @@
 // JpegDisplay  - JPEG frames decoded by createImageBitmap (off the main thread in Chromium)
 //                and shown on a 'bitmaprenderer' canvas;
 // S3tcDisplay  - DXT1 frames uploaded as WEBGL_compressed_texture_s3tc and drawn as a quad;
-// MjpegDisplay - an <img> on the node's MJPEG stream (http://host:port/mjpeg/<session>).
+// MjpegDisplay - an <img> on the node's MJPEG stream (http://host:port/mjpeg/<session>);
+// VideoDisplay - H.264 access units decoded by WebCodecs' VideoDecoder onto a 2d canvas.
 
 export class JpegDisplay {
   constructor(doc) {
@@ -90,4 +91,139 @@ export class MjpegDisplay {
   // The image arrives on the HTTP stream; the WebSocket frame record only carries timings.
   async show() { this.start(); return true; }
   dispose() { this.element.src = ''; this.element.remove(); }
+}
+
+// H.264 (display 'h264'): each frame record carries one access unit in Annex B form (start
+// codes), constrained baseline, so the decoder is configured without a `description`.
+
+// The NAL unit types of an Annex B access unit, in order (5 IDR slice, 1 non-IDR slice, 7 SPS,
+// 8 PPS, ...). A start code 00 00 01 (also the tail of 00 00 00 01) cannot occur inside a NAL
+// unit (emulation prevention), so scanning for it is enough.
+export function nalTypes(bytes) {
+  const types = [];
+  for (let i = 0; i + 3 < bytes.length; i++) {
+    if (bytes[i] === 0 && bytes[i + 1] === 0 && bytes[i + 2] === 1) { types.push(bytes[i + 3] & 0x1f); i += 3; }
+  }
+  return types;
+}
+
+// A unit the decoder can start from: it holds an IDR slice (the node sends SPS and PPS with it).
+export const isKeyframe = (bytes) => nalTypes(bytes).includes(5);
+
+// Constrained baseline levels by their largest frame in macroblocks (H.264 table A-1, MaxFS),
+// lowest first; level 3.1 covers 1280x720. A picture's sides may be at most sqrt(8 MaxFS)
+// macroblocks each. The node encodes up to level 5.2.
+const LEVELS = [[0x1f, 3600], [0x20, 5120], [0x28, 8192], [0x2a, 8704], [0x32, 22080], [0x33, 36864], [0x3c, 139264]];
+export const H264_CODEC = 'avc1.42E01F';  // the probe's configuration (RemoteBackend, Features.js)
+
+// The codec string for a width x height stream: constrained baseline (42 E0) at the lowest level
+// from 3.1 up whose frame size fits.
+export function h264Codec(width, height) {
+  const mw = Math.ceil(width / 16), mh = Math.ceil(height / 16);
+  const [level] = LEVELS.find(([, fs]) => mw * mh <= fs && Math.max(mw, mh) <= Math.sqrt(8 * fs)) || LEVELS.at(-1);
+  return `avc1.42E0${level.toString(16).toUpperCase().padStart(2, '0')}`;
+}
+
+export class VideoDisplay {
+  // onNeedKeyframe(error): called when the decoder cannot go on without a keyframe (after a
+  // decoder error, with it; or a delta unit came first, with null), once per keyframe awaited;
+  // RemoteBackend then asks the node for one (a video record).
+  // VideoDecoder, EncodedVideoChunk: WebCodecs (replaced in unit tests).
+  constructor(doc, { onNeedKeyframe = () => {}, VideoDecoder = globalThis.VideoDecoder,
+    EncodedVideoChunk = globalThis.EncodedVideoChunk } = {}) {
+    this.element = doc.createElement('canvas');
+    this.element.className = 'tessera-display';
+    this.ctx = this.element.getContext('2d', { alpha: false });
+    Object.assign(this, { onNeedKeyframe, VideoDecoder, EncodedVideoChunk });
+    this.pending = new Map();  // chunk timestamp -> {width, height, resolve}, in decode order
+    this.chunks = 0;
+    this.waitingForKey = true;  // a delta unit needs every unit since the last keyframe
+    this.keyRequested = false;
+    this.config = null;  // codec and size the decoder is configured for
+    this.decoder = this.makeDecoder();
+  }
+
+  makeDecoder() {
+    const dec = new this.VideoDecoder({ output: (f) => this.output(dec, f), error: (e) => this.failed(dec, e) });
+    return dec;
+  }
+
+  // Resolves true when the frame is on screen, false when it is not shown (a delta unit before
+  // the first keyframe, or the decoder failed on it or an earlier one).
+  async show(frame) {
+    if (frame.encoding !== 'h264') throw new Error(`expected an H.264 frame, got ${frame.encoding}`);
+    if (!this.decoder) return false;  // disposed
+    const key = isKeyframe(frame.payload);
+    if (!key && this.waitingForKey) { this.needKeyframe(); return false; }
+    if (key) {
+      this.waitingForKey = false;
+      this.keyRequested = false;
+      // A keyframe may start a stream of another size (the node sends one after each size
+      // change): the decoder is configured anew for it, at the level the size needs.
+      const codec = h264Codec(frame.width, frame.height), config = `${codec} ${frame.width}x${frame.height}`;
+      if (config !== this.config || this.decoder.state !== 'configured') {
+        try { this.decoder.configure({ codec, optimizeForLatency: true }); } catch (e) { this.failed(this.decoder, e); return false; }
+        this.config = config;
+      }
+    }
+    const timestamp = this.chunks++;
+    const shown = new Promise((resolve) => this.pending.set(timestamp, { width: frame.width, height: frame.height, resolve }));
+    try {
+      this.decoder.decode(new this.EncodedVideoChunk({ type: key ? 'key' : 'delta', timestamp, data: frame.payload }));
+    } catch (e) {
+      this.failed(this.decoder, e);
+    }
+    return shown;
+  }
+
+  // A decoded picture: drawn cropped to its frame's width x height (the node pads odd sizes by
+  // one pixel), then closed (a VideoFrame holds decoder memory until then).
+  output(dec, vf) {
+    try {
+      if (dec !== this.decoder) return;
+      // One picture per unit, in decode order (no B-frames): units before this one that gave
+      // none are not shown.
+      for (const [t, p] of this.pending) {
+        if (t >= vf.timestamp) break;
+        this.pending.delete(t);
+        p.resolve(false);
+      }
+      const p = this.pending.get(vf.timestamp);
+      this.pending.delete(vf.timestamp);
+      const w = Math.min(p ? p.width : vf.displayWidth, vf.displayWidth), h = Math.min(p ? p.height : vf.displayHeight, vf.displayHeight);
+      if (this.element.width !== w || this.element.height !== h) { this.element.width = w; this.element.height = h; }
+      this.ctx.drawImage(vf, 0, 0, w, h, 0, 0, w, h);
+      if (p) p.resolve(true);
+    } finally {
+      vf.close();
+    }
+  }
+
+  // The decoder failed (its error callback, or configure/decode threw): a fresh one waits for
+  // the next keyframe, which is asked for once.
+  failed(dec, e) {
+    if (dec !== this.decoder) return;  // an earlier decoder's late error
+    for (const p of this.pending.values()) p.resolve(false);
+    this.pending.clear();
+    try { if (dec.state !== 'closed') dec.close(); } catch { /* closed already */ }
+    this.config = null;
+    this.waitingForKey = true;
+    this.decoder = this.makeDecoder();
+    this.needKeyframe(e);
+  }
+
+  needKeyframe(error = null) {
+    if (this.keyRequested) return;
+    this.keyRequested = true;
+    this.onNeedKeyframe(error);
+  }
+
+  dispose() {
+    const dec = this.decoder;
+    this.decoder = null;
+    for (const p of this.pending.values()) p.resolve(false);
+    this.pending.clear();
+    try { if (dec && dec.state !== 'closed') dec.close(); } catch { /* closed already */ }
+    this.element.remove();
+  }
 }

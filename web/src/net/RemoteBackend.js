@@ -1,6 +1,6 @@
-// Server rendering backend: <xml3d server="[wss://]host:port" renderer="raytracer" display="jpeg|s3tc|mjpeg"
-// nodes="N" sync-rate="30" jpeg-quality="85" ao-samples="0" max-depth="4" refine-samples="64"
-// frame-budget="33" token="..." references="off">
+// Server rendering backend: <xml3d server="[wss://]host:port" renderer="raytracer"
+// display="jpeg|s3tc|mjpeg|h264|auto" nodes="N" sync-rate="30" jpeg-quality="85" video-kbps="8000"
+// ao-samples="0" max-depth="4" refine-samples="64" frame-budget="33" token="..." references="off">
 // (RenderSettings.js; the access token also from the page's #tessera-token=..., AccessToken.js;
 // references="off": every buffer and texture is uploaded, none is left for the node to load
 // from its URL).
@@ -9,9 +9,9 @@
 // While the node refines a still, the status line says "refining k/N", then "converged N", and
 // "interactive" after a requested frame.
 import { SyncChannel } from './SyncChannel.js';
-import { JpegDisplay, S3tcDisplay, MjpegDisplay } from './FrameDisplay.js';
-import { hasS3TC } from './Features.js';
-import { readRenderSettings, refineStatus } from './RenderSettings.js';
+import { JpegDisplay, S3tcDisplay, MjpegDisplay, VideoDisplay } from './FrameDisplay.js';
+import { hasS3TC, probeH264, warnOnce } from './Features.js';
+import { readRenderSettings, readVideoKbps, refineStatus } from './RenderSettings.js';
 import { accessToken, withToken, redact } from './AccessToken.js';
 import { pageBackground } from './PageBackground.js';
 
@@ -30,6 +30,21 @@ function cssColor(doc, el) {
   return pageBackground(el, (e) => doc.defaultView.getComputedStyle(e));
 }
 
+export const DISPLAYS = ['jpeg', 's3tc', 'mjpeg', 'h264', 'auto'];
+
+// The display for display="h264" or "auto", once WebCodecs has been asked (probeH264, once per
+// page): h264 when it decodes the node's stream, else jpeg. For "h264" that fallback is one
+// console warning per page naming the reason; "auto" falls back silently (JPEG is one of its
+// choices). "auto" does not measure the bandwidth: H.264 whenever the browser can decode it
+// (at the same picture quality its frames are a fraction of JPEG's, which helps on any link).
+export async function chooseDisplay(display) {
+  if (display !== 'h264' && display !== 'auto') return display;
+  const { ok, reason } = await probeH264();
+  if (ok) return 'h264';
+  if (display === 'h264') warnOnce('h264', `${reason}: display="h264" falls back to JPEG frames`);
+  return 'jpeg';
+}
+
 const int = (el, name, def) => {
   const v = parseInt(el.getAttribute(name) ?? '', 10);
   return Number.isFinite(v) ? v : def;
@@ -39,23 +54,20 @@ export class RemoteBackend {
   constructor(handler, server) {
     const doc = handler.container.ownerDocument, x = handler.xml3d;
     this.handler = handler;
-    let display = (x.getAttribute('display') || 'jpeg').toLowerCase();
-    if (!['jpeg', 's3tc', 'mjpeg'].includes(display)) {
+    let display = (x.getAttribute('display') || 'jpeg').trim().toLowerCase();
+    if (!DISPLAYS.includes(display)) {
       handler.setStatus('display', `⚠ display="${display}" unknown, jpeg used`, true);
       display = 'jpeg';
     }
     if (display === 's3tc' && !hasS3TC()) display = 'jpeg';
-    this.display = display;
+    this.display = display;  // h264 or auto: settled when the probe answers (start below)
     const { host, secure } = nodeAddress(server, doc.defaultView.location.protocol);
     const session = Math.random().toString(36).slice(2) + Date.now().toString(36);
     const token = accessToken(x, doc.defaultView);
     this.host = host;
     this.url = withToken(`${secure ? 'wss' : 'ws'}://${host}/ws?session=${session}`, token);
-    this.frameView = display === 's3tc' ? new S3tcDisplay(doc)
-      : display === 'mjpeg' ? new MjpegDisplay(doc, withToken(`${secure ? 'https' : 'http'}://${host}/mjpeg/${session}`, token))
-        : new JpegDisplay(doc);
-    this.element = this.frameView.element;
-    handler.container.appendChild(this.element);
+    this.mjpegUrl = withToken(`${secure ? 'https' : 'http'}://${host}/mjpeg/${session}`, token);
+    this.frameView = null;  // made once the display is settled
     this.inputElement = doc.createElement('canvas');
     this.inputElement.className = '_xml3d tessera-input';  // transparent: never drawn
     handler.container.appendChild(this.inputElement);
@@ -71,12 +83,14 @@ export class RemoteBackend {
     this.downloadGate = new Promise((r) => (openGate = r));
     this.openDownloads = openGate;
     this.gateTimer = setTimeout(openGate, 3000);
+    const settings = this.readSettings();
     this.channel = new SyncChannel({
       url: this.url,
       handshake: { renderer: renderer === 'rasterizer' ? 'rasterizer' : 'raytracer', display,
         jpegQuality: Math.min(100, Math.max(1, int(x, 'jpeg-quality', 85))), maxNodes: Math.max(0, int(x, 'nodes', 0)),
         width: handler.width, height: handler.height },
-      settings: this.readSettings(),
+      settings,
+      videoKbps: this.videoKbps,
       rate: Math.min(120, Math.max(1, int(x, 'sync-rate', 30))),
       references,
       onReferencesAnswered: () => this.openDownloads(),
@@ -87,13 +101,49 @@ export class RemoteBackend {
       onProgress: (sent, queued) => handler.setStatus('upload', queued && sent < queued
         ? `uploading scene: ${Math.round(100 * sent / queued)}% of ${(queued / 1048576).toFixed(1)} MB` : null),
     });
+    // The display (and the handshake, which names it) waits for the H.264 probe when it matters;
+    // the others start at once, as before.
+    if (display === 'h264' || display === 'auto') chooseDisplay(display).then((d) => this.start(d));
+    else this.start(display);
+  }
+
+  // Shows frames of `display` and connects with it.
+  start(display) {
+    if (this.disposed) return;
+    const doc = this.handler.container.ownerDocument;
+    this.display = display;
+    this.useView(display === 's3tc' ? new S3tcDisplay(doc)
+      : display === 'mjpeg' ? new MjpegDisplay(doc, this.mjpegUrl)
+        : display === 'h264' ? new VideoDisplay(doc, { onNeedKeyframe: (e) => this.needKeyframe(e) })
+          : new JpegDisplay(doc));
+    this.channel.handshake.display = display;
     this.channel.connect();
   }
 
+  // The H.264 decoder cannot go on (an error, or a delta frame it has no keyframe for): the node
+  // sends a keyframe with the next frame when asked. A decoder error is unusual (a corrupt
+  // stream, a decoder that gave up): one warning per page says what it was.
+  needKeyframe(error) {
+    if (error) warnOnce('h264-decode', `the H.264 decoder failed (${error.message || error}); asking the node for a keyframe`);
+    this.channel.requestKeyframe();
+  }
+
+  // The frame display, behind the input canvas.
+  useView(view) {
+    if (this.frameView) this.frameView.dispose();
+    this.frameView = view;
+    this.element = view.element;
+    this.handler.container.insertBefore(this.element, this.inputElement);
+  }
+
   // ao-samples / max-depth / refine-samples / frame-budget from the element; bad values are
-  // warned about once and replaced by the default or clamped (also on the status line).
+  // warned about once and replaced by the default or clamped (also on the status line). Also
+  // video-kbps (this.videoKbps, 0 when absent or bad).
   readSettings() {
     const { settings, problems } = readRenderSettings(this.handler.xml3d);
+    const video = readVideoKbps(this.handler.xml3d);
+    if (video.problem) problems.push(video.problem);
+    this.videoKbps = video.kbps;
     const key = problems.join('\n');
     if (key !== this.settingsProblems) {
       this.settingsProblems = key;
@@ -119,18 +169,15 @@ export class RemoteBackend {
     if (state === 'failed' || state === 'disconnected') this.openDownloads();  // no answers are coming
     if (state === 'ready') {
       this.serverInfo = detail;
-      if (this.frameView.start) this.frameView.start();
+      if (this.frameView && this.frameView.start) this.frameView.start();
     }
   }
 
   async frame(f) {
     try {
-      if (f.encoding === 'jpeg' && this.display === 's3tc') {
+      if (f.encoding === 'jpeg' && (this.display === 's3tc' || this.display === 'h264')) {
         // The node answered JPEG after all: switch displays.
-        this.frameView.dispose();
-        this.frameView = new JpegDisplay(this.handler.container.ownerDocument);
-        this.element = this.frameView.element;
-        this.handler.container.insertBefore(this.element, this.inputElement);
+        this.useView(new JpegDisplay(this.handler.container.ownerDocument));
         this.display = 'jpeg';
       }
       if (!(await this.frameView.show(f))) return;
@@ -187,6 +234,7 @@ export class RemoteBackend {
     this.inputElement.width = h.width;
     this.inputElement.height = h.height;
     this.channel.setSettings(this.readSettings());
+    this.channel.setVideoKbps(this.videoKbps);
     this.channel.setScene(scene, { width: h.width, height: h.height,
       background: cssColor(h.container.ownerDocument, h.container) });
   }
@@ -194,11 +242,12 @@ export class RemoteBackend {
   draw() { return null; }  // frames arrive asynchronously
 
   dispose() {
+    this.disposed = true;
     clearTimeout(this.gateTimer);
     this.openDownloads();
     clearTimeout(this.flushTimer);
     this.channel.close();
-    this.frameView.dispose();
+    if (this.frameView) this.frameView.dispose();
     this.inputElement.remove();
   }
 }

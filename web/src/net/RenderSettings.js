@@ -3,7 +3,11 @@
 // refine record (Refine) and budget record (Budget) after the handshake and whenever the
 // attributes change. Bad values are reported (console warning, status line) and the default is
 // used instead (a refine-samples or frame-budget beyond its range is clamped to it), so a typo
-// never makes the node refuse the session.
+// never makes the node refuse the session. Also video-kbps, the H.264 display's bitrate (a
+// video record; readVideoKbps below).
+
+import { MIN_VIDEO_KBPS } from './Protocol.js';
+import { RANGES } from './Wire.js';
 
 // Same ranges as `tessera render --ao/--depth` and the node's default limits
 // (protocol::Limits::max_ao_samples = 256, max_refine_samples = 4096, max_frame_budget_ms =
@@ -35,6 +39,22 @@ export function readRenderSettings(xml3d) {
     } else problems.push(`<xml3d ${spec.attribute}="${text}">: not a whole number in ${range} (${spec.what}); using ${spec.default}`);
   }
   return { settings, problems };
+}
+
+// <xml3d video-kbps="N">: the H.264 display's bitrate in kbit/s, sent as the protocol's video
+// record (Video.bitrate_kbps). It has no default here: absent, or not a whole number in range
+// (reported like the others), it is 0 and nothing is sent, so the node's own bitrate holds
+// (`tessera.video-kbps`, 8000 unless configured).
+export const VIDEO_KBPS = { attribute: 'video-kbps', min: MIN_VIDEO_KBPS, max: RANGES.video.bitrate_kbps.hi, what: 'H.264 bitrate in kbit/s' };
+
+// {kbps (0: not set), problem (text or null)}.
+export function readVideoKbps(xml3d) {
+  const { attribute, min, max, what } = VIDEO_KBPS;
+  if (!xml3d.hasAttribute(attribute)) return { kbps: 0, problem: null };
+  const text = xml3d.getAttribute(attribute);
+  const v = /^\s*\+?\d+\s*$/.test(text) ? Number(text) : NaN;
+  if (Number.isSafeInteger(v) && v >= min && v <= max) return { kbps: v, problem: null };
+  return { kbps: 0, problem: `<xml3d ${attribute}="${text}">: not a whole number in ${min}..${max} (${what}); ignored, the node's bitrate is used` };
 }
 
 export const sameSettings = (a, b) => !!a && !!b && a.aoSamples === b.aoSamples && a.maxDepth === b.maxDepth

@@ -4,7 +4,8 @@
 // a frame after every iteration that changed something. The render settings (AO samples, ray
 // depth) go as a settings record after the handshake and again whenever they change, the
 // refinement target (samples per pixel of a still) likewise as a refine record, and the frame
-// budget (milliseconds an interactive frame should take) as a budget record. Frames the node
+// budget (milliseconds an interactive frame should take) as a budget record, and the H.264
+// display's bitrate as a video record (only in an h264 session). Frames the node
 // sends unasked while it refines a still (`refined`) answer no render request. Buffers and
 // textures the node can load from their URLs go as references (docs/protocol.md, "References";
 // off with the option `references: false`): in messages of their own, before the rest of the
@@ -33,10 +34,10 @@ const uploadBytes = (r) => (r.type === 'buffer' ? r.data.byteLength : TEXTURE_BY
 let refusalsWarned = false;
 
 export class SyncChannel {
-  constructor({ url, handshake, settings = null, rate = 30, highWater = 4 << 20, messageBytes = 1 << 20, references = true,
+  constructor({ url, handshake, settings = null, videoKbps = 0, rate = 30, highWater = 4 << 20, messageBytes = 1 << 20, references = true,
     onFrame = () => {}, onState = () => {}, onServerError = () => {}, onStats = () => {}, onProgress = () => {},
     onReferencesAnswered = () => {} }) {
-    Object.assign(this, { url, handshake, settings, rate, highWater, messageBytes, onFrame, onState, onServerError, onStats, onProgress,
+    Object.assign(this, { url, handshake, settings, videoKbps, rate, highWater, messageBytes, onFrame, onState, onServerError, onStats, onProgress,
       onReferencesAnswered });
     this.sync = new SceneSync({ references });
     this.queue = [];          // {size, record: Promise|object}
@@ -122,6 +123,23 @@ export class SyncChannel {
     if (settings.frameBudget !== undefined && (!old || old.frameBudget !== settings.frameBudget)) this.budgetDirty = true;
   }
 
+  // The H.264 bitrate in kbit/s (0: the node's own): the next run-loop iteration of an h264
+  // session sends a video record when it differs from the last one. 0 sends nothing (the video
+  // record's 0 means "unchanged"), so the last bitrate holds until the next session.
+  setVideoKbps(kbps) {
+    if (kbps === this.videoKbps) return;
+    this.videoKbps = kbps;
+    this.videoDirty = true;
+  }
+
+  // Asks for a keyframe (the H.264 decoder lost the stream): a video record with the keyframe
+  // flag, and a render request in the same message, since the keyframe comes with the next
+  // frame. Outside a session nothing is sent: the next one starts with a keyframe anyway.
+  requestKeyframe() {
+    if (this.state !== 'ready') return;
+    this.requestRender([{ type: 'video', bitrateKbps: 0, keyframe: true }]);
+  }
+
   receive(data) {
     let records;
     try { records = decodeServer(new Uint8Array(data)); } catch (e) {
@@ -143,6 +161,7 @@ export class SyncChannel {
         this.settingsDirty = !!this.settings;
         this.refineDirty = !!this.settings && this.settings.refineSamples !== undefined;
         this.budgetDirty = !!this.settings && this.settings.frameBudget !== undefined;
+        this.videoDirty = this.videoKbps > 0;
         clearInterval(this.timer);
         this.timer = setInterval(() => this.tick(), 1000 / this.rate);
         this.tick();
@@ -213,6 +232,13 @@ export class SyncChannel {
       const r = { type: 'budget', frameMs: this.settings.frameBudget };
       this.queue.push({ size: clientRecordSize(r), record: r });
       this.changed = true;
+    }
+    if (this.videoDirty && this.reply && this.reply.display === 'h264') {
+      this.videoDirty = false;
+      if (this.videoKbps > 0) {
+        const r = { type: 'video', bitrateKbps: this.videoKbps, keyframe: false };
+        this.queue.push({ size: clientRecordSize(r), record: r });
+      }
     }
     if (this.dirty && this.scene) {
       this.dirty = false;
@@ -315,10 +341,16 @@ export class SyncChannel {
     if (w) w.done();
   }
 
-  requestRender() {
-    if (this.outstanding >= MAX_OUTSTANDING_RENDERS) { this.renderWanted = true; return; }
+  // `records`: records to send first, in the same message (a keyframe request); they go at
+  // once even when the render request itself has to wait for a frame.
+  requestRender(records = []) {
+    if (this.outstanding >= MAX_OUTSTANDING_RENDERS) {
+      this.renderWanted = true;
+      if (records.length) this.send(encodeClient(records));
+      return;
+    }
     this.renderWanted = false;
     this.outstanding++;
-    this.send(encodeClient([{ type: 'render', frame: ++this.frameNumber }]));
+    this.send(encodeClient([...records, { type: 'render', frame: ++this.frameNumber }]));
   }
 }

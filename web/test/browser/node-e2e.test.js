@@ -18,8 +18,11 @@ const W = 160, H = 120;
 // PSNR bound for "this frame shows that view", per display. Matching frames measure (jpeg q85 /
 // mjpeg) ~27-36 dB and (DXT1) ~23-33 dB on this scene of saturated colours on black (4:2:0
 // chroma and 4x4 blocks with three colours cost the most), a different view ~8-13 dB; each test
-// also checks that the frame is far further from the other views' references.
-const MATCH_DB = { jpeg: 24, mjpeg: 24, s3tc: 19 };
+// also checks that the frame is far further from the other views' references. H.264 at the
+// node's default 8 Mbit/s measures 28.8-29.0 dB (start view) and 26.5 dB (frame 1 of the loop)
+// against JPEG's 28.4 and 27.1: both are at the ceiling of 4:2:0 chroma here (the references
+// through a BT.709 4:2:0 round trip alone: 29.3 and 26.6 dB), so its bound is JPEG's plus one.
+const MATCH_DB = { jpeg: 24, mjpeg: 24, s3tc: 19, h264: 25 };
 const PAGES = path.join(WEB, 'test/browser/pages');
 
 let env, node, tmp;
@@ -99,11 +102,13 @@ async function untilMatches(page, k, bound, { after = 0, timeout = 20000 } = {})
     + `node log tail:\n${node.log.slice(-10).join('\n')}`);
 }
 
-async function openNodePage(query) {
+// `init`: a script to run in the page before its own (page.addInitScript).
+async function openNodePage(query, { init = null } = {}) {
   const page = await env.context.newPage();
   page.logs = [];
   page.on('console', (m) => page.logs.push(`${m.type()}: ${m.text()}`));
   page.on('pageerror', (e) => page.logs.push(`pageerror: ${e.message}`));
+  if (init) await page.addInitScript(init);
   // The page comes from the node itself (same origin as its MJPEG stream, so the test can read
   // the shown pixels): a node serves only the client and demo files of its web root unless told
   // otherwise, so startNode below names the test pages' folder in tessera.web-public.
@@ -111,7 +116,7 @@ async function openNodePage(query) {
   return page;
 }
 
-for (const display of ['jpeg', 's3tc', 'mjpeg']) {
+for (const display of ['jpeg', 's3tc', 'mjpeg', 'h264']) {
   test(`display=${display}: real-node frames match tessera render; moving the camera or the model gives matching new frames`,
     { skip: !BIN && 'TESSERA_BIN not set (CTest passes the tessera binary)' }, async () => {
       const page = await openNodePage(`display=${display}`);
@@ -121,7 +126,7 @@ for (const display of ['jpeg', 's3tc', 'mjpeg']) {
         element: document.querySelector('.tessera-display').localName, encodings: [...new Set(window.__frames.map((f) => f.encoding))] }));
       assert.equal(info.display, display, 'the page kept the display method it asked for');
       assert.equal(info.element, display === 'mjpeg' ? 'img' : 'canvas');
-      if (display !== 'mjpeg') assert.deepEqual(info.encodings, [display === 's3tc' ? 'dxt1' : 'jpeg']);
+      if (display !== 'mjpeg') assert.deepEqual(info.encodings, [{ s3tc: 'dxt1', h264: 'h264' }[display] || 'jpeg']);
       const otherView = psnr(start.image, await reference(page, 1));
       assert.ok(otherView < Math.min(bound, start.psnr - 8), `views are told apart: ${otherView.toFixed(1)} dB against another view`);
 
@@ -143,6 +148,72 @@ for (const display of ['jpeg', 's3tc', 'mjpeg']) {
       await page.close();
     });
 }
+
+const displayInfo = (page) => page.evaluate(() => ({ display: document.getElementById('x').tessera.backend.display,
+  encodings: [...new Set(window.__frames.map((f) => f.encoding))] }));
+const warnings = (page) => page.logs.filter((l) => l.startsWith('warning:'));
+
+test('display=h264 without WebCodecs (VideoDecoder deleted before the page loads) shows JPEG frames after one warning; display=auto then picks JPEG silently',
+  { skip: !BIN && 'TESSERA_BIN not set (CTest passes the tessera binary)' }, async () => {
+    const noWebCodecs = () => { delete window.VideoDecoder; };
+    for (const display of ['h264', 'auto']) {
+      const page = await openNodePage(`display=${display}`, { init: noWebCodecs });
+      const start = await untilMatches(page, 0, MATCH_DB.jpeg);
+      assert.deepEqual(await displayInfo(page), { display: 'jpeg', encodings: ['jpeg'] });
+      const warned = warnings(page);
+      if (display === 'h264') {
+        assert.equal(warned.length, 1, `exactly one warning:\n${page.logs.join('\n')}`);
+        assert.match(warned[0], /no VideoDecoder.*display="h264" falls back to JPEG frames/);
+      } else assert.deepEqual(warned, [], 'auto falls back without a warning');
+      const st = await pageState(page);
+      assert.equal(st.connection, 'ready');
+      assert.ok(!/⚠/.test(st.status || ''), `no red status line: ${st.status}`);
+      console.log(`# display=${display} without VideoDecoder: JPEG frames at ${start.psnr.toFixed(1)} dB, ${warned.length} warning(s)`);
+      await page.close();
+    }
+  });
+
+test('display=auto picks H.264 where WebCodecs decodes it; after a decoder error the page asks for one keyframe and shows the node\'s next frames; video-kbps is accepted',
+  { skip: !BIN && 'TESSERA_BIN not set (CTest passes the tessera binary)' }, async () => {
+    const page = await openNodePage('display=auto');
+    await untilMatches(page, 0, MATCH_DB.h264);
+    assert.deepEqual(await displayInfo(page), { display: 'h264', encodings: ['h264'] });
+    // From here on: whether each unit that comes is a keyframe (NAL type 5), and what the page sends.
+    await page.evaluate(async () => {
+      const { decodeClient } = await import('/src/net/Protocol.js');
+      const { isKeyframe } = await import('/src/net/FrameDisplay.js');
+      const ch = document.getElementById('x').tessera.backend.channel, onFrame = ch.onFrame, send = ch.send.bind(ch);
+      window.__units = [];
+      ch.onFrame = (r) => { window.__units.push(isKeyframe(r.payload)); onFrame(r); };
+      window.__sent = [];
+      ch.send = (bytes) => { window.__sent.push(decodeClient(bytes).map((r) => (r.type === 'video' ? `video ${r.bitrateKbps} ${r.keyframe}` : r.type))); send(bytes); };
+    });
+    // A decoder error (as a corrupt unit would cause): the display takes a fresh decoder, skips
+    // delta units until a keyframe and asks for one, once; the node sends it with the frame that
+    // the render request in the same message asks for.
+    const n = await frameCount(page);
+    await page.evaluate(() => { const v = document.getElementById('x').tessera.backend.frameView; v.failed(v.decoder, new Error('test: decoder broke')); });
+    await page.evaluate(() => window.setCameraFrame(1));
+    const moved = await untilMatches(page, 1, MATCH_DB.h264, { after: n });
+    const { units, sent } = await page.evaluate(() => ({ units: window.__units, sent: window.__sent }));
+    assert.deepEqual(sent[0], ['video 0 true', 'render'], JSON.stringify(sent));
+    assert.equal(sent.flat().filter((r) => r === 'video 0 true').length, 1, `one keyframe request: ${JSON.stringify(sent)}`);
+    assert.ok(units.includes(true), `a keyframe came after the request: ${JSON.stringify(units)}`);
+    const warned = warnings(page);
+    assert.equal(warned.length, 1, page.logs.join('\n'));
+    assert.match(warned[0], /H\.264 decoder failed \(test: decoder broke\); asking the node for a keyframe/);
+    // A bitrate from the page: a video record, which the node takes (no error); frames go on.
+    const m = await frameCount(page);
+    await page.evaluate(() => { document.getElementById('x').setAttribute('video-kbps', '2000'); window.setCameraFrame(0); });
+    const back = await untilMatches(page, 0, MATCH_DB.h264, { after: m });
+    assert.ok((await page.evaluate(() => window.__sent.flat())).includes('video 2000 false'));
+    const st = await pageState(page);
+    assert.equal(st.connection, 'ready');
+    assert.ok(!/server:/.test(st.status || ''), `no server errors: ${st.status}`);
+    console.log(`# h264 decoder error: units after it ${units.map((k) => (k ? 'K' : 'P')).join('')}, the new view at ${moved.psnr.toFixed(1)} dB `
+      + `after ${moved.ms} ms; video-kbps=2000: ${back.psnr.toFixed(1)} dB`);
+    await page.close();
+  });
 
 test('a mouse drag orbits the camera (examine controller) and the node\'s next frame shows the orbited view',
   { skip: !BIN && 'TESSERA_BIN not set (CTest passes the tessera binary)' }, async () => {
