@@ -196,7 +196,10 @@ void on_handshake(self_ptr self, const Handshake& h) {
     r.max_buffer_bytes = st.settings->limits.max_buffer_bytes;
     r.server_version = st.settings->server_version;
     st.sink->send(encode(ServerRecord{r}));
-    static const char* displays[] = {"jpeg", "s3tc", "mjpeg"};
+    // Indexed by DisplayKind (wire.toml's display enum); the decoder refused any other value.
+    static const char* displays[] = {"jpeg", "s3tc", "mjpeg", "h264"};
+    static_assert(sizeof displays / sizeof *displays == size_t(protocol::wire::enum_max::display) + 1,
+                  "a display kind without a name here");
     log(self, Event(Ev::handshake, Json::object({{"display", displays[int(h.display)]},
                                                  {"quality", unsigned(h.jpeg_quality)},
                                                  {"width", h.width},
