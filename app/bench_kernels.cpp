@@ -32,6 +32,11 @@ namespace bench_sse {
 #include "app/bench_kernels.inc"
 }  // namespace bench_sse
 
+#if defined(__clang__)
+// clang ignores `#pragma GCC target`: one copy, as in raytracer.cpp.
+namespace bench_avx2 = bench_sse;
+namespace bench_avx512 = bench_sse;
+#else
 #pragma GCC push_options
 #pragma GCC target("avx2,fma,bmi,bmi2,lzcnt,popcnt,f16c")
 namespace bench_avx2 {
@@ -47,6 +52,7 @@ namespace bench_avx512 {
 #include "app/bench_kernels.inc"
 }  // namespace bench_avx512
 #pragma GCC pop_options
+#endif
 
 namespace bench {
 namespace {
