@@ -5,7 +5,7 @@ import { readRenderSettings, refineStatus, sameSettings } from '../../../src/net
 import { SyncChannel } from '../../../src/net/SyncChannel.js';
 import { MarkupReader } from '../../../src/reader/MarkupReader.js';
 import { Resources } from '../../../src/reader/Resources.js';
-import { encodeServer, decodeClient } from '../../../src/net/Protocol.js';
+import { FakeSocket } from './fake_socket.js';
 
 const read = (attrs) => readRenderSettings(page(`<xml3d ${attrs}></xml3d>`).querySelector('xml3d'));
 
@@ -88,14 +88,6 @@ test('bad numbers give a clear problem each and the default is used', () => {
   assert.equal(read('ao-samples="x" max-depth="y"').problems.length, 2);
 });
 
-// A WebSocket stand-in: records what the channel sends, lets the test answer.
-class FakeSocket {
-  static last = null;
-  constructor(url) { this.url = url; this.readyState = 1; this.bufferedAmount = 0; this.sent = []; FakeSocket.last = this; queueMicrotask(() => this.onopen()); }
-  send(bytes) { this.sent.push(decodeClient(bytes)); }
-  close() { this.readyState = 3; }
-  reply(records) { this.onmessage({ data: encodeServer(records).buffer }); }
-}
 
 const until = async (pred) => { for (let i = 0; i < 200 && !pred(); i++) await new Promise((r) => setTimeout(r, 5)); assert.ok(pred()); };
 

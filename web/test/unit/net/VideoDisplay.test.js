@@ -10,7 +10,7 @@ import { resetFeatures } from '../../../src/net/Features.js';
 import { RemoteBackend, chooseDisplay } from '../../../src/net/RemoteBackend.js';
 import { readVideoKbps } from '../../../src/net/RenderSettings.js';
 import { SyncChannel } from '../../../src/net/SyncChannel.js';
-import { encodeServer, decodeClient } from '../../../src/net/Protocol.js';
+import { FakeSocket } from './fake_socket.js';
 
 // An Annex B access unit with NAL units of the given types (4-byte start codes, or 3-byte ones
 // with short: true). Each body holds an emulation-prevented 00 00 03 01, which is no start code.
@@ -169,14 +169,6 @@ test('after a decoder error: a fresh decoder, one keyframe request, deltas skipp
   v.dispose();
 });
 
-// A WebSocket stand-in: records the decoded messages the page sends, lets the test answer.
-class FakeSocket {
-  static last = null;
-  constructor(url) { this.url = url; this.readyState = 1; this.bufferedAmount = 0; this.sent = []; FakeSocket.last = this; queueMicrotask(() => this.onopen()); }
-  send(bytes) { this.sent.push(decodeClient(bytes)); }
-  close() { this.readyState = 3; }
-  reply(records) { this.onmessage({ data: encodeServer(records).buffer }); }
-}
 const until = async (pred, what = 'condition') => {
   for (let i = 0; i < 400 && !pred(); i++) await new Promise((r) => setTimeout(r, 5));
   assert.ok(pred(), what);
