@@ -36,6 +36,20 @@ void open_mjpeg_session(TestNode& node, ProtoClient& c, const std::string& token
   REQUIRE(c.upload(pavilion().scene));
 }
 
+// An asset store whose one listed origin, http://slow.example, answers nothing until `open` is
+// set (then fails); `entered` counts the fetches that began.
+std::shared_ptr<AssetStore> slow_origin_store(std::shared_future<void> open, std::atomic<int>& entered) {
+  AssetOptions o;
+  o.origins = {"http://slow.example"};
+  return std::make_shared<AssetStore>(o, [open, &entered](const std::string&, uint64_t, std::vector<uint8_t>&,
+                                                           std::string& error) {
+    ++entered;
+    open.wait_for(std::chrono::seconds(120));
+    error = "the slow origin gave up";
+    return false;
+  });
+}
+
 }  // namespace
 
 TEST_CASE("A client uploads the pavilion and receives JPEG and S3TC frames that match the ray tracer", "[e2e]") {
@@ -654,17 +668,7 @@ TEST_CASE("References load off CAF's threads: while a slow origin holds two sess
   std::promise<void> gate;
   std::shared_future<void> open = gate.get_future().share();
   std::atomic<int> entered{0};
-  TestNode node(8, [&](NodeSettings& s, ServerOptions&) {
-    AssetOptions o;
-    o.origins = {"http://slow.example"};
-    s.assets = std::make_shared<AssetStore>(o, [open, &entered](const std::string&, uint64_t, std::vector<uint8_t>&,
-                                                                 std::string& error) {
-      ++entered;
-      open.wait_for(std::chrono::seconds(120));
-      error = "the slow origin gave up";
-      return false;
-    });
-  });
+  TestNode node(8, [&](NodeSettings& s, ServerOptions&) { s.assets = slow_origin_store(open, entered); });
   using namespace protocol;
   SetBufferRef slow;
   slow.id = 1, slow.components = 3, slow.value_count = 9, slow.url = "http://slow.example/scene.bin";
@@ -721,15 +725,7 @@ TEST_CASE("Messages that arrive while references load are held up to one message
   std::atomic<int> entered{0};
   TestNode node(8, [&](NodeSettings& s, ServerOptions&) {
     s.limits.max_message_bytes = 4096;
-    AssetOptions o;
-    o.origins = {"http://slow.example"};
-    s.assets = std::make_shared<AssetStore>(o, [open, &entered](const std::string&, uint64_t, std::vector<uint8_t>&,
-                                                                 std::string& error) {
-      ++entered;
-      open.wait_for(std::chrono::seconds(120));
-      error = "the slow origin gave up";
-      return false;
-    });
+    s.assets = slow_origin_store(open, entered);
   });
   using namespace protocol;
   SetBufferRef slow;
