@@ -41,6 +41,7 @@ const char* event_name(Ev kind) {
     case Ev::cluster_security: return "cluster_security";
     case Ev::converged: return "converged";
     case Ev::references: return "references";
+    case Ev::tls_certificate: return "tls_certificate";
     case Ev::closed_slow_client: return "closed_slow_client";
     case Ev::rejected: return "rejected";
     case Ev::network_thread_error: return "network_thread_error";

@@ -39,6 +39,9 @@ enum class Ev : uint8_t {
   converged,
   // A session: the references of a client message, loaded or refused (update/asset_store.h).
   references,
+  // The server's TLS certificate (net/server.cpp): no scope; "loaded" at start, "reloaded" or
+  // "reload_failed" (SIGHUP, Server::reload_tls).
+  tls_certificate,
 };
 // The kind's key in a JSON line ("node_lost").
 const char* event_name(Ev kind);

@@ -37,7 +37,11 @@ const char* kHelp =
     "max-mjpeg-viewers. Admission (docs/operations.md): token-key (key file of signed access tokens, see\n"
     "`tessera token`), token-file (static tokens, one per line), allowed-origins (default [\"self\",\n"
     "\"loopback\"]), require-origin, max-connections-per-ip. TLS: tls-cert and tls-key (PEM files) make the\n"
-    "port HTTPS and WSS only (TLS 1.2+; scripts/tls-cert.sh makes a self-signed pair for local use).\n"
+    "port HTTPS and WSS only (TLS 1.2+; scripts/tls-cert.sh makes a self-signed pair for local use); SIGHUP\n"
+    "reads them again (a renewed certificate: new connections get it, open sessions go on; a bad pair is\n"
+    "logged and the old one kept). With TLS: hsts-max-age (seconds of Strict-Transport-Security; default 0,\n"
+    "off: it pins the host name on every port to https, so set it only for a public name, e.g. 31536000),\n"
+    "http-redirect-port (plain HTTP there redirects GET/HEAD to https://, 308; default 0, off).\n"
     "Cluster (docs/operations.md): [--cluster-port P] publishes this node to parents; [--children H:P,H:P]\n"
     "names its children; [--no-render] makes it a hub or dedicated master; [--no-http] serves no clients.\n"
     "INI: cluster-port, cluster-host (default 127.0.0.1), children, render, http, name, task-timeout-ms,\n"
@@ -48,7 +52,7 @@ const char* kHelp =
     "--renderer: 'client' (default) renders each session with the renderer its handshake asks for (the\n"
     "ray tracer unless the page says renderer=\"rasterizer\"); raytracer or rasterizer renders every\n"
     "session with that one. The listening line says whether the rasterizer's GL context can be created.\n"
-    "Stops on SIGINT/SIGTERM.\n";
+    "Stops on SIGINT/SIGTERM; SIGHUP reloads the TLS certificate.\n";
 
 // What the node admits, for the listening line: which kinds of token it asks for (never a
 // token, a key or a file's content), the page origins it takes and the per-address limit.
@@ -95,11 +99,13 @@ int run(const std::vector<std::string>& argv) {
 #ifdef __GLIBC__
   if (!std::getenv("MALLOC_ARENA_MAX")) mallopt(M_ARENA_MAX, 2);
 #endif
-  // Block the stop signals before any thread starts, so sigwait below receives them.
+  // Block the stop signals and SIGHUP (reload the TLS certificate) before any thread starts, so
+  // that sigwait below receives them on this thread: no signal handler runs anywhere.
   sigset_t sigs;
   sigemptyset(&sigs);
   sigaddset(&sigs, SIGINT);
   sigaddset(&sigs, SIGTERM);
+  sigaddset(&sigs, SIGHUP);
   pthread_sigmask(SIG_BLOCK, &sigs, nullptr);
 
   NodeConfig cfg;
@@ -201,7 +207,7 @@ int run(const std::vector<std::string>& argv) {
   std::printf("{\"listening\": %s, \"websocket\": %s, \"cluster\": %s, \"name\": %s, \"children\": [%s], "
               "\"render\": %s, \"web_root\": %s, \"scene\": %s, \"max_clients\": %d, \"render_threads\": %d, "
               "\"cpu\": %s, \"renderer\": %s, \"rasterizer\": %s, \"max_node_bytes\": %llu, "
-              "\"handshake_timeout_ms\": %u, \"admission\": %s}\n",
+              "\"handshake_timeout_ms\": %u, \"admission\": %s, \"http_redirect\": %s, \"hsts_max_age\": %u}\n",
               server ? json_str(std::string(opts.tls() ? "https" : "http") + "://" + opts.host + ":" +
                                 std::to_string(server->port()) + "/").c_str()
                      : "null",
@@ -214,10 +220,21 @@ int run(const std::vector<std::string>& argv) {
               cfg.render_threads > 0 ? cfg.render_threads : hardware_threads(), json_str(cpu_model()).c_str(),
               json_str(renderer).c_str(), json_str(gl_ok ? "available" : "unavailable: " + gl_why).c_str(),
               static_cast<unsigned long long>(settings->budget ? settings->budget->limit() : 0),
-              settings->handshake_timeout_ms, admission_json(opts).c_str());
+              settings->handshake_timeout_ms, admission_json(opts).c_str(),
+              server && server->redirect_port()
+                  ? json_str("http://" + opts.host + ":" + std::to_string(server->redirect_port()) + "/").c_str()
+                  : "null",
+              opts.hsts_max_age);
   std::fflush(stdout);
   int sig = 0;
-  sigwait(&sigs, &sig);
+  while (sigwait(&sigs, &sig) == 0 && sig == SIGHUP) {
+    // A renewed certificate (docs/operations.md, "TLS"): read here, on the main thread; the
+    // server logs a tls_certificate event either way and serves on.
+    if (server)
+      server->reload_tls();
+    else
+      node_log(*settings, Event(Ev::tls_certificate, "reload_failed").with("error", "no HTTP endpoint on this node"));
+  }
   std::fprintf(stderr, "{\"stopping\": true, \"signal\": %d}\n", sig);
   if (server) server->stop();
   if (node) caf::anon_send_exit(node, caf::exit_reason::user_shutdown);

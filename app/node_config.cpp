@@ -83,6 +83,11 @@ NodeConfig::NodeConfig() {
       .add(max_mjpeg_per_session, "max-mjpeg-per-session", "MJPEG viewers of one session")
       .add(max_mjpeg_viewers, "max-mjpeg-viewers", "MJPEG viewers on the node")
       .add(max_connections_per_ip, "max-connections-per-ip", "WebSocket connections per client address (0: no limit)")
+      .add(hsts_max_age, "hsts-max-age",
+           "with TLS: send Strict-Transport-Security with this max-age in seconds (0: off; it pins the host name, "
+           "every port, to https in browsers)")
+      .add(http_redirect_port, "http-redirect-port",
+           "with TLS: also listen on this port in plain HTTP, redirecting every GET/HEAD to https (0: off)")
       .add(asset_cache_mb, "asset-cache-mb", "decoded textures of references kept for later sessions, in MiB (0: none)")
       .add(asset_max_file_mb, "asset-max-file-mb", "the largest file a reference may name, in MiB")
       .add(geometry_cache_mb, "geometry-cache-mb",
@@ -296,6 +301,22 @@ ServerOptions NodeConfig::server_options() const {
     throw std::invalid_argument("tessera.tls-cert and tessera.tls-key go together: give both (HTTPS and WSS) or neither");
   o.tls_cert = tls_cert;
   o.tls_key = tls_key;
+  if (hsts_max_age < 0) throw std::invalid_argument("tessera.hsts-max-age must be >= 0 (seconds; 0: off)");
+  if (hsts_max_age > 0 && !o.tls())
+    throw std::invalid_argument("tessera.hsts-max-age needs TLS (tessera.tls-cert and tessera.tls-key): browsers ignore "
+                                "Strict-Transport-Security over plain HTTP (behind a TLS proxy, set it at the proxy)");
+  o.hsts_max_age = uint32_t(hsts_max_age);
+  if (http_redirect_port < 0 || http_redirect_port > 65535)
+    throw std::invalid_argument("tessera.http-redirect-port must be in 0..65535 (0: off)");
+  if (http_redirect_port > 0) {
+    if (!o.tls())
+      throw std::invalid_argument("tessera.http-redirect-port needs TLS (tessera.tls-cert and tessera.tls-key): it "
+                                  "redirects plain HTTP to https:// on tessera.port");
+    if (http_redirect_port == port)
+      throw std::invalid_argument("tessera.http-redirect-port must differ from the port (" + std::to_string(port) +
+                                  "), which speaks TLS");
+    o.http_redirect_port = uint16_t(http_redirect_port);
+  }
   return o;
 }
 

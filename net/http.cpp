@@ -139,6 +139,58 @@ std::string query_param(const std::string& target, const std::string& key) {
   return "";
 }
 
+std::optional<std::string> redirect_host(const std::string& header) {
+  std::string h = trim(header);
+  if (h.empty() || h.size() > 300) return std::nullopt;
+  for (auto& c : h) c = char(std::tolower(static_cast<unsigned char>(c)));
+  std::string port;
+  if (h.front() == '[') {  // [IPv6]:port
+    const size_t close = h.find(']');
+    if (close == std::string::npos) return std::nullopt;
+    port = h.substr(close + 1);
+    h = h.substr(0, close + 1);
+    in6_addr a6;
+    if (!port.empty() && port.front() != ':') return std::nullopt;
+    if (inet_pton(AF_INET6, h.substr(1, h.size() - 2).c_str(), &a6) != 1) return std::nullopt;
+  } else {
+    const size_t colon = h.find(':');
+    if (colon != std::string::npos) {
+      port = h.substr(colon);
+      h = h.substr(0, colon);
+    }
+    if (h.empty() || h.size() > 253 || h.front() == '.' || h.front() == '-') return std::nullopt;
+    for (char c : h)
+      if (!((c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '-' || c == '.')) return std::nullopt;
+  }
+  if (!port.empty()) {  // ":" and up to 5 digits, or nothing
+    uint64_t p = 0;
+    if (port.size() > 6 || (port.size() > 1 && (!parse_u64(port.substr(1), p) || p > 65535))) return std::nullopt;
+  }
+  return h;
+}
+
+std::string location(const std::string& scheme, const std::string& host, uint16_t port, const std::string& target) {
+  const bool default_port = port == ((scheme == "https" || scheme == "wss") ? 443 : 80);
+  std::string out = scheme + "://" + host + (default_port ? "" : ":" + std::to_string(port));
+  if (target.empty() || target.front() != '/') return out + "/";
+  static const char* kHex = "0123456789ABCDEF";
+  auto hex = [](char c) { return std::isxdigit(static_cast<unsigned char>(c)) != 0; };
+  for (size_t i = 0; i < target.size(); ++i) {
+    const unsigned char c = static_cast<unsigned char>(target[i]);
+    // RFC 3986 unreserved, sub-delims, ':', '@', '/', '?', and '%' where it starts an escape.
+    const bool keep = (c < 0x80 && std::isalnum(c)) || (c != 0 && std::strchr("-._~!$&'()*+,;=:@/?", c)) ||
+                      (c == '%' && i + 2 < target.size() && hex(target[i + 1]) && hex(target[i + 2]));
+    if (keep) {
+      out += char(c);
+    } else {
+      out += '%';
+      out += kHex[c >> 4];
+      out += kHex[c & 15];
+    }
+  }
+  return out;
+}
+
 // --- Client -----------------------------------------------------------------------------
 
 namespace {

@@ -46,6 +46,16 @@ bool valid_token(const std::string& token);
 // The value of `key` in the target's query string ("" when absent).
 std::string query_param(const std::string& target, const std::string& key);
 
+// The plain HTTP port's redirect to HTTPS (ServerOptions::http_redirect_port). The host of a
+// Host header, lower case and without its port ("Node.Example:8080" -> "node.example",
+// "[::1]:80" -> "[::1]"); nullopt unless it is a DNS name (letters, digits, '-', '.'), an IPv4
+// address or a bracketed IPv6 address, so that a hostile header never reaches a Location.
+std::optional<std::string> redirect_host(const std::string& host_header);
+// scheme://HOST[:PORT]TARGET: the port left out when it is the scheme's (443 for https and wss),
+// TARGET ("/path?query") kept with every byte that may not stand in a URL percent-escaped (no
+// CR, LF, space or quote gets through), "/" when it is not a path.
+std::string location(const std::string& scheme, const std::string& host, uint16_t port, const std::string& target);
+
 // --- Client side (tests, load test) -------------------------------------------------------
 
 struct Response {

@@ -43,6 +43,7 @@ struct MjpegStream : std::enable_shared_from_this<MjpegStream<Config>> {
   bool writing = false, dead = false;
   std::shared_ptr<const std::vector<uint8_t>> current, pending;
   std::string part_header;
+  std::string extra_headers;  // further header lines of the response ("Name: value\r\n" each)
   static constexpr const char* kBoundary = "tesseraframe";
 
   void push(std::shared_ptr<const std::vector<uint8_t>> jpeg) {
@@ -80,7 +81,8 @@ struct MjpegStream : std::enable_shared_from_this<MjpegStream<Config>> {
   void start() {
     watch_eof();
     part_header = std::string("HTTP/1.1 200 OK\r\nContent-Type: multipart/x-mixed-replace; boundary=") + kBoundary +
-                  "\r\nCache-Control: no-cache, no-store\r\nPragma: no-cache\r\nConnection: close\r\n\r\n--" +
+                  "\r\nCache-Control: no-cache, no-store\r\nPragma: no-cache\r\nConnection: close\r\n" +
+                  extra_headers + "\r\n--" +
                   kBoundary + "\r\n";
     writing = true;
     auto self = this->shared_from_this();
@@ -135,7 +137,9 @@ struct Server::Impl {
   virtual ~Impl() = default;
   virtual void start() = 0;
   virtual void stop() = 0;
+  virtual bool reload_tls(std::string* error) = 0;
   std::atomic<uint16_t> bound_port{0};
+  std::atomic<uint16_t> redirect_bound{0};  // the plain HTTP redirect's port (0: none)
   std::atomic<size_t> count{0};
   std::atomic<uint64_t> queued{0};    // sum of the connections' backlogs
   std::atomic<size_t> viewers{0};     // open MJPEG streams
@@ -153,11 +157,21 @@ struct Endpoint final : Server::Impl, std::enable_shared_from_this<Endpoint<Conf
   using message_ptr = typename WsServer::message_ptr;
   static constexpr bool kTls = std::is_same_v<Config, websocketpp::config::asio_tls>;
 
+  using PlainServer = websocketpp::server<websocketpp::config::asio>;
+
   caf::actor_system& sys;
   std::shared_ptr<const NodeSettings> settings;
   ServerOptions opts;
   WsServer ws;
-  std::shared_ptr<asio::ssl::context> tls_context;  // kTls: every connection's (one per node)
+  // kTls: every connection's context (one per node), and the certificate its handshakes
+  // present, which reload_tls replaces (tls::ServerContext).
+  std::shared_ptr<asio::ssl::context> tls_context;
+  std::unique_ptr<tls::ServerContext> tls_identity;
+  std::mutex reload_mu;
+  std::string hsts;  // kTls and hsts_max_age > 0: the Strict-Transport-Security value, else ""
+  // kTls and http_redirect_port: plain HTTP redirected to https, on ws's io_service (declared
+  // after ws: it goes first, while that io_service still exists).
+  std::unique_ptr<PlainServer> redirect;
   std::thread thread;
   std::atomic<uint64_t> next_id{0};
   bool running = false;
@@ -195,10 +209,19 @@ struct Endpoint final : Server::Impl, std::enable_shared_from_this<Endpoint<Conf
   std::map<connection_hdl, Refusal, std::owner_less<connection_hdl>> refusing;
 
   Endpoint(caf::actor_system& s, std::shared_ptr<const NodeSettings> st, ServerOptions o)
-      : sys(s), settings(std::move(st)), opts(std::move(o)), per_address(opts.max_connections_per_ip) {}
+      : sys(s), settings(std::move(st)), opts(std::move(o)), per_address(opts.max_connections_per_ip) {
+    if (kTls && opts.hsts_max_age > 0) hsts = "max-age=" + std::to_string(opts.hsts_max_age);
+  }
 
   void start() override;
   void stop() override;
+  bool reload_tls(std::string* error) override;
+  void start_redirect(const asio::ip::address& addr);
+  void on_redirect_http(connection_hdl h);
+  bool on_redirect_validate(connection_hdl h);
+  // The host a redirect names when the request's Host header is missing or not a host: the
+  // node's address, or the one the client connected to when the node listens on all of them.
+  std::string fallback_host(const PlainServer::connection_ptr& con) const;
 
   void log(Event e) { node_log(*settings, std::move(e)); }
   void on_open(connection_hdl h);
@@ -425,6 +448,7 @@ void Endpoint<Config>::close_conn(connection_hdl h, Conn& c, websocketpp::close:
 template <class Config>
 bool Endpoint<Config>::on_validate(connection_hdl h) {
   auto con = ws.get_con_from_hdl(h);
+  if (!hsts.empty()) con->replace_header("Strict-Transport-Security", hsts);  // the 101 and every refusal
   const std::string target = con->get_resource();
   if (http::target_path(target) != "/ws") {
     con->set_status(websocketpp::http::status_code::not_found);
@@ -602,6 +626,7 @@ template <class Config>
 void Endpoint<Config>::on_http(connection_hdl h) {
   namespace sc = websocketpp::http::status_code;
   auto con = ws.get_con_from_hdl(h);
+  if (!hsts.empty()) con->replace_header("Strict-Transport-Security", hsts);
   const std::string target = con->get_resource();
   const std::string path = http::target_path(target);
   const std::string& method = con->get_request().get_method();
@@ -649,6 +674,7 @@ void Endpoint<Config>::on_http(connection_hdl h) {
     con->defer_http_response();
     auto s = std::make_shared<MjpegStream<Config>>();
     s->con = con;
+    if (!hsts.empty()) s->extra_headers = "Strict-Transport-Security: " + hsts + "\r\n";
     s->live = &viewers;
     ++viewers;
     mjpeg[token].push_back(s);
@@ -699,12 +725,27 @@ void Endpoint<Config>::on_http(connection_hdl h) {
   con->replace_header("Cache-Control", "no-cache");
 }
 
+// The `tls_certificate` event of a certificate the port presents from now on.
+Event certificate_event(const char* what, const std::string& cert_file, const tls::CertInfo& info) {
+  Event e(Ev::tls_certificate, what);
+  e.with("cert", cert_file).with("subject", info.subject).with("not_after", info.not_after).with("sha256", info.sha256);
+  if (info.expires > 0 && info.expires < int64_t(std::time(nullptr)))
+    e.with("warning", "the certificate expired at " + info.not_after + ": browsers refuse it");
+  return e;
+}
+
 template <class Config>
 void Endpoint<Config>::start() {
   Endpoint& i = *this;
   if constexpr (kTls) {  // before anything binds: a bad certificate or key ends the start
-    tls_context = std::make_shared<asio::ssl::context>(tls::server_context(opts.tls_cert, opts.tls_key).release());
+    std::lock_guard<std::mutex> l(reload_mu);
+    tls_identity = std::make_unique<tls::ServerContext>(opts.tls_cert, opts.tls_key);
+    SSL_CTX_up_ref(tls_identity->native());  // asio's context holds a reference of its own
+    tls_context = std::make_shared<asio::ssl::context>(tls_identity->native());
     i.ws.set_tls_init_handler([ctx = tls_context](connection_hdl) { return ctx; });
+  } else if (opts.http_redirect_port) {
+    throw std::runtime_error("tessera.http-redirect-port needs TLS (tessera.tls-cert and tessera.tls-key): it "
+                             "redirects plain HTTP to https://");
   }
   i.ws.clear_access_channels(websocketpp::log::alevel::all);
   i.ws.clear_error_channels(websocketpp::log::elevel::all);
@@ -732,6 +773,8 @@ void Endpoint<Config>::start() {
   i.ws.start_accept(ec);
   if (ec) throw std::runtime_error("cannot accept: " + ec.message());
   i.bound_port = i.ws.get_local_endpoint(ec).port();
+  if constexpr (kTls)
+    if (i.opts.http_redirect_port) i.start_redirect(addr);
   i.running = true;
   i.thread = std::thread([&i] {
     try {
@@ -740,6 +783,108 @@ void Endpoint<Config>::start() {
       i.log(Event(Ev::network_thread_error, e.what()));
     }
   });
+  if constexpr (kTls) i.log(certificate_event("loaded", i.opts.tls_cert, i.tls_identity->current()));
+}
+
+template <class Config>
+bool Endpoint<Config>::reload_tls(std::string* error) {
+  std::lock_guard<std::mutex> l(reload_mu);
+  std::string why;
+  if constexpr (kTls) {
+    if (!tls_identity) {
+      why = "the server has not started";
+    } else {
+      try {
+        log(certificate_event("reloaded", opts.tls_cert, tls_identity->reload(opts.tls_cert, opts.tls_key)));
+        return true;
+      } catch (const std::exception& e) {
+        why = e.what();  // names the file and OpenSSL's reason, never a key's content
+      }
+    }
+    const tls::CertInfo kept = tls_identity ? tls_identity->current() : tls::CertInfo{};
+    log(Event(Ev::tls_certificate, "reload_failed")
+            .with("error", why)
+            .with("serving", kept.subject)
+            .with("serving_sha256", kept.sha256)
+            .with("serving_not_after", kept.not_after));
+  } else {
+    why = "no TLS on this node (tessera.tls-cert and tessera.tls-key are not set)";
+    log(Event(Ev::tls_certificate, "reload_failed").with("error", why));
+  }
+  if (error) *error = why;
+  return false;
+}
+
+// The plain HTTP listener of ServerOptions::http_redirect_port: websocketpp's plain config on the
+// TLS endpoint's io_service (its network thread), bound to the same address.
+template <class Config>
+void Endpoint<Config>::start_redirect(const asio::ip::address& addr) {
+  redirect = std::make_unique<PlainServer>();
+  PlainServer& r = *redirect;
+  r.clear_access_channels(websocketpp::log::alevel::all);
+  r.clear_error_channels(websocketpp::log::elevel::all);
+  r.init_asio(&ws.get_io_service());
+  r.set_reuse_addr(true);
+  r.set_user_agent("");
+  r.set_max_http_body_size(4096);
+  r.set_http_handler([this](connection_hdl h) { on_redirect_http(h); });
+  r.set_validate_handler([this](connection_hdl h) { return on_redirect_validate(h); });
+  asio::error_code ec;
+  r.listen(asio::ip::tcp::endpoint(addr, *opts.http_redirect_port), ec);
+  if (ec)
+    throw std::runtime_error("cannot listen on " + opts.host + ":" + std::to_string(*opts.http_redirect_port) +
+                             " (tessera.http-redirect-port): " + ec.message());
+  r.start_accept(ec);
+  if (ec) throw std::runtime_error("cannot accept on the redirect port: " + ec.message());
+  redirect_bound = r.get_local_endpoint(ec).port();
+}
+
+template <class Config>
+std::string Endpoint<Config>::fallback_host(const PlainServer::connection_ptr& con) const {
+  asio::error_code ec;
+  auto host = asio::ip::make_address(opts.host, ec);
+  if (ec || host.is_unspecified()) {
+    host = con->get_raw_socket().local_endpoint(ec).address();
+    if (ec) return "localhost";
+  }
+  if (host.is_v6() && host.to_v6().is_v4_mapped()) host = asio::ip::make_address_v4(asio::ip::v4_mapped, host.to_v6());
+  return host.is_v6() ? "[" + host.to_string() + "]" : host.to_string();
+}
+
+// Every GET and HEAD on the redirect port: 308 to the same path and query over https on the
+// node's port, at the host the request named (its Host header, checked: http::redirect_host),
+// else at the node's address. Other methods get 405. No content, no HSTS (plain HTTP).
+template <class Config>
+void Endpoint<Config>::on_redirect_http(connection_hdl h) {
+  namespace sc = websocketpp::http::status_code;
+  websocketpp::lib::error_code ec;
+  auto con = redirect->get_con_from_hdl(h, ec);
+  if (ec) return;
+  const std::string& method = con->get_request().get_method();
+  if (method != "GET" && method != "HEAD") {
+    respond(con, false, sc::method_not_allowed, "method not allowed: this port redirects GET and HEAD to https\n");
+    con->replace_header("Allow", "GET, HEAD");
+    return;
+  }
+  const std::string host = http::redirect_host(con->get_request_header("Host")).value_or(fallback_host(con));
+  const std::string to = http::location("https", host, bound_port, con->get_resource());
+  respond(con, method == "HEAD", sc::ok, "moved permanently to " + to + "\n");
+  con->set_status(static_cast<sc::value>(308), "Permanent Redirect");  // not in websocketpp's table
+  con->replace_header("Location", to);
+}
+
+// A WebSocket upgrade on the redirect port: refused (a WebSocket does not follow redirects), and
+// the body says where the secure one is.
+template <class Config>
+bool Endpoint<Config>::on_redirect_validate(connection_hdl h) {
+  auto con = redirect->get_con_from_hdl(h);
+  const std::string host = http::redirect_host(con->get_request_header("Host")).value_or(fallback_host(con));
+  con->set_status(websocketpp::http::status_code::forbidden);
+  con->set_body("plain WebSocket is not served: this port only redirects to https; the WebSocket is " +
+                http::location("wss", host, bound_port, "/ws") + "\n");
+  con->replace_header("Content-Type", "text/plain; charset=utf-8");
+  log(Event(Ev::rejected, "plain WebSocket on the redirect port").with("address", peer_address(con)));
+  return false;
 }
 
 template <class Config>
@@ -751,6 +896,7 @@ void Endpoint<Config>::stop() {
   i.ws.get_io_service().post([&i, &done] {
     websocketpp::lib::error_code ec;
     i.ws.stop_listening(ec);
+    if (i.redirect) i.redirect->stop_listening(ec);
     if (i.poll) i.poll->cancel();
     for (auto& [h, c] : i.conns) {
       c->sink->open = false;
@@ -794,5 +940,7 @@ uint16_t Server::port() const { return impl_->bound_port; }
 size_t Server::sessions() const { return impl_->count; }
 uint64_t Server::queued_bytes() const { return impl_->queued; }
 size_t Server::mjpeg_viewers() const { return impl_->viewers; }
+uint16_t Server::redirect_port() const { return impl_->redirect_bound; }
+bool Server::reload_tls(std::string* error) { return impl_->reload_tls(error); }
 
 }  // namespace tessera

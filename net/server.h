@@ -36,6 +36,13 @@ struct ServerOptions {
   // plain HTTP and WebSocket. With TLS the port speaks nothing else.
   std::string tls_cert, tls_key;
   bool tls() const { return !tls_cert.empty() || !tls_key.empty(); }
+  // With TLS: every response on the port carries `Strict-Transport-Security: max-age=N` (0:
+  // none). Never sent over plain HTTP.
+  uint32_t hsts_max_age = 0;
+  // With TLS: plain HTTP on this port of the same address answers GET and HEAD with a 308
+  // redirect to https://HOST:port/... and serves nothing else (0: any free port, see
+  // Server::redirect_port()); none: no such listener. Without TLS start() refuses it.
+  std::optional<uint16_t> http_redirect_port;
 };
 
 class Server {
@@ -56,6 +63,15 @@ class Server {
   // waiting to replace), over all connections; counted in NodeSettings::budget.
   uint64_t queued_bytes() const;
   size_t mjpeg_viewers() const;  // open MJPEG streams
+  uint16_t redirect_port() const;  // the plain HTTP redirect's port (0: none)
+  // With TLS: reads ServerOptions::tls_cert and tls_key again (SIGHUP in `tessera serve`).
+  // Connections accepted from now on present the new certificate; established ones go on with
+  // theirs. Logs a `tls_certificate` event: "reloaded" with the new certificate's subject,
+  // expiry and SHA-256 fingerprint, or "reload_failed" with the reason (a file missing or
+  // unreadable, not PEM, a key that does not belong to the certificate, an expired certificate)
+  // while the node serves on with the certificate it had. False and *error when refused, and
+  // on a server without TLS. Any thread.
+  bool reload_tls(std::string* error = nullptr);
 
   struct Impl;
 

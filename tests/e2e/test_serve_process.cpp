@@ -3,13 +3,17 @@
 // client that uploads a scene and gets a frame, serves the static page and a 404, and exits
 // with status 0 on SIGTERM within a bounded time, with a client still connected. A config
 // file that does not exist, a bad setting and a port in use each end it with a clear error
-// and a non-zero status.
+// and a non-zero status. With TLS, SIGHUP reloads the certificate (a bad one is logged and the
+// node serves on), and the HSTS and redirect settings take effect or are refused without TLS.
 #include <catch2/catch.hpp>
 
 #include <sstream>
 
+#include <arpa/inet.h>
 #include <fcntl.h>
+#include <netinet/in.h>
 #include <poll.h>
+#include <sys/socket.h>
 #include <signal.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -412,4 +416,136 @@ TEST_CASE("tessera serve with tls-cert and tls-key serves HTTPS and WSS only; on
     CHECK(p.out().find("listening") == std::string::npos);
   }
   std::filesystem::remove_all(dir);
+}
+
+namespace {
+
+// A port free on 127.0.0.1 just now (for a setting that has no "any free port").
+uint16_t free_port() {
+  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  REQUIRE(fd >= 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  REQUIRE(::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0);
+  socklen_t n = sizeof a;
+  REQUIRE(::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &n) == 0);
+  ::close(fd);
+  return ntohs(a.sin_port);
+}
+
+std::string self_signed(const std::string& name) {
+  char tmpl[] = "/tmp/tessera-serve-tls-XXXXXX";
+  REQUIRE(mkdtemp(tmpl));
+  REQUIRE(std::system(("scripts/tls-cert.sh " + std::string(tmpl) + " " + name + " >/dev/null").c_str()) == 0);
+  return tmpl;
+}
+
+void copy_over(const std::string& from, const std::string& to) {
+  std::filesystem::copy_file(from, to + ".new", std::filesystem::copy_options::overwrite_existing);
+  std::filesystem::rename(to + ".new", to);  // as a renewal replaces the file
+}
+
+}  // namespace
+
+TEST_CASE("tessera serve reloads its TLS certificate on SIGHUP: new connections get the renewed one, an open session "
+          "goes on, a bad pair is logged and the old one kept; HSTS and the HTTP redirect from the settings",
+          "[e2e]") {
+  const std::string a = self_signed("first.example"), b = self_signed("renewed.example"), live = self_signed("live");
+  copy_over(a + "/node.crt", live + "/node.crt");
+  copy_over(a + "/node.key", live + "/node.key");
+  const uint16_t redirect = free_port();
+  Process p(serve({"--port", "0", "--tessera.tls-cert=" + live + "/node.crt", "--tessera.tls-key=" + live + "/node.key",
+                   "--tessera.hsts-max-age=300", "--tessera.http-redirect-port=" + std::to_string(redirect)}));
+  auto line = p.first_line(30000);
+  INFO("stderr: " << p.err());
+  REQUIRE(line);
+  const std::string key = "\"listening\": \"https://127.0.0.1:";
+  REQUIRE(line->find(key) != std::string::npos);
+  const uint16_t port = uint16_t(std::stoi(line->substr(line->find(key) + key.size())));
+  CHECK(line->find("\"http_redirect\": \"http://127.0.0.1:" + std::to_string(redirect) + "/\"") != std::string::npos);
+  CHECK(line->find("\"hsts_max_age\": 300") != std::string::npos);
+  CHECK(wait_for([&] { return p.err_count("\"tls_certificate\": \"loaded\"") == 1; }, 5000));
+  CHECK(p.err().find("CN=first.example") != std::string::npos);
+
+  // HSTS on HTTPS, the redirect on plain HTTP.
+  auto page = http::get("127.0.0.1", port, "/", 5000, {true, a + "/node.crt"});
+  REQUIRE(page);
+  CHECK(page->header("Strict-Transport-Security") == std::optional<std::string>("max-age=300"));
+  auto moved = http::get("localhost", redirect, "/demo/index.html?x=1");
+  REQUIRE(moved);
+  CHECK(moved->status == 308);
+  CHECK(moved->header("Location") == std::optional<std::string>("https://localhost:" + std::to_string(port) +
+                                                                 "/demo/index.html?x=1"));
+  CHECK_FALSE(moved->header("Strict-Transport-Security"));
+
+  ProtoClient open;
+  open.ws.use_tls(a + "/node.crt");
+  std::string error;
+  REQUIRE(open.ws.connect("127.0.0.1", port, "/ws", &error));
+  REQUIRE(open.handshake(protocol::DisplayKind::jpeg, 64, 48));
+  REQUIRE(open.upload(pavilion().scene));
+  REQUIRE(open.render(pavilion_loop().camera(0), 1));
+
+  // The renewal, then SIGHUP.
+  copy_over(b + "/node.crt", live + "/node.crt");
+  copy_over(b + "/node.key", live + "/node.key");
+  p.signal(SIGHUP);
+  REQUIRE(wait_for([&] { return p.err_count("\"tls_certificate\": \"reloaded\"") == 1; }, 10000));
+  CHECK(p.err().find("CN=renewed.example") != std::string::npos);
+  CHECK(http::get("127.0.0.1", port, "/", 5000, {true, b + "/node.crt"}));
+  CHECK_FALSE(http::get("127.0.0.1", port, "/", 5000, {true, a + "/node.crt"}));
+  CHECK(open.render(pavilion_loop().camera(1), 2));
+
+  // A key that does not belong to the certificate: refused and logged; the node serves on.
+  copy_over(a + "/node.key", live + "/node.key");
+  p.signal(SIGHUP);
+  REQUIRE(wait_for([&] { return p.err_count("\"tls_certificate\": \"reload_failed\"") == 1; }, 10000));
+  CHECK(p.err().find("does not belong to the certificate") != std::string::npos);
+  CHECK(p.err().find("PRIVATE KEY") == std::string::npos);
+  CHECK(http::get("127.0.0.1", port, "/", 5000, {true, b + "/node.crt"}));
+  CHECK(open.render(pavilion_loop().camera(2), 3));
+
+  p.signal(SIGTERM);
+  auto status = p.wait(15000);
+  REQUIRE(status);
+  CHECK(WIFEXITED(*status));
+  CHECK(WEXITSTATUS(*status) == 0);
+  for (const std::string& dir : {a, b, live}) std::filesystem::remove_all(dir);
+}
+
+TEST_CASE("tessera serve without TLS: SIGHUP is logged and the node serves on; HSTS and the HTTP redirect are "
+          "refused at start",
+          "[e2e]") {
+  {
+    Process p(serve({"--port", "0"}));
+    auto line = p.first_line(30000);
+    INFO("stderr: " << p.err());
+    REQUIRE(line);
+    const uint16_t port = listening_port(*line);
+    CHECK(line->find("\"http_redirect\": null") != std::string::npos);
+    p.signal(SIGHUP);
+    REQUIRE(wait_for([&] { return p.err_count("\"tls_certificate\": \"reload_failed\"") == 1; }, 10000));
+    CHECK(p.err().find("no TLS on this node") != std::string::npos);
+    auto page = http::get("127.0.0.1", port, "/");
+    REQUIRE(page);
+    CHECK(page->status == 200);
+    p.signal(SIGTERM);
+    auto status = p.wait(15000);
+    REQUIRE(status);
+    CHECK(WEXITSTATUS(*status) == 0);
+  }
+  for (const auto& [setting, message] : std::vector<std::pair<std::string, std::string>>{
+           {"--tessera.http-redirect-port=8081", "tessera.http-redirect-port needs TLS"},
+           {"--tessera.hsts-max-age=300", "tessera.hsts-max-age needs TLS"},
+           {"--tessera.hsts-max-age=-1", "tessera.hsts-max-age must be >= 0"}}) {
+    Process p(serve({"--port", "0", setting}));
+    auto status = p.wait(15000);
+    REQUIRE(status);
+    CHECK(WIFEXITED(*status));
+    CHECK(WEXITSTATUS(*status) != 0);
+    INFO(setting << "\nstderr: " << p.err());
+    CHECK(p.err().find(message) != std::string::npos);
+    CHECK(p.out().find("listening") == std::string::npos);
+  }
 }

@@ -3,9 +3,11 @@
 // first byte says) and, for a complete request, the node's routing helpers (net/http.h):
 // target_path, query_param, valid_token and resolve_static over a scratch web root that holds
 // a file outside the root, a symlink to it, a hidden directory and a directory without an
-// index. Invariants: resolve_static returns only regular files inside the root (after
-// resolving symlinks), never the file outside it, nothing hidden; valid_token accepts only
-// 8..64 of [A-Za-z0-9_-].
+// index; and the redirect port's Location (redirect_host of the Host header, location).
+// Invariants: resolve_static returns only regular files inside the root (after resolving
+// symlinks), never the file outside it, nothing hidden; valid_token accepts only 8..64 of
+// [A-Za-z0-9_-]; a Location is https://HOST:PORT/ of URL characters only (no space, quote, angle
+// bracket, backslash or control byte) and HOST only a name or an address.
 #include <cctype>
 #include <cstdint>
 #include <cstdio>
@@ -110,5 +112,18 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   check_resolved(r.web, target, http::resolve_static(r.web, target));
   if (target.rfind("/scenes/", 0) == 0) check_resolved(r.scenes, target, http::resolve_static(r.scenes, target.substr(7)));
   (void)http::mime_type(path);
+
+  // What the redirect port answers (Server's on_redirect_http): 127.0.0.1 stands for the node's
+  // address when the Host header is not taken.
+  const std::string host = http::redirect_host(req.get_header("Host")).value_or("127.0.0.1");
+  const std::string location = http::location("https", host, 8443, target);
+  bool ok = location.rfind("https://" + host + ":8443/", 0) == 0;
+  for (unsigned char c : location) ok &= c > 0x20 && c < 0x7f && c != '"' && c != '<' && c != '>' && c != '\\';
+  for (unsigned char c : host) ok &= std::isalnum(c) || c == '-' || c == '.' || c == '[' || c == ']' || c == ':';
+  if (!ok) {
+    std::fprintf(stderr, "redirect for Host \"%s\" and \"%s\": \"%s\"\n", req.get_header("Host").c_str(), target.c_str(),
+                 location.c_str());
+    std::abort();
+  }
   return 0;
 }

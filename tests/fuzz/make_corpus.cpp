@@ -414,6 +414,10 @@ void http_corpus() {
   put("http", "symlinks", req(11, "GET /up/secret.txt HTTP/1.1\r\nHost: x\r\n\r\n"));
   put("http", "head_range", req(30, "HEAD /app.js HTTP/1.1\r\nHost: x\r\nRange: bytes=0-1\r\n\r\n"));
   put("http", "post_body", req(50, "POST /index.html HTTP/1.1\r\nHost: x\r\nContent-Length: 5\r\n\r\nhello"));
+  // The redirect port's Location from a hostile Host header and a target to escape.
+  put("http", "redirect_hostile_host",
+      req(25, "GET /a\"b<c>%zz?q=1 HTTP/1.1\r\nHost: evil.example/@x\nX-Injected: 1\r\n\r\n"));
+  put("http", "redirect_ipv6_host", req(18, "HEAD /demo/ HTTP/1.1\r\nHost: [::1]:8080\r\n\r\n"));
 }
 
 }  // namespace

@@ -85,3 +85,38 @@ TEST_CASE("Range headers: one byte range is served, several or malformed ones me
                            "bytes=1-2-3"})
     CHECK(parse_range(full, 100, r) == RangeKind::full);
 }
+
+TEST_CASE("The redirect to HTTPS takes a Host header's host only when it is a host name or an address", "[unit]") {
+  CHECK(redirect_host("node.example") == std::optional<std::string>("node.example"));
+  CHECK(redirect_host("Node.Example:8080") == std::optional<std::string>("node.example"));
+  CHECK(redirect_host(" localhost:80 ") == std::optional<std::string>("localhost"));
+  CHECK(redirect_host("10.0.0.2:8080") == std::optional<std::string>("10.0.0.2"));
+  CHECK(redirect_host("[::1]:8080") == std::optional<std::string>("[::1]"));
+  CHECK(redirect_host("[2001:DB8::7]") == std::optional<std::string>("[2001:db8::7]"));
+  CHECK(redirect_host("xn--bcher-kva.example:") == std::optional<std::string>("xn--bcher-kva.example"));
+  for (const char* hostile :
+       {"", " ", "evil.example\r\nSet-Cookie: a=1", "evil.example\nX-Injected: 1", "a b.example", "evil.example/@x",
+        "user@evil.example", "evil.example?x", "evil.example#x", "\"evil\"", "<script>", "evil.example:99999",
+        "evil.example:80:81", "evil.example:8o", ":8080", "::1", "[::1", "[::1]x", "[::1]:80x", "[zz::1]",
+        "[::1%25eth0]", ".example", "-evil.example", "ex%61mple.com", "b\xc3\xbc" "cher.example", "evil.example\x01"}) {
+    INFO(hostile);
+    CHECK_FALSE(redirect_host(hostile));
+  }
+  CHECK_FALSE(redirect_host(std::string(254, 'a')));
+}
+
+TEST_CASE("The redirect's Location keeps the path and query and escapes what may not stand in a URL", "[unit]") {
+  CHECK(location("https", "node.example", 8443, "/demo/index.html?a=1&b=%20x") ==
+        "https://node.example:8443/demo/index.html?a=1&b=%20x");
+  CHECK(location("https", "node.example", 443, "/") == "https://node.example/");  // https's own port left out
+  CHECK(location("wss", "[::1]", 443, "/ws") == "wss://[::1]/ws");
+  CHECK(location("wss", "[::1]", 8443, "/ws") == "wss://[::1]:8443/ws");
+  CHECK(location("https", "h", 8443, "") == "https://h:8443/");
+  CHECK(location("https", "h", 8443, "*") == "https://h:8443/");
+  CHECK(location("https", "h", 8443, "http://evil.example/x") == "https://h:8443/");  // not origin-form
+  CHECK(location("https", "h", 8443, "//evil.example/x") == "https://h:8443//evil.example/x");  // a path on h
+  static const char kTarget[] = "/a b\"<c>\r\nSet-Cookie:x\x7f\xff%zz%4\0#";
+  const std::string escaped = location("https", "h", 8443, std::string(kTarget, sizeof kTarget - 1));
+  CHECK(escaped == "https://h:8443/a%20b%22%3Cc%3E%0D%0ASet-Cookie:x%7F%FF%25zz%254%00%23");
+  for (char c : escaped) CHECK((c > 0x20 && c < 0x7f));
+}
