@@ -11,6 +11,7 @@
 #include "app/command.h"
 #include "app/common.h"
 #include "renderer/accumulation.h"
+#include "renderer/denoise.h"
 #include "renderer/raytracer.h"
 
 namespace tessera::app {
@@ -18,7 +19,7 @@ namespace {
 
 const char* kHelp =
     "tessera quality --scene S.gltf --camera-loop L.json [--frame K] [--size W H] [--threads T]\n"
-    "                [--mode fixed|progressive] [--seconds S] [--ao N] [--depth D]\n"
+    "                [--mode fixed|progressive|progressive+denoise] [--seconds S] [--ao N] [--depth D]\n"
     "                [--ao-list 1,2,4,8,16,32] [--max-samples M]\n"
     "                [--reference-samples R] [--reference-ao A] [--cache DIR]\n"
     "Image quality against render time, as PSNR against a converged reference: the average of R\n"
@@ -28,6 +29,10 @@ const char* kHelp =
     "  fixed: today's frame (one sample per pixel, N AO rays per hit) for each N of --ao-list.\n"
     "  progressive: a still that refines: sample after sample (--ao N rays each, default 1)\n"
     "  averaged, until --seconds (default 5) of rendering or --max-samples (default 65536).\n"
+    "  progressive+denoise: the same, each average denoised (renderer/denoise.h) with the guides\n"
+    "  of its first sample; the denoising counts in the time. --denoise-iterations K (default 5)\n"
+    "  sets its passes, --denoise-sigma S (default 4) its value weight.\n"
+    "--write-png F writes the last image measured (the last step's average, or the last fixed frame).\n"
     "One JSON line per step (samples, elapsed_ms, psnr_db), then a summary line with\n"
     "seconds_to_psnr for 30, 35 and 40 dB (null: not reached), the step that reached each level\n"
     "(samples_to_psnr, or ao_to_psnr for fixed: exact, unlike the seconds on a shared machine),\n"
@@ -69,16 +74,26 @@ std::string reference_key(const SceneSetup& setup, long frame, const RenderSetti
   return k.str();
 }
 
-// Renders samples [first, first + n) of the still and adds them to `acc`.
-void refine(RayTracer& rt, const Rect& full, RenderSettings s, uint32_t first, uint32_t n, Accumulation& acc) {
+// Renders samples [first, first + n) of the still and adds them to `acc`. With `ao`, every
+// sample also writes its guides: the first sample's are kept in *guides, and every sample's
+// open fractions go to *ao.
+void refine(RayTracer& rt, const Rect& full, RenderSettings s, uint32_t first, uint32_t n, Accumulation& acc,
+            StillAo* ao = nullptr, std::vector<float>* guides = nullptr) {
   TaskResult r;
   s.cost_map = false;
   s.radiance = true;
+  s.guides = ao != nullptr;
   for (uint32_t i = 0; i < n; ++i) {
     s.sample = first + i;
     rt.render(full, s, r);
     acc.add(r.radiance, full.width(), full.height(), 0, 0);
     acc.end_sample();
+    if (!ao) continue;
+    if (s.sample == 0) {
+      ao->reset(full.width(), full.height());
+      *guides = r.guides;
+    }
+    ao->add(r.guides);
   }
 }
 
@@ -128,8 +143,16 @@ int run(const std::vector<std::string>& argv) {
   const long ref_samples = args.integer("--reference-samples", 1024);
   const int ref_ao = int(args.integer("--reference-ao", 4));
   const std::string dir = cache_dir(args.str("--cache", ""));
+  const std::string png_out = args.str("--write-png", "");
+  DenoiseOptions denoise_options;
+  denoise_options.iterations = int(args.integer("--denoise-iterations", denoise_options.iterations));
+  denoise_options.sigma_value = float(args.number("--denoise-sigma", denoise_options.sigma_value));
   args.finish();
-  if (mode != "fixed" && mode != "progressive") throw std::invalid_argument("--mode must be fixed or progressive");
+  const bool denoised = mode == "progressive+denoise";
+  if (mode != "fixed" && mode != "progressive" && !denoised)
+    throw std::invalid_argument("--mode must be fixed, progressive or progressive+denoise");
+  if (denoise_options.iterations < 0 || denoise_options.iterations > 10)
+    throw std::invalid_argument("--denoise-iterations must be in 0..10");
   if (!(seconds > 0)) throw std::invalid_argument("--seconds must be > 0");
   if (ao < 0 || ao > 4096 || ref_ao < 1 || ref_ao > 4096) throw std::invalid_argument("--ao 0..4096, --reference-ao 1..4096");
   if (depth < 1 || depth > 64) throw std::invalid_argument("--depth must be in 1..64");
@@ -203,6 +226,7 @@ int run(const std::vector<std::string>& argv) {
       rt.render(full, s, r);
       const double t = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
       const double db = finite_db(compare(r.image, ref).psnr);
+      if (!png_out.empty()) write_png(png_out, r.image);
       levels.see(db, t, n);
       last_db = db;
       elapsed_s = t;
@@ -215,21 +239,27 @@ int run(const std::vector<std::string>& argv) {
     // Sample after sample; only rendering and accumulating count as time (not the PSNR).
     Accumulation acc;
     acc.reset(W, H, srgb);
+    StillAo still_ao;
+    std::vector<float> guides;
     RenderSettings s = base;
     s.ao_samples = ao;
     while (elapsed_s < seconds && acc.samples() < uint32_t(max_samples)) {
       const auto t0 = std::chrono::steady_clock::now();
-      refine(rt, full, s, acc.samples(), 1, acc);
-      Image avg = acc.average();
+      refine(rt, full, s, acc.samples(), 1, acc, denoised ? &still_ao : nullptr, &guides);
+      Image avg = denoised ? Accumulation::encode(denoise(acc.mean(), guides, still_ao.mean(),
+                                                         still_ao.variance_of_mean(guides), W, H, denoise_options),
+                                                 W, H, srgb)
+                           : acc.average();
       const double dt = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
       elapsed_s += dt;
       step_ms.push_back(dt * 1e3);
       const double db = finite_db(compare(avg, ref).psnr);
+      if (!png_out.empty()) write_png(png_out, avg);
       levels.see(db, elapsed_s, long(acc.samples()));
       last_db = db;
       samples = acc.samples();
-      std::printf("{\"mode\": \"progressive\", \"ao\": %d, \"samples\": %u, \"elapsed_ms\": %.1f, \"psnr_db\": %.3f}\n",
-                  ao, samples, elapsed_s * 1e3, db);
+      std::printf("{\"mode\": \"%s\", \"ao\": %d, \"samples\": %u, \"elapsed_ms\": %.1f, \"psnr_db\": %.3f}\n",
+                  mode.c_str(), ao, samples, elapsed_s * 1e3, db);
       std::fflush(stdout);
     }
   }

@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Regenerates docs/results/quality.{jsonl,md,png}: image quality (PSNR against a converged
 # reference) against render time, for today's fixed frame (1 sample per pixel, N AO rays per
-# hit) and for a still that refines (progressive samples averaged, 1 AO ray each), on the
-# pavilion, the living room and the kitchen (frame 0 of each camera loop).
+# hit), for a still that refines (progressive samples averaged, 1 AO ray each), and for the
+# same still denoised at every step (renderer/denoise.h), on the pavilion, the living room and
+# the kitchen (frame 0 of each camera loop).
 # Usage: bench/quality_report.sh [W H [THREADS [SECONDS [REF_SAMPLES]]]]
 #        (default 640 360, 2 threads, 8 s per refining still, 1024-sample reference)
 # The references (REF_SAMPLES samples of 2 AO rays) are made once and cached by `tessera
@@ -24,8 +25,10 @@ done
 : > "$out/quality.jsonl"
 for sc in pavilion living-room kitchen; do
   $T quality $(common $sc) --mode fixed | sed "s|^{|{\"scene_name\": \"$sc\", |" | tee -a "$out/quality.jsonl"
-  $T quality $(common $sc) --mode progressive --ao 1 --seconds "$SECONDS_" | sed "s|^{|{\"scene_name\": \"$sc\", |" \
-    | tee -a "$out/quality.jsonl" | grep summary
+  for mode in progressive progressive+denoise; do
+    $T quality $(common $sc) --mode $mode --ao 1 --seconds "$SECONDS_" | sed "s|^{|{\"scene_name\": \"$sc\", |" \
+      | tee -a "$out/quality.jsonl" | grep summary
+  done
 done
 python3 - "$out" <<'PY'
 import json, sys, os
@@ -51,7 +54,10 @@ md = ["# Image quality against render time: fixed frames and refining stills", "
       "- **fixed**: today's frame, one sample per pixel through pixel centres with N AO rays per hit; its",
       "  row is the best time among N = 1..32 to reach each level (aliasing caps it).",
       "- **progressive**: a still that refines, sample after sample (1 AO ray per hit each), averaged as",
-      "  linear radiance (`renderer/sampling.h`, `renderer/accumulation.h`).", "",
+      "  linear radiance (`renderer/sampling.h`, `renderer/accumulation.h`).",
+      "- **progressive+denoise**: the same still, its average denoised at every step",
+      "  (`renderer/denoise.h`: the AO open fraction filtered by SVGF's spatial filter, guided by normal",
+      "  and distance); the denoising counts in the time.", "",
       "The sample counts are exact (the sequences are deterministic); the seconds are this machine's",
       "and move with its neighbours: the median time of a sample is given so the two can be told apart.", "",
       "| scene | mode | seconds to 30 dB | to 35 dB | to 40 dB | PSNR at the end | ms per sample (median) | load |",
@@ -67,7 +73,7 @@ for r in rows:
 md += ["", "![PSNR against seconds](quality.png)", ""]
 open(os.path.join(out, "quality.md"), "w").write("\n".join(md))
 for sc in ("pavilion", "living-room", "kitchen"):
-    for mode in ("fixed", "progressive"):
+    for mode in ("fixed", "progressive", "progressive+denoise"):
         with open(f"/tmp/quality-{sc}-{mode}.dat", "w") as f:
             for r in rows:
                 if not r.get("summary") and r["scene_name"] == sc and r["mode"] == mode:
@@ -83,7 +89,8 @@ set logscale x
 do for [sc in "pavilion living-room kitchen"] {
   set title sc
   plot "/tmp/quality-".sc."-fixed.dat" u 1:2 w lp t "fixed (1 spp, AO 1..32)", \
-       "/tmp/quality-".sc."-progressive.dat" u 1:2 w l lw 2 t "progressive (1 AO ray per sample)"
+       "/tmp/quality-".sc."-progressive.dat" u 1:2 w l lw 2 t "progressive (1 AO ray per sample)", \
+       "/tmp/quality-".sc."-progressive+denoise.dat" u 1:2 w l lw 2 t "progressive, denoised"
 }
 unset multiplot
 GP

@@ -41,19 +41,32 @@ void Accumulation::add_bytes(const std::vector<uint8_t>& radiance, int32_t width
   });
 }
 
-Image Accumulation::average() const {
+std::vector<float> Accumulation::mean() const {
   if (samples_ == 0) return {};
-  Image out(width_, height_);
+  std::vector<float> out(sum_.size());
   const float inv = 1.0f / float(samples_);
-  const size_t pixels = size_t(width_) * size_t(height_);
+  for (size_t i = 0; i < sum_.size(); ++i) out[i] = sum_[i] * inv;  // one sample: exactly the renderer's value
+  return out;
+}
+
+Image Accumulation::encode(const std::vector<float>& rgb, int32_t width, int32_t height, bool srgb) {
+  const size_t pixels = size_t(width) * size_t(height);
+  if (width < 0 || height < 0 || rgb.size() != pixels * 3)
+    throw std::invalid_argument("Accumulation::encode: radiance not width x height RGB");
+  Image out(width, height);
   for (size_t p = 0; p < pixels; ++p) {
     for (int c = 0; c < 3; ++c) {
-      const float v = sum_[p * 3 + size_t(c)] * inv;  // one sample: exactly the renderer's value
-      out.rgba[p * 4 + size_t(c)] = uint8_t(srgb_ ? raytracer_detail::encode_srgb(v) : raytracer_detail::encode_plain(v));
+      const float v = rgb[p * 3 + size_t(c)];
+      out.rgba[p * 4 + size_t(c)] = uint8_t(srgb ? raytracer_detail::encode_srgb(v) : raytracer_detail::encode_plain(v));
     }
     out.rgba[p * 4 + 3] = 255;
   }
   return out;
+}
+
+Image Accumulation::average() const {
+  if (samples_ == 0) return {};
+  return encode(mean(), width_, height_, srgb_);
 }
 
 }  // namespace tessera

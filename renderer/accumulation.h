@@ -29,6 +29,11 @@ class Accumulation {
   // The average, encoded (opaque alpha); an empty image before the first sample. With one
   // sample it is exactly the frame the renderer encoded.
   Image average() const;
+  // The average as linear radiance (width * height RGB); empty before the first sample.
+  std::vector<float> mean() const;
+  // Linear radiance (width * height RGB) encoded as the renderer encodes a frame.
+  static Image encode(const std::vector<float>& rgb, int32_t width, int32_t height, bool srgb);
+  bool srgb() const { return srgb_; }
 
  private:
   template <class Value>

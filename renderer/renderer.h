@@ -37,7 +37,12 @@ struct RenderSettings {
   // Also write what each packet saw first to TaskResult::points (lb/reproject.h uses it to
   // carry a frame's cost map into the next camera).
   bool hit_points = false;
+  // Also write what each pixel's primary ray saw to TaskResult::guides (the denoiser's
+  // guides, renderer/denoise.h).
+  bool guides = false;
 };
+
+constexpr int kGuideFloats = 8;  // TaskResult::guides: nx, ny, nz, distance, ambient r, g, b, open
 
 struct RayCounts {
   uint64_t primary = 0, shadow = 0, ao = 0, secondary = 0;
@@ -55,6 +60,13 @@ struct TaskResult {
   std::vector<float> radiance;  // with RenderSettings::radiance: RGB per pixel, row by row (else empty)
   CostMap cost;           // per-packet cost (cost_map.h for the unit); empty if not measured
   PacketPoints points;    // with RenderSettings::hit_points (cost_map.h); else empty
+  // With RenderSettings::guides: per pixel, row by row, kGuideFloats floats about what the
+  // primary ray hit: its shading normal (world space, facing the viewer), its distance along
+  // the ray, the sky's ambient light it would show unoccluded (RGB, linear, after exposure and
+  // the share that reflection and refraction leave to its own shading), and the fraction of
+  // its ambient occlusion rays that were open. The pixel's radiance holds ambient x open.
+  // A miss has normal 0, distance -1, ambient 0 and open 1. Else empty.
+  std::vector<float> guides;
   double kernel_ms = 0;   // sum of the cost map, in milliseconds of one core
   double rendering_ms = 0;  // wall time of the multi-threaded rendering
   RayCounts rays;

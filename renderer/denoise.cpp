@@ -1,0 +1,246 @@
+#include "renderer/denoise.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+#include <cstring>
+#include <stdexcept>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include "renderer/renderer.h"
+
+namespace tessera {
+namespace {
+
+// Offsets into one pixel's guides.
+constexpr int kNormal = 0, kDistance = 3, kAmbient = 4, kOpen = 7;
+
+// exp(-e) for e >= 0 to about 1e-3 relative (a weight, not a result): 2^-(e log2 e) as a
+// power of two times a quartic in the fraction. Large e, +inf and NaN give 0. Branch-free
+// (selects), so that loops over pixels vectorise.
+inline float exp_neg(float e) {
+  const float x0 = e * 1.44269504f;
+  const bool small = x0 < 126.0f;  // false for large e, +inf and NaN
+  const float x = small ? x0 : 0.0f;
+  const int32_t i = int32_t(x);  // x >= 0: truncation is the floor
+  const float f = x - float(i);
+  const float poly = 1.0f + f * (-0.69314718f + f * (0.24022651f + f * (-0.05550411f + f * 0.00961813f)));
+  const uint32_t bits = uint32_t(127 - i) << 23;
+  float scale;
+  std::memcpy(&scale, &bits, sizeof scale);
+  return small ? poly * scale : 0.0f;
+}
+
+template <class Row>
+void rows(int32_t height, Row&& row) {
+  tbb::parallel_for(tbb::blocked_range<int32_t>(0, height, 8), [&](const tbb::blocked_range<int32_t>& r) {
+    for (int32_t y = r.begin(); y != r.end(); ++y) row(y);
+  });
+}
+
+}  // namespace
+
+void StillAo::reset(int32_t width, int32_t height) {
+  width_ = width;
+  height_ = height;
+  samples_ = 0;
+  sum_.assign(size_t(width) * size_t(height), 0.0);
+  sum_sq_.assign(size_t(width) * size_t(height), 0.0);
+}
+
+void StillAo::add(const std::vector<float>& guides) {
+  const size_t pixels = sum_.size();
+  if (guides.size() != pixels * kGuideFloats) throw std::invalid_argument("StillAo::add: guides not the still's size");
+  for (size_t p = 0; p < pixels; ++p) {
+    const double v = guides[p * kGuideFloats + kOpen];
+    sum_[p] += v;
+    sum_sq_[p] += v * v;
+  }
+  ++samples_;
+}
+
+std::vector<float> StillAo::mean() const {
+  std::vector<float> m(sum_.size(), 0.0f);
+  if (samples_ == 0) return m;
+  for (size_t p = 0; p < m.size(); ++p) m[p] = float(sum_[p] / samples_);
+  return m;
+}
+
+std::vector<float> StillAo::variance_of_mean(const std::vector<float>& guides) const {
+  const size_t pixels = sum_.size();
+  if (guides.size() != pixels * kGuideFloats) throw std::invalid_argument("StillAo: guides not the still's size");
+  std::vector<float> var(pixels, 0.0f);
+  if (samples_ == 0) return var;
+  const double n = samples_;
+  if (samples_ >= kSpatialVarianceBelow) {
+    for (size_t p = 0; p < pixels; ++p) {
+      const double m = sum_[p] / n;
+      var[p] = float(std::max(0.0, (sum_sq_[p] / n - m * m) / (n - 1)));
+    }
+    return var;
+  }
+  // Few samples: the spread of the 3x3 neighbourhood's means on the same surface (normals
+  // within about 25 degrees, both hits), which holds the mean's noise and the occlusion's own
+  // detail; the latter only makes the filter more careful.
+  for (int32_t y = 0; y < height_; ++y)
+    for (int32_t x = 0; x < width_; ++x) {
+      const size_t p = size_t(y) * size_t(width_) + size_t(x);
+      const float* gp = &guides[p * kGuideFloats];
+      double s = 0, s2 = 0;
+      int k = 0;
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          const int32_t qx = x + dx, qy = y + dy;
+          if (qx < 0 || qy < 0 || qx >= width_ || qy >= height_) continue;
+          const size_t q = size_t(qy) * size_t(width_) + size_t(qx);
+          const float* gq = &guides[q * kGuideFloats];
+          const bool same = (gp[kDistance] >= 0) == (gq[kDistance] >= 0) &&
+                            gp[0] * gq[0] + gp[1] * gq[1] + gp[2] * gq[2] >= 0.9f;
+          if (q != p && !same) continue;
+          const double m = sum_[q] / n;
+          s += m;
+          s2 += m * m;
+          ++k;
+        }
+      const double m = s / k;  // k >= 1: the pixel itself
+      var[p] = float(std::max(0.0, s2 / k - m * m));
+    }
+  return var;
+}
+
+std::vector<float> denoise(const std::vector<float>& mean, const std::vector<float>& guides,
+                           const std::vector<float>& open_mean, const std::vector<float>& open_variance,
+                           int32_t width, int32_t height, const DenoiseOptions& o) {
+  const size_t pixels = size_t(std::max(width, 0)) * size_t(std::max(height, 0));
+  if (width < 0 || height < 0 || mean.size() != pixels * 3 || guides.size() != pixels * kGuideFloats ||
+      open_mean.size() != pixels || open_variance.size() != pixels)
+    throw std::invalid_argument("denoise: radiance, guides and open fractions must all be width x height");
+  if (o.iterations < 0 || o.iterations > 10 || !(o.sigma_value > 0) || o.normal_squarings < 0 ||
+      o.normal_squarings > 16 || !(o.sigma_distance > 0))
+    throw std::invalid_argument("denoise: iterations in 0..10, normal_squarings in 0..16, sigmas > 0");
+  if (o.iterations == 0 || pixels == 0) return mean;
+
+  // Structure of arrays: the guides; the open fraction and its variance, filtered pass after
+  // pass. Pixels that show no ambient light take no part (z < 0, like misses).
+  std::vector<float> nx(pixels), ny(pixels), nz(pixels), z(pixels), grad(pixels, 0.0f);
+  std::vector<float> val(open_mean), var(open_variance), val2(pixels), var2(pixels), v_scale(pixels), z_scale(pixels);
+  for (size_t p = 0; p < pixels; ++p) {
+    const float* g = &guides[p * kGuideFloats];
+    const bool shown = g[kDistance] >= 0 && (g[kAmbient] > 0 || g[kAmbient + 1] > 0 || g[kAmbient + 2] > 0);
+    nx[p] = g[kNormal], ny[p] = g[kNormal + 1], nz[p] = g[kNormal + 2], z[p] = shown ? g[kDistance] : -1.0f;
+  }
+  const size_t W = size_t(width);
+  rows(height, [&](int32_t y) {
+    for (int32_t x = 0; x < width; ++x) {
+      const size_t p = size_t(y) * W + size_t(x);
+      if (z[p] < 0) continue;
+      float gx = 0, gy = 0;
+      if (x + 1 < width && z[p + 1] >= 0) gx = std::fabs(z[p + 1] - z[p]);
+      if (x > 0 && z[p - 1] >= 0) gx = std::max(gx, std::fabs(z[p] - z[p - 1]));
+      if (y + 1 < height && z[p + W] >= 0) gy = std::fabs(z[p + W] - z[p]);
+      if (y > 0 && z[p - W] >= 0) gy = std::max(gy, std::fabs(z[p] - z[p - W]));
+      grad[p] = std::max(gx, gy);
+    }
+  });
+
+  static constexpr float kB3[5] = {1.0f / 16, 1.0f / 4, 3.0f / 8, 1.0f / 4, 1.0f / 16};
+  static constexpr float kGauss3[3] = {0.25f, 0.5f, 0.25f};
+  float inv_dist[5][5];
+  for (int dy = -2; dy <= 2; ++dy)
+    for (int dx = -2; dx <= 2; ++dx) inv_dist[dy + 2][dx + 2] = 1.0f / std::max(1.0f, std::sqrt(float(dx * dx + dy * dy)));
+  for (int it = 0; it < o.iterations; ++it) {
+    const int32_t step = int32_t(1) << it;
+    // The value and distance weights' scales per pixel: the pixel's noise (its variance
+    // blurred over 3x3) and its distance gradient over the taps' spacing.
+    rows(height, [&](int32_t y) {
+      for (int32_t x = 0; x < width; ++x) {
+        const size_t p = size_t(y) * W + size_t(x);
+        float v = 0, vw = 0;
+        for (int dy = -1; dy <= 1; ++dy) {
+          const int32_t qy = y + dy;
+          if (qy < 0 || qy >= height) continue;
+          for (int dx = -1; dx <= 1; ++dx) {
+            const int32_t qx = x + dx;
+            if (qx < 0 || qx >= width) continue;
+            const float k = kGauss3[dx + 1] * kGauss3[dy + 1];
+            v += k * var[size_t(qy) * W + size_t(qx)];
+            vw += k;
+          }
+        }
+        v_scale[p] = 1.0f / (o.sigma_value * std::sqrt(std::max(v / vw, 0.0f)) + 1e-6f);
+        z_scale[p] = 1.0f / (o.sigma_distance * grad[p] * float(step) + 1e-3f * std::max(z[p], 0.0f) + 1e-6f);
+      }
+    });
+    // One tap: q's weight for p, added to p's sums.
+    auto tap = [&](size_t p, size_t q, float kernel, float inv_d, float& sv, float& svar, float& sw) {
+      float wn = std::max(0.0f, nx[p] * nx[q] + ny[p] * ny[q] + nz[p] * nz[q]);
+      for (int k = 0; k < o.normal_squarings; ++k) wn *= wn;
+      const float e = std::fabs(val[p] - val[q]) * v_scale[p] + std::fabs(z[p] - z[q]) * z_scale[p] * inv_d;
+      const float w = z[q] >= 0 ? kernel * wn * exp_neg(e) : 0.0f;  // a pixel not taking part weighs nothing
+      sv += w * val[q];
+      svar += w * w * var[q];
+      sw += w;
+    };
+    // The filtered pixel from its sums; one not taking part, or with no weight (guides not
+    // finite), stays as it is.
+    auto put = [&](size_t p, float sv, float svar, float sw) {
+      const bool keep = !(z[p] >= 0) || !(sw > 0);
+      const float inv = keep ? 0.0f : 1.0f / sw;
+      val2[p] = keep ? val[p] : sv * inv;
+      var2[p] = keep ? var[p] : svar * inv * inv;
+    };
+    rows(height, [&](int32_t y) {
+      const size_t row = size_t(y) * W;
+      // Pixels whose taps all lie inside the row's width: tap after tap over all of them
+      // (loops that vectorise); the others one by one, with bounds checks.
+      const int32_t x0 = std::min(width, 2 * step), x1 = std::max(x0, width - 2 * step);
+      const size_t n = size_t(x1 - x0);
+      std::vector<float> sums(3 * n, 0.0f);
+      float* sv = sums.data();
+      float* svar = sv + n;
+      float* sw = svar + n;
+      for (int dy = -2; dy <= 2; ++dy) {
+        const int32_t qy = y + dy * step;
+        if (qy < 0 || qy >= height) continue;
+        for (int dx = -2; dx <= 2; ++dx) {
+          const float kernel = kB3[dx + 2] * kB3[dy + 2], inv_d = inv_dist[dy + 2][dx + 2];
+          const ptrdiff_t off = ptrdiff_t(qy - y) * ptrdiff_t(W) + ptrdiff_t(dx) * step;
+          for (size_t i = 0; i < n; ++i) {
+            const size_t p = row + size_t(x0) + i;
+            tap(p, size_t(ptrdiff_t(p) + off), kernel, inv_d, sv[i], svar[i], sw[i]);
+          }
+        }
+      }
+      for (size_t i = 0; i < n; ++i) put(row + size_t(x0) + i, sv[i], svar[i], sw[i]);
+      for (int32_t x = 0; x < width; x = x + 1 == x0 ? x1 : x + 1) {
+        const size_t p = row + size_t(x);
+        float v = 0, vv = 0, w = 0;
+        for (int dy = -2; dy <= 2; ++dy) {
+          const int32_t qy = y + dy * step;
+          if (qy < 0 || qy >= height) continue;
+          for (int dx = -2; dx <= 2; ++dx) {
+            const int32_t qx = x + dx * step;
+            if (qx < 0 || qx >= width) continue;
+            tap(p, size_t(qy) * W + size_t(qx), kB3[dx + 2] * kB3[dy + 2], inv_dist[dy + 2][dx + 2], v, vv, w);
+          }
+        }
+        put(p, v, vv, w);
+      }
+    });
+    std::swap(val, val2);
+    std::swap(var, var2);
+  }
+  // The radiance with the filtered occlusion instead of the noisy one.
+  std::vector<float> out(mean);
+  for (size_t p = 0; p < pixels; ++p) {
+    if (!(z[p] >= 0)) continue;
+    const float d = val[p] - open_mean[p];
+    const float* a = &guides[p * kGuideFloats + kAmbient];
+    for (int c = 0; c < 3; ++c) out[p * 3 + size_t(c)] = std::max(0.0f, out[p * 3 + size_t(c)] + a[c] * d);
+  }
+  return out;
+}
+
+}  // namespace tessera

@@ -1,0 +1,60 @@
+#pragma once
+// An edge-avoiding denoiser for the average of a still's first samples (issue 18 item 3): the
+// spatial filter of SVGF (Schied et al. 2017), itself the edge-avoiding a-trous wavelet filter
+// of Dammertz et al. 2010 with its value weight scaled by each pixel's estimated noise.
+//
+// What it filters: the only noise in our images is ambient occlusion's (and the sub-pixel
+// jitter that anti-aliases edges, which averaging converges). So it filters the fraction of
+// each pixel's AO rays that were open, at the primary hit (TaskResult::guides), and puts the
+// difference back through the ambient light the pixel would show unoccluded. Reflections,
+// refractions, textures and direct light are left exactly as rendered: no guide can blur them.
+//
+// - Five passes of a 5x5 B3-spline kernel, 1, 2, 4, 8 and 16 pixels apart (a 125x125
+//   footprint), each tap weighted by how alike the two pixels' normals, distances and open
+//   fractions are.
+// - The open fraction's weight is measured against the noise of the pixel's mean: its samples'
+//   variance over their count (StillAo), from the 3x3 neighbourhood's spread while there are
+//   fewer than kSpatialVarianceBelow samples. Where the samples agree the filter keeps the
+//   edges of the occlusion, and it smooths less as samples accumulate.
+#include <cstdint>
+#include <vector>
+
+namespace tessera {
+
+struct DenoiseOptions {
+  int iterations = 5;           // a-trous passes (tap spacing 1, 2, 4, ...); 0 returns the input
+  float sigma_value = 4.0f;     // open-fraction distance, in standard deviations of the mean
+  int normal_squarings = 7;     // the normals' cosine to the power 2^k (128)
+  float sigma_distance = 1.0f;  // distance difference, in units of the local distance gradient
+};
+
+// A still's AO open fractions at its primary hits, per pixel, over its samples.
+class StillAo {
+ public:
+  // Below this many samples the variance of a pixel's mean is estimated from its neighbours.
+  static constexpr uint32_t kSpatialVarianceBelow = 4;
+  void reset(int32_t width, int32_t height);
+  // One sample's guides (TaskResult::guides).
+  void add(const std::vector<float>& guides);
+  uint32_t samples() const { return samples_; }
+  std::vector<float> mean() const;
+  // The variance of each pixel's mean; `guides` (the first sample's) tell which neighbours
+  // lie on the same surface for the spatial estimate.
+  std::vector<float> variance_of_mean(const std::vector<float>& guides) const;
+
+ private:
+  int32_t width_ = 0, height_ = 0;
+  uint32_t samples_ = 0;
+  std::vector<double> sum_, sum_sq_;
+};
+
+// Denoises `mean` (width * height RGB linear radiance, the average of a still's samples) with
+// the still's first guides and its open fractions' mean and variance of the mean (StillAo);
+// multi-threaded with TBB in the calling arena. Pixels whose primary ray missed, or that show
+// no ambient light, come back as they are. Throws std::invalid_argument on sizes that do not
+// match or options out of range.
+std::vector<float> denoise(const std::vector<float>& mean, const std::vector<float>& guides,
+                           const std::vector<float>& open_mean, const std::vector<float>& open_variance,
+                           int32_t width, int32_t height, const DenoiseOptions& options = {});
+
+}  // namespace tessera
