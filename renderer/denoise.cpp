@@ -33,6 +33,107 @@ inline float exp_neg(float e) {
   return small ? poly * scale : 0.0f;
 }
 
+constexpr float kB3[5] = {1.0f / 16, 1.0f / 4, 3.0f / 8, 1.0f / 4, 1.0f / 16};
+constexpr float kGauss3[3] = {0.25f, 0.5f, 0.25f};
+constexpr int kNormalSquarings = 7;  // the normals' weight: their cosine to the power 2^7 = 128 (SVGF's)
+
+// 1 / max(1, |(dx, dy)|) of a tap, for the distance weight.
+struct InvDist {
+  float v[5][5];
+  InvDist() {
+    for (int dy = -2; dy <= 2; ++dy)
+      for (int dx = -2; dx <= 2; ++dx) v[dy + 2][dx + 2] = 1.0f / std::max(1.0f, std::sqrt(float(dx * dx + dy * dy)));
+  }
+};
+const InvDist kInvDist;
+
+// What one a-trous pass reads (the guides, the values and variances, the weights' scales) and
+// writes (the next values and variances).
+struct Pass {
+  const float *nx, *ny, *nz, *z, *val, *var, *v_scale, *z_scale;
+  float *val2, *var2;
+  int32_t width, height, step;
+};
+
+// One tap: q's weight for p, added to p's sums (interior() holds the same arithmetic over a
+// span). Pixels not taking part (z < 0) weigh nothing.
+inline void tap(const Pass& a, size_t p, size_t q, float kernel, float inv_d, float& sv, float& svar, float& sw) {
+  float wn = std::max(0.0f, a.nx[p] * a.nx[q] + a.ny[p] * a.ny[q] + a.nz[p] * a.nz[q]);
+  static_assert(kNormalSquarings == 7, "the squarings below");
+  wn *= wn, wn *= wn, wn *= wn, wn *= wn, wn *= wn, wn *= wn, wn *= wn;
+  const float e = std::fabs(a.val[p] - a.val[q]) * a.v_scale[p] + std::fabs(a.z[p] - a.z[q]) * a.z_scale[p] * inv_d;
+  const float taking_part = a.z[q] >= 0 ? 1.0f : 0.0f;  // a factor, not a branch: the loops vectorise
+  const float w = kernel * wn * exp_neg(e) * taking_part;
+  sv += w * a.val[q];
+  svar += w * w * a.var[q];
+  sw += w;
+}
+
+// The filtered pixel from its sums; one not taking part, or with no weight (guides not
+// finite), stays as it is.
+inline void put(const Pass& a, size_t p, float sv, float svar, float sw) {
+  const bool keep = !(a.z[p] >= 0) || !(sw > 0);
+  const float inv = keep ? 0.0f : 1.0f / sw;
+  a.val2[p] = keep ? a.val[p] : sv * inv;
+  a.var2[p] = keep ? a.var[p] : svar * inv * inv;
+}
+
+// Pixels [x0, x1) of row y, all of whose taps lie inside the row's width: tap after tap over
+// the whole span, in loops that vectorise (with -fno-trapping-math: renderer/CMakeLists.txt).
+// sums: room for 3 (x1 - x0) floats.
+void interior(const Pass& a, int32_t y, int32_t x0, int32_t x1, float* sums) {
+  const size_t n = size_t(x1 - x0), W = size_t(a.width), row = size_t(y) * W + size_t(x0);
+  float* __restrict sv = sums;
+  float* __restrict svar = sv + n;
+  float* __restrict sw = svar + n;
+  std::fill(sums, sums + 3 * n, 0.0f);
+  // The span's own pixels (p) as plain pointers, so that the loop below is one the
+  // vectoriser reads: every access an affine function of i.
+  const float *__restrict pnx = a.nx + row, *__restrict pny = a.ny + row, *__restrict pnz = a.nz + row;
+  const float *__restrict pz = a.z + row, *__restrict pval = a.val + row;
+  const float *__restrict pvs = a.v_scale + row, *__restrict pzs = a.z_scale + row;
+  for (int dy = -2; dy <= 2; ++dy) {
+    const int32_t qy = y + dy * a.step;
+    if (qy < 0 || qy >= a.height) continue;
+    for (int dx = -2; dx <= 2; ++dx) {
+      const float kernel = kB3[dx + 2] * kB3[dy + 2], inv_d = kInvDist.v[dy + 2][dx + 2];
+      const size_t q0 = size_t(ptrdiff_t(row) + ptrdiff_t(qy - y) * ptrdiff_t(W) + ptrdiff_t(dx) * a.step);
+      const float *__restrict qnx = a.nx + q0, *__restrict qny = a.ny + q0, *__restrict qnz = a.nz + q0;
+      const float *__restrict qz = a.z + q0, *__restrict qval = a.val + q0, *__restrict qvar = a.var + q0;
+      // The pointers only read what the loop never writes (sums is scratch space of its own).
+#pragma GCC ivdep
+      for (size_t i = 0; i < n; ++i) {
+        const float cosn = pnx[i] * qnx[i] + pny[i] * qny[i] + pnz[i] * qnz[i];
+        float wn = cosn > 0.0f ? cosn : 0.0f;
+        wn *= wn, wn *= wn, wn *= wn, wn *= wn, wn *= wn, wn *= wn, wn *= wn;  // kNormalSquarings
+        const float e = std::fabs(pval[i] - qval[i]) * pvs[i] + std::fabs(pz[i] - qz[i]) * pzs[i] * inv_d;
+        const float w = kernel * wn * exp_neg(e) * (qz[i] >= 0 ? 1.0f : 0.0f);
+        sv[i] += w * qval[i];
+        svar[i] += w * w * qvar[i];
+        sw[i] += w;
+      }
+    }
+  }
+  for (size_t i = 0; i < n; ++i) put(a, row + i, sv[i], svar[i], sw[i]);
+}
+
+// A pixel near the left or right edge, with bounds checks.
+void border(const Pass& a, int32_t y, int32_t x) {
+  const size_t W = size_t(a.width);
+  float v = 0, vv = 0, w = 0;
+  for (int dy = -2; dy <= 2; ++dy) {
+    const int32_t qy = y + dy * a.step;
+    if (qy < 0 || qy >= a.height) continue;
+    for (int dx = -2; dx <= 2; ++dx) {
+      const int32_t qx = x + dx * a.step;
+      if (qx < 0 || qx >= a.width) continue;
+      tap(a, size_t(y) * W + size_t(x), size_t(qy) * W + size_t(qx), kB3[dx + 2] * kB3[dy + 2],
+          kInvDist.v[dy + 2][dx + 2], v, vv, w);
+    }
+  }
+  put(a, size_t(y) * W + size_t(x), v, vv, w);
+}
+
 template <class Row>
 void rows(int32_t height, Row&& row) {
   tbb::parallel_for(tbb::blocked_range<int32_t>(0, height, 8), [&](const tbb::blocked_range<int32_t>& r) {
@@ -117,9 +218,8 @@ std::vector<float> denoise(const std::vector<float>& mean, const std::vector<flo
   if (width < 0 || height < 0 || mean.size() != pixels * 3 || guides.size() != pixels * kGuideFloats ||
       open_mean.size() != pixels || open_variance.size() != pixels)
     throw std::invalid_argument("denoise: radiance, guides and open fractions must all be width x height");
-  if (o.iterations < 0 || o.iterations > 10 || !(o.sigma_value > 0) || o.normal_squarings < 0 ||
-      o.normal_squarings > 16 || !(o.sigma_distance > 0))
-    throw std::invalid_argument("denoise: iterations in 0..10, normal_squarings in 0..16, sigmas > 0");
+  if (o.iterations < 0 || o.iterations > 10 || !(o.sigma_value > 0) || !(o.sigma_distance > 0))
+    throw std::invalid_argument("denoise: iterations in 0..10, sigmas > 0");
   if (o.iterations == 0 || pixels == 0) return mean;
 
   // Structure of arrays: the guides; the open fraction and its variance, filtered pass after
@@ -131,6 +231,11 @@ std::vector<float> denoise(const std::vector<float>& mean, const std::vector<flo
     const bool shown = g[kDistance] >= 0 && (g[kAmbient] > 0 || g[kAmbient + 1] > 0 || g[kAmbient + 2] > 0);
     nx[p] = g[kNormal], ny[p] = g[kNormal + 1], nz[p] = g[kNormal + 2], z[p] = shown ? g[kDistance] : -1.0f;
   }
+  // No pixel shows ambient light (a scene without a sky), or no open fraction is uncertain
+  // (AO off, or a still whose samples all agree): nothing to filter.
+  if (std::none_of(z.begin(), z.end(), [](float d) { return d >= 0; }) ||
+      std::none_of(open_variance.begin(), open_variance.end(), [](float v) { return v > 0; }))
+    return mean;
   const size_t W = size_t(width);
   rows(height, [&](int32_t y) {
     for (int32_t x = 0; x < width; ++x) {
@@ -145,11 +250,6 @@ std::vector<float> denoise(const std::vector<float>& mean, const std::vector<flo
     }
   });
 
-  static constexpr float kB3[5] = {1.0f / 16, 1.0f / 4, 3.0f / 8, 1.0f / 4, 1.0f / 16};
-  static constexpr float kGauss3[3] = {0.25f, 0.5f, 0.25f};
-  float inv_dist[5][5];
-  for (int dy = -2; dy <= 2; ++dy)
-    for (int dx = -2; dx <= 2; ++dx) inv_dist[dy + 2][dx + 2] = 1.0f / std::max(1.0f, std::sqrt(float(dx * dx + dy * dy)));
   for (int it = 0; it < o.iterations; ++it) {
     const int32_t step = int32_t(1) << it;
     // The value and distance weights' scales per pixel: the pixel's noise (its variance
@@ -173,61 +273,15 @@ std::vector<float> denoise(const std::vector<float>& mean, const std::vector<flo
         z_scale[p] = 1.0f / (o.sigma_distance * grad[p] * float(step) + 1e-3f * std::max(z[p], 0.0f) + 1e-6f);
       }
     });
-    // One tap: q's weight for p, added to p's sums.
-    auto tap = [&](size_t p, size_t q, float kernel, float inv_d, float& sv, float& svar, float& sw) {
-      float wn = std::max(0.0f, nx[p] * nx[q] + ny[p] * ny[q] + nz[p] * nz[q]);
-      for (int k = 0; k < o.normal_squarings; ++k) wn *= wn;
-      const float e = std::fabs(val[p] - val[q]) * v_scale[p] + std::fabs(z[p] - z[q]) * z_scale[p] * inv_d;
-      const float w = z[q] >= 0 ? kernel * wn * exp_neg(e) : 0.0f;  // a pixel not taking part weighs nothing
-      sv += w * val[q];
-      svar += w * w * var[q];
-      sw += w;
-    };
-    // The filtered pixel from its sums; one not taking part, or with no weight (guides not
-    // finite), stays as it is.
-    auto put = [&](size_t p, float sv, float svar, float sw) {
-      const bool keep = !(z[p] >= 0) || !(sw > 0);
-      const float inv = keep ? 0.0f : 1.0f / sw;
-      val2[p] = keep ? val[p] : sv * inv;
-      var2[p] = keep ? var[p] : svar * inv * inv;
-    };
+    const Pass pass{nx.data(), ny.data(), nz.data(), z.data(), val.data(), var.data(), v_scale.data(), z_scale.data(),
+                    val2.data(), var2.data(), width, height, step};
     rows(height, [&](int32_t y) {
-      const size_t row = size_t(y) * W;
       // Pixels whose taps all lie inside the row's width: tap after tap over all of them
       // (loops that vectorise); the others one by one, with bounds checks.
       const int32_t x0 = std::min(width, 2 * step), x1 = std::max(x0, width - 2 * step);
-      const size_t n = size_t(x1 - x0);
-      std::vector<float> sums(3 * n, 0.0f);
-      float* sv = sums.data();
-      float* svar = sv + n;
-      float* sw = svar + n;
-      for (int dy = -2; dy <= 2; ++dy) {
-        const int32_t qy = y + dy * step;
-        if (qy < 0 || qy >= height) continue;
-        for (int dx = -2; dx <= 2; ++dx) {
-          const float kernel = kB3[dx + 2] * kB3[dy + 2], inv_d = inv_dist[dy + 2][dx + 2];
-          const ptrdiff_t off = ptrdiff_t(qy - y) * ptrdiff_t(W) + ptrdiff_t(dx) * step;
-          for (size_t i = 0; i < n; ++i) {
-            const size_t p = row + size_t(x0) + i;
-            tap(p, size_t(ptrdiff_t(p) + off), kernel, inv_d, sv[i], svar[i], sw[i]);
-          }
-        }
-      }
-      for (size_t i = 0; i < n; ++i) put(row + size_t(x0) + i, sv[i], svar[i], sw[i]);
-      for (int32_t x = 0; x < width; x = x + 1 == x0 ? x1 : x + 1) {
-        const size_t p = row + size_t(x);
-        float v = 0, vv = 0, w = 0;
-        for (int dy = -2; dy <= 2; ++dy) {
-          const int32_t qy = y + dy * step;
-          if (qy < 0 || qy >= height) continue;
-          for (int dx = -2; dx <= 2; ++dx) {
-            const int32_t qx = x + dx * step;
-            if (qx < 0 || qx >= width) continue;
-            tap(p, size_t(qy) * W + size_t(qx), kB3[dx + 2] * kB3[dy + 2], inv_dist[dy + 2][dx + 2], v, vv, w);
-          }
-        }
-        put(p, v, vv, w);
-      }
+      std::vector<float> sums(3 * size_t(x1 - x0));
+      interior(pass, y, x0, x1, sums.data());
+      for (int32_t x = 0; x < width; x = x + 1 == x0 ? x1 : x + 1) border(pass, y, x);
     });
     std::swap(val, val2);
     std::swap(var, var2);

@@ -10,8 +10,8 @@
 // refractions, textures and direct light are left exactly as rendered: no guide can blur them.
 //
 // - Five passes of a 5x5 B3-spline kernel, 1, 2, 4, 8 and 16 pixels apart (a 125x125
-//   footprint), each tap weighted by how alike the two pixels' normals, distances and open
-//   fractions are.
+//   footprint), each tap weighted by how alike the two pixels' normals (their cosine to the
+//   power 128), distances and open fractions are.
 // - The open fraction's weight is measured against the noise of the pixel's mean: its samples'
 //   variance over their count (StillAo), from the 3x3 neighbourhood's spread while there are
 //   fewer than kSpatialVarianceBelow samples. Where the samples agree the filter keeps the
@@ -24,7 +24,6 @@ namespace tessera {
 struct DenoiseOptions {
   int iterations = 5;           // a-trous passes (tap spacing 1, 2, 4, ...); 0 returns the input
   float sigma_value = 4.0f;     // open-fraction distance, in standard deviations of the mean
-  int normal_squarings = 7;     // the normals' cosine to the power 2^k (128)
   float sigma_distance = 1.0f;  // distance difference, in units of the local distance gradient
 };
 
