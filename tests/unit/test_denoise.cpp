@@ -35,6 +35,21 @@ Scene corner(int W, int H) {
   return scene;
 }
 
+// A ray tracer synced with the corner scene at W x H, and settings for a still's samples
+// (AO rays 2 units long, linear radiance, no cost map).
+struct Corner {
+  Scene scene;
+  RayTracer rt;
+  RenderSettings s = no_ao();
+  Corner(int W, int H) : scene(corner(W, H)) {
+    std::vector<std::string> warnings;
+    rt.sync(scene, warnings);
+    s.ao_distance = 2;
+    s.radiance = true;
+    s.cost_map = false;
+  }
+};
+
 const float* guide(const TaskResult& r, int32_t x, int32_t y) {
   return &r.guides[(size_t(y) * size_t(r.pixels.width()) + size_t(x)) * kGuideFloats];
 }
@@ -73,16 +88,11 @@ std::vector<float> radiance_of(const std::vector<float>& open) {
 
 TEST_CASE("guides: normal, distance, unoccluded ambient and open fraction describe the radiance", "[denoise][raytracer]") {
   const int W = 48, H = 32;
-  Scene scene = corner(W, H);
-  RayTracer rt;
-  std::vector<std::string> warnings;
-  rt.sync(scene, warnings);
-  RenderSettings s = no_ao();
+  Corner setup(W, H);
+  RayTracer& rt = setup.rt;
+  RenderSettings& s = setup.s;
   s.ao_samples = 4;
-  s.ao_distance = 2;
-  s.radiance = true;
   s.guides = true;
-  s.cost_map = false;
   TaskResult a, b;
   rt.render({0, 0, W, H}, s, a);
   s.frame = 99;  // another AO pattern at the same pixel centres
@@ -226,14 +236,9 @@ TEST_CASE("StillAo: the variance of the mean, from the samples or (few samples) 
 
 TEST_CASE("denoise: a 4-sample still comes closer to the converged one than its plain average", "[denoise][raytracer]") {
   const int W = 96, H = 64;
-  Scene scene = corner(W, H);
-  RayTracer rt;
-  std::vector<std::string> warnings;
-  rt.sync(scene, warnings);
-  RenderSettings s = no_ao();
-  s.ao_distance = 2;
-  s.radiance = true;
-  s.cost_map = false;
+  Corner setup(W, H);
+  RayTracer& rt = setup.rt;
+  const RenderSettings& s = setup.s;
   auto still = [&](int ao_rays, uint32_t samples, uint32_t frame, StillAo* ao, std::vector<float>* first) {
     Accumulation acc;
     acc.reset(W, H, false);
