@@ -101,9 +101,7 @@ void interior(const Pass& a, int32_t y, int32_t x0, int32_t x1, float* sums) {
       const float *__restrict qnx = a.nx + q0, *__restrict qny = a.ny + q0, *__restrict qnz = a.nz + q0;
       const float *__restrict qz = a.z + q0, *__restrict qval = a.val + q0, *__restrict qvar = a.var + q0;
       // The pointers only read what the loop never writes (sums is scratch space of its own).
-#if defined(__clang__)
-#pragma clang loop vectorize(assume_safety)
-#else
+#if defined(__GNUC__) && !defined(__clang__)  // (clang builds are the sanitizer builds, at -O1)
 #pragma GCC ivdep
 #endif
       for (size_t i = 0; i < n; ++i) {
