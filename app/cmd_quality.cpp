@@ -153,6 +153,8 @@ int run(const std::vector<std::string>& argv) {
     throw std::invalid_argument("--mode must be fixed, progressive or progressive+denoise");
   if (denoise_options.iterations < 0 || denoise_options.iterations > 10)
     throw std::invalid_argument("--denoise-iterations must be in 0..10");
+  if (!(denoise_options.sigma_value > 0) || !std::isfinite(denoise_options.sigma_value))
+    throw std::invalid_argument("--denoise-sigma must be a number > 0");
   if (!(seconds > 0)) throw std::invalid_argument("--seconds must be > 0");
   if (ao < 0 || ao > 4096 || ref_ao < 1 || ref_ao > 4096) throw std::invalid_argument("--ao 0..4096, --reference-ao 1..4096");
   if (depth < 1 || depth > 64) throw std::invalid_argument("--depth must be in 1..64");
@@ -169,6 +171,13 @@ int run(const std::vector<std::string>& argv) {
   const int W = setup.loaded.scene.width(), H = setup.loaded.scene.height();
   const Rect full{0, 0, W, H};
   const bool srgb = setup.loaded.scene.environment().linear;
+  // Denoising filters the AO of what shows the sky's ambient light (renderer/denoise.h): on a
+  // scene without one, or with AO off, there is nothing to filter, and the guides would only
+  // cost time. Said once, as the node says of settings that change nothing.
+  const bool filter = denoised && ao > 0 && max_component(setup.loaded.scene.environment().ambient) > 0;
+  if (denoised && !filter)
+    std::fprintf(stderr, "quality: progressive+denoise has nothing to filter here (%s): the still is averaged plainly\n",
+                 ao > 0 ? "the scene has no sky or ambient light" : "--ao 0");
   RenderSettings base;
   base.max_depth = depth;
   base.frame = uint32_t(frame);
@@ -245,8 +254,8 @@ int run(const std::vector<std::string>& argv) {
     s.ao_samples = ao;
     while (elapsed_s < seconds && acc.samples() < uint32_t(max_samples)) {
       const auto t0 = std::chrono::steady_clock::now();
-      refine(rt, full, s, acc.samples(), 1, acc, denoised ? &still_ao : nullptr, &guides);
-      Image avg = denoised ? Accumulation::encode(denoise(acc.mean(), guides, still_ao.mean(),
+      refine(rt, full, s, acc.samples(), 1, acc, filter ? &still_ao : nullptr, &guides);
+      Image avg = filter ? Accumulation::encode(denoise(acc.mean(), guides, still_ao.mean(),
                                                          still_ao.variance_of_mean(guides), W, H, denoise_options),
                                                  W, H, srgb)
                            : acc.average();

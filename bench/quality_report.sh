@@ -6,12 +6,15 @@
 # the kitchen (frame 0 of each camera loop).
 # Usage: bench/quality_report.sh [W H [THREADS [SECONDS [REF_SAMPLES]]]]
 #        (default 640 360, 2 threads, 8 s per refining still, 1024-sample reference)
+#        NAME=quality-1280x720 bench/quality_report.sh 1280 720 ... writes docs/results/NAME.*
+#        instead of docs/results/quality.*
 # The references (REF_SAMPLES samples of 2 AO rays) are made once and cached by `tessera
 # quality` (~/.cache/tessera); their making is not timed. Run it on a quiet machine.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 W=${1:-640}; H=${2:-360}; THREADS=${3:-2}; SECONDS_=${4:-8}; REF=${5:-1024}
 T=build/app/tessera
+NAME=${NAME:-quality}
 S=../shared/scenes
 out=docs/results
 mkdir -p "$out"
@@ -22,18 +25,19 @@ common() { echo --scene "$S/$1/scene.gltf" --camera-loop "$S/$1/camera-loop.json
 for sc in pavilion living-room kitchen; do
   $T quality $(common $sc) --mode fixed --ao-list 1 >/dev/null
 done
-: > "$out/quality.jsonl"
+: > "$out/$NAME.jsonl"
 for sc in pavilion living-room kitchen; do
-  $T quality $(common $sc) --mode fixed | sed "s|^{|{\"scene_name\": \"$sc\", |" | tee -a "$out/quality.jsonl"
+  $T quality $(common $sc) --mode fixed | sed "s|^{|{\"scene_name\": \"$sc\", |" | tee -a "$out/$NAME.jsonl"
   for mode in progressive progressive+denoise; do
     $T quality $(common $sc) --mode $mode --ao 1 --seconds "$SECONDS_" | sed "s|^{|{\"scene_name\": \"$sc\", |" \
-      | tee -a "$out/quality.jsonl" | grep summary
+      | tee -a "$out/$NAME.jsonl" | grep summary
   done
 done
-python3 - "$out" <<'PY'
+python3 - "$out" "$NAME" <<'PY'
 import json, sys, os
 out = sys.argv[1]
-rows = [json.loads(l) for l in open(os.path.join(out, "quality.jsonl"))]
+name = sys.argv[2]
+rows = [json.loads(l) for l in open(os.path.join(out, name + ".jsonl"))]
 summ = [r for r in rows if r.get("summary")]
 s0 = summ[0]
 def t(r, level):
@@ -70,8 +74,8 @@ md += ["", "Fixed frames, per AO count:", "", "| scene | AO rays per hit | ms | 
 for r in rows:
     if not r.get("summary") and r["mode"] == "fixed":
         md.append(f"| {r['scene_name']} | {r['ao']} | {r['elapsed_ms']:.1f} | {r['psnr_db']:.2f} |")
-md += ["", "![PSNR against seconds](quality.png)", ""]
-open(os.path.join(out, "quality.md"), "w").write("\n".join(md))
+md += ["", f"![PSNR against seconds]({name}.png)", ""]
+open(os.path.join(out, name + ".md"), "w").write("\n".join(md))
 for sc in ("pavilion", "living-room", "kitchen"):
     for mode in ("fixed", "progressive", "progressive+denoise"):
         with open(f"/tmp/quality-{sc}-{mode}.dat", "w") as f:
@@ -81,7 +85,7 @@ for sc in ("pavilion", "living-room", "kitchen"):
 PY
 gnuplot <<GP
 set terminal pngcairo size 1400,420 font ",10"
-set output "$out/quality.png"
+set output "$out/$NAME.png"
 set multiplot layout 1,3
 set grid; set key bottom right
 set xlabel "seconds of rendering (${W}x${H}, ${THREADS} threads)"; set ylabel "PSNR vs converged reference (dB)"
@@ -94,4 +98,4 @@ do for [sc in "pavilion living-room kitchen"] {
 }
 unset multiplot
 GP
-echo "wrote $out/quality.md, $out/quality.png, $out/quality.jsonl"
+echo "wrote $out/$NAME.md, $out/$NAME.png, $out/$NAME.jsonl"
