@@ -337,7 +337,7 @@ TEST_CASE("A client streaming frames for more than a second receives Stats recor
   uint32_t sent = 0, frames = 0;
   uint64_t frame_bytes = 0;
   std::vector<std::pair<protocol::Stats, uint64_t>> stats;  // with the frame bytes received before it
-  std::vector<uint32_t> frames_before;
+  std::vector<uint32_t> frames_before, sent_before;
   std::vector<std::chrono::steady_clock::time_point> arrived;  // of each frame
   auto request = [&] {
     REQUIRE(c.send({protocol::SetCamera{pavilion_loop().camera(sent % pavilion_loop().frames.size())},
@@ -362,6 +362,7 @@ TEST_CASE("A client streaming frames for more than a second receives Stats recor
       } else if (auto* s = std::get_if<protocol::Stats>(&r)) {
         stats.emplace_back(*s, frame_bytes);
         frames_before.push_back(frames);
+        sent_before.push_back(sent);
       }
     }
   }
@@ -376,7 +377,12 @@ TEST_CASE("A client streaming frames for more than a second receives Stats recor
     CHECK(s.scene_bytes == scene_bytes(pavilion().scene));
     CHECK(s.triangles == pavilion().scene.triangle_count());
     CHECK(s.nodes == 1);
-    CHECK(s.dropped == 0);  // never more than one request waits while a frame renders
+    // Every request is answered by a frame or counted as dropped. With two requests
+    // outstanding a drop is rare: only when the node's network thread has not begun to write a
+    // frame when the next one is encoded (the newer replaces it: a loaded machine, seen once in
+    // a ctest -j2 run beside the browser tests).
+    CHECK(s.frames + s.dropped <= sent_before[i]);
+    CHECK(s.dropped * 10 <= s.frames);
     // The rate the client saw over the same frames (the window opens at the first frame, then
     // at the frame of the previous Stats), within a factor of two of the node's figure.
     const size_t first = i == 0 ? 0 : frames_before[i - 1] - 1, last = frames_before[i] - 1;
