@@ -49,14 +49,16 @@ std::vector<float> Accumulation::mean() const {
   return out;
 }
 
-Image Accumulation::encode(const std::vector<float>& rgb, int32_t width, int32_t height, bool srgb) {
-  const size_t pixels = size_t(width) * size_t(height);
-  if (width < 0 || height < 0 || rgb.size() != pixels * 3)
-    throw std::invalid_argument("Accumulation::encode: radiance not width x height RGB");
+namespace {
+
+// width x height pixels whose RGB value i is value(i), encoded as the renderer encodes a frame.
+template <class Value>
+Image encode_values(int32_t width, int32_t height, bool srgb, Value value) {
   Image out(width, height);
+  const size_t pixels = size_t(width) * size_t(height);
   for (size_t p = 0; p < pixels; ++p) {
     for (int c = 0; c < 3; ++c) {
-      const float v = rgb[p * 3 + size_t(c)];
+      const float v = value(p * 3 + size_t(c));
       out.rgba[p * 4 + size_t(c)] = uint8_t(srgb ? raytracer_detail::encode_srgb(v) : raytracer_detail::encode_plain(v));
     }
     out.rgba[p * 4 + 3] = 255;
@@ -64,9 +66,19 @@ Image Accumulation::encode(const std::vector<float>& rgb, int32_t width, int32_t
   return out;
 }
 
+}  // namespace
+
+Image Accumulation::encode(const std::vector<float>& rgb, int32_t width, int32_t height, bool srgb) {
+  if (width < 0 || height < 0 || rgb.size() != size_t(width) * size_t(height) * 3)
+    throw std::invalid_argument("Accumulation::encode: radiance not width x height RGB");
+  return encode_values(width, height, srgb, [&](size_t i) { return rgb[i]; });
+}
+
+// Encoded straight from the sums (no mean() copy: this runs for every refined frame).
 Image Accumulation::average() const {
   if (samples_ == 0) return {};
-  return encode(mean(), width_, height_, srgb_);
+  const float inv = 1.0f / float(samples_);
+  return encode_values(width_, height_, srgb_, [&](size_t i) { return sum_[i] * inv; });
 }
 
 }  // namespace tessera

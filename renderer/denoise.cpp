@@ -55,15 +55,22 @@ struct Pass {
   int32_t width, height, step;
 };
 
-// One tap: q's weight for p, added to p's sums (interior() holds the same arithmetic over a
-// span). Pixels not taking part (z < 0) weigh nothing.
-inline void tap(const Pass& a, size_t p, size_t q, float kernel, float inv_d, float& sv, float& svar, float& sw) {
-  float wn = std::max(0.0f, a.nx[p] * a.nx[q] + a.ny[p] * a.ny[q] + a.nz[p] * a.nz[q]);
+// A tap's weight: the B3 kernel's, times how alike p and q are in normal (their cosine), open
+// fraction (dval) and distance (dz) on p's scales. q not taking part (qz < 0) weighs nothing:
+// a factor, not a branch, so that interior()'s loop vectorises.
+inline float tap_weight(float cosn, float dval, float dz, float v_scale, float z_scale, float kernel, float inv_d,
+                        float qz) {
+  float wn = cosn > 0.0f ? cosn : 0.0f;
   static_assert(kNormalSquarings == 7, "the squarings below");
   wn *= wn, wn *= wn, wn *= wn, wn *= wn, wn *= wn, wn *= wn, wn *= wn;
-  const float e = std::fabs(a.val[p] - a.val[q]) * a.v_scale[p] + std::fabs(a.z[p] - a.z[q]) * a.z_scale[p] * inv_d;
-  const float taking_part = a.z[q] >= 0 ? 1.0f : 0.0f;  // a factor, not a branch: the loops vectorise
-  const float w = kernel * wn * exp_neg(e) * taking_part;
+  const float e = std::fabs(dval) * v_scale + std::fabs(dz) * z_scale * inv_d;
+  return kernel * wn * exp_neg(e) * (qz >= 0 ? 1.0f : 0.0f);
+}
+
+// One tap: q's weight for p, added to p's sums.
+inline void tap(const Pass& a, size_t p, size_t q, float kernel, float inv_d, float& sv, float& svar, float& sw) {
+  const float w = tap_weight(a.nx[p] * a.nx[q] + a.ny[p] * a.ny[q] + a.nz[p] * a.nz[q], a.val[p] - a.val[q],
+                             a.z[p] - a.z[q], a.v_scale[p], a.z_scale[p], kernel, inv_d, a.z[q]);
   sv += w * a.val[q];
   svar += w * w * a.var[q];
   sw += w;
@@ -105,11 +112,8 @@ void interior(const Pass& a, int32_t y, int32_t x0, int32_t x1, float* sums) {
 #pragma GCC ivdep
 #endif
       for (size_t i = 0; i < n; ++i) {
-        const float cosn = pnx[i] * qnx[i] + pny[i] * qny[i] + pnz[i] * qnz[i];
-        float wn = cosn > 0.0f ? cosn : 0.0f;
-        wn *= wn, wn *= wn, wn *= wn, wn *= wn, wn *= wn, wn *= wn, wn *= wn;  // kNormalSquarings
-        const float e = std::fabs(pval[i] - qval[i]) * pvs[i] + std::fabs(pz[i] - qz[i]) * pzs[i] * inv_d;
-        const float w = kernel * wn * exp_neg(e) * (qz[i] >= 0 ? 1.0f : 0.0f);
+        const float w = tap_weight(pnx[i] * qnx[i] + pny[i] * qny[i] + pnz[i] * qnz[i], pval[i] - qval[i],
+                                   pz[i] - qz[i], pvs[i], pzs[i], kernel, inv_d, qz[i]);
         sv[i] += w * qval[i];
         svar[i] += w * w * qvar[i];
         sw[i] += w;
