@@ -6,6 +6,7 @@
 #include <cstring>
 
 #include "lb/sat.h"
+#include "renderer/renderer.h"
 #include "update/scene_update.h"
 
 namespace tessera {
@@ -23,11 +24,12 @@ RenderTask task_of(const RenderBatch& b, const Rect& pixels) {
   t.seed = b.seed;
   t.radiance = b.radiance;
   t.hit_points = b.hit_points;
+  t.guides = b.guides;
   return t;
 }
 
 std::string check_tile(const TileResult& t, uint32_t frame, const Rect& expected, PacketLayout layout, int32_t width,
-                       int32_t height, bool radiance) {
+                       int32_t height, bool radiance, uint8_t guides) {
   auto str = [](const Rect& r) {
     return "[" + std::to_string(r.x0) + "," + std::to_string(r.y0) + "," + std::to_string(r.x1) + "," +
            std::to_string(r.y1) + "]";
@@ -45,6 +47,24 @@ std::string check_tile(const TileResult& t, uint32_t frame, const Rect& expected
     float v;
     std::memcpy(&v, t.radiance.data() + i, 4);
     if (!(v >= 0 && v <= 3.0e38f)) return "tile " + str(expected) + " with radiance that is negative or not finite";
+  }
+  const size_t guide_floats = guides == kAllGuides ? size_t(kGuideFloats) : guides == kOpenGuides ? 1 : 0;
+  const size_t want_guides = size_t(expected.area()) * guide_floats * 4;
+  if (t.guides.size() != want_guides)
+    return "tile " + str(expected) + " with " + std::to_string(t.guides.size()) + " bytes of guides, expected " +
+           std::to_string(want_guides);
+  // As a renderer writes them: finite; distances >= 0 or -1 (a miss), ambient light >= 0, open
+  // fractions in 0..1. The denoiser trusts them.
+  for (size_t p = 0; p < size_t(expected.area()) && guide_floats; ++p) {
+    float g[kGuideFloats];
+    std::memcpy(g, t.guides.data() + p * guide_floats * 4, guide_floats * 4);
+    bool ok = std::isfinite(g[0]) && g[0] >= 0 && g[0] <= 1;  // kOpenGuides: the open fraction
+    if (guide_floats == size_t(kGuideFloats)) {
+      ok = true;
+      for (int i = 0; i < kGuideFloats; ++i) ok = ok && std::isfinite(g[i]) && std::fabs(g[i]) <= 3.0e38f;
+      ok = ok && (g[3] >= 0 || g[3] == -1.0f) && g[4] >= 0 && g[5] >= 0 && g[6] >= 0 && g[7] >= 0 && g[7] <= 1;
+    }
+    if (!ok) return "tile " + str(expected) + " with guides out of range";
   }
   if (!std::isfinite(t.kernel_ms) || t.kernel_ms < 0 || !std::isfinite(t.rendering_ms) || t.rendering_ms < 0 ||
       !std::isfinite(t.sat_ms) || t.sat_ms < 0)
@@ -122,6 +142,8 @@ std::string check_batch(const RenderBatch& b, const protocol::Limits& lim) {
   if (b.renderer > uint8_t(protocol::RendererKind::rasterizer)) return "renderer kind " + std::to_string(int(b.renderer));
   if (b.radiance && b.renderer != uint8_t(protocol::RendererKind::raytracer))
     return "radiance asked of the rasterizer (progressive stills are ray traced)";
+  if (b.guides > kOpenGuides) return "guides kind " + std::to_string(int(b.guides));
+  if (b.guides != kNoGuides && !b.radiance) return "guides asked without radiance (they serve a refining still)";
   if (b.timeout_ms < 1 || b.timeout_ms > 3'600'000) return "timeout of " + std::to_string(b.timeout_ms) + " ms";
   if (b.tasks.size() > 65536) return std::to_string(b.tasks.size()) + " tasks";
   const Rect frame{0, 0, b.width, b.height};

@@ -16,7 +16,7 @@ namespace tessera {
 
 // A tile a node returned: `expected` is the task that was sent; pixels and SAT must match it.
 std::string check_tile(const TileResult& t, uint32_t frame, const Rect& expected, PacketLayout layout, int32_t width,
-                       int32_t height, bool radiance = false);
+                       int32_t height, bool radiance = false, uint8_t guides = kNoGuides);
 
 // A sub-tree's node list: every node needs a name, 1..65536 logical cores and a finite
 // single-core performance in (0, 1000].

@@ -158,6 +158,8 @@ void send_encoded(display_state& st, EncodedFrame& ef) {
   e.with("encode_ms", Json::number(ef.encode_ms)).with("pipeline_ms", Json::number(f.timings.pipeline_ms));
   e.with("bytes", bytes);
   if (m.samples > 1 || m.refined) e.with("samples", m.samples).with("refined", m.refined);
+  if (m.estimated_db > 0)
+    e.with("estimated_db", Json::number(m.estimated_db)).with("denoised", m.denoised).with("denoise_ms", Json::number(m.denoise_ms));
   e.with("render_start_ms", Json::number(rel(m.render_start_ns)));
   e.with("render_end_ms", Json::number(rel(m.render_end_ns)));
   e.with("encode_start_ms", Json::number(rel(ef.encode_start_ns)));

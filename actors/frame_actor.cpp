@@ -1,6 +1,8 @@
 // Frame actor (frame_protocol.h): tiler -> root subtree -> recovery -> display, one frame at a time.
 #include <algorithm>
 #include <chrono>
+#include <cstring>
+#include <memory>
 #include <stdexcept>
 
 #include <caf/all.hpp>
@@ -9,11 +11,64 @@
 #include "actors/errors.h"
 #include "actors/node.h"
 #include "renderer/accumulation.h"
+#include "renderer/denoise.h"
+#include "renderer/renderer.h"
 
 namespace tessera {
 namespace {
 
 using protocol::ErrorCode;
+using denoise_atom = caf::atom_constant<caf::atom("denoise")>;
+
+// A still being denoised (FrameStart::denoise): its first sample's guides and the open
+// fractions of all its samples, beside the average (frame_state::acc).
+struct Denoising {
+  bool on = false;             // later samples bring their open fractions: off once the plain
+                               // average's estimate passed NodeSettings::denoise_below_db
+  std::vector<float> guides;   // kGuideFloats a pixel, of sample 0
+  StillAo ao;
+  uint32_t shown = 0;          // the samples of the last frame shown
+};
+
+// What the denoising worker gets (the still's state, moved in and back) and gives.
+struct DenoiseJob {
+  Accumulation acc;
+  std::unique_ptr<Denoising> dn;
+  double below_db = 0;
+  int32_t width = 0, height = 0;
+  Image image;          // the frame shown: denoised, or the plain average
+  double estimate_db = 0, ms = 0;
+  bool denoised = false;
+  std::string error;
+};
+
+// Runs on the worker: estimates the plain average's PSNR and denoises below the threshold.
+void run_denoise(DenoiseJob& j) {
+  const auto t0 = std::chrono::steady_clock::now();
+  try {
+    const Denoising& dn = *j.dn;
+    const std::vector<float> mean = j.acc.mean();
+    const std::vector<float> var = dn.ao.variance_of_mean(dn.guides);
+    j.estimate_db = estimated_psnr_db(mean, dn.guides, var, j.width, j.height, j.acc.srgb());
+    j.denoised = j.estimate_db < j.below_db;
+    if (j.denoised)
+      j.image = Accumulation::encode(denoise(mean, dn.guides, dn.ao.mean(), var, j.width, j.height), j.width,
+                                     j.height, j.acc.srgb());
+    else
+      j.image = j.acc.average();
+  } catch (const std::exception& e) {
+    j.error = e.what();
+  }
+  j.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+
+// While a still is denoised, the frames shown: every one of its first 4 samples, then each
+// with a quarter more samples than the last one shown, and its last. A denoising costs about as
+// much as a sample (docs/renderer.md); the samples between are averaged and not shown, so the
+// still converges nearly as fast as a plain one, and each frame the client gets is better.
+bool shown_while_denoising(uint32_t samples, uint32_t last_shown, uint32_t target) {
+  return samples <= 4 || samples >= target || samples >= last_shown + std::max<uint32_t>(1, last_shown / 4);
+}
 
 struct frame_state {
   std::shared_ptr<const NodeSettings> settings;
@@ -37,6 +92,8 @@ struct frame_state {
   // The progressive still's average (FrameStart::refine): the tiles' radiance of every sample
   // since its sample 0, composed here, where the tiles of all nodes meet.
   Accumulation acc;
+  std::unique_ptr<Denoising> dn;  // FrameStart::denoise: the still's denoising (none: plain)
+  bool denoising = false;         // a worker has acc and dn (moved into its job)
   static inline const char* name = "tessera.frame";
 };
 using self_ptr = frame_actor::stateful_pointer<frame_state>;
@@ -80,6 +137,117 @@ void render_here(self_ptr self, const RenderTask& t, std::function<void(TileResu
   self->request(st.a.renderer, caf::infinite, render_atom::value, st.cur.scene, t)
       .then([cb](TileResult& r) { cb(std::move(r)); },
             [cb, t](caf::error& e) { cb(failed_tile(t, e, ErrorCode::render_failed)); });
+}
+
+// Answers the session for the frame in flight: an error, or its tiles (`show`: sent to the
+// display; a still's sample that is averaged and not shown sends nothing).
+void deliver(self_ptr self, std::vector<TileResult>&& shown, const std::string& error, bool show = true) {
+  auto& st = self->state;
+  auto done = std::move(st.done);
+  st.cur.scene = {};  // the sync actor may change its scene once it has the answer
+  if (!error.empty()) {
+    done.deliver(protocol::make_error(ErrorCode::render_failed,
+                                      "frame " + std::to_string(st.cur.meta.client_frame) + ": " + error));
+    return;
+  }
+  if (show) self->send(st.a.display, display_atom::value, FrameTiles{st.cur.meta, std::move(shown)});
+  done.deliver(st.cur.meta.seq);
+}
+
+TileResult whole_frame(const FrameMeta& meta, Image&& image) {
+  TileResult whole;
+  whole.frame = meta.seq;
+  whole.pixels = Rect{0, 0, meta.width, meta.height};
+  whole.rgba = std::move(image.rgba);
+  return whole;
+}
+
+// Adds the frame's tiles to the still's average, and their guides to its denoising.
+void add_sample(self_ptr self, const std::vector<TileResult>& tiles) {
+  auto& st = self->state;
+  const FrameMeta& meta = st.cur.meta;
+  const int32_t W = meta.width, H = meta.height;
+  if (st.cur.sample == 0) {
+    st.acc.reset(W, H, st.cur.scene.scene->environment().linear);
+    st.dn.reset();
+    if (st.batch.guides == kAllGuides) {
+      st.dn = std::make_unique<Denoising>();
+      st.dn->on = true;
+      st.dn->guides.assign(size_t(W) * size_t(H) * kGuideFloats, 0.0f);
+      st.dn->ao.reset(W, H);
+    }
+  } else if (st.acc.samples() != st.cur.sample || st.acc.width() != W || st.acc.height() != H) {
+    throw std::logic_error("sample " + std::to_string(st.cur.sample) + " of a still that has " +
+                           std::to_string(st.acc.samples()));
+  }
+  for (const TileResult& t : tiles)
+    st.acc.add_bytes(t.radiance, t.pixels.width(), t.pixels.height(), t.pixels.x0, t.pixels.y0);
+  st.acc.end_sample();
+  if (!st.dn || st.batch.guides == kNoGuides) return;
+  // The tiles' guides into the frame's: all of them (sample 0), or the open fractions.
+  const size_t floats = st.batch.guides == kAllGuides ? size_t(kGuideFloats) : 1;
+  std::vector<float> open;
+  if (floats == 1) open.assign(size_t(W) * size_t(H), 1.0f);
+  float* dst = floats == 1 ? open.data() : st.dn->guides.data();
+  for (const TileResult& t : tiles) {
+    const Rect& r = t.pixels;
+    if (!Rect{0, 0, W, H}.contains(r) || t.guides.size() != size_t(r.area()) * floats * sizeof(float))
+      throw std::logic_error("a tile without the guides of its pixels");
+    const size_t row = size_t(r.width()) * floats;
+    for (int32_t y = r.y0; y < r.y1; ++y)
+      std::memcpy(dst + (size_t(y) * size_t(W) + size_t(r.x0)) * floats,
+                  t.guides.data() + size_t(y - r.y0) * row * sizeof(float), row * sizeof(float));
+  }
+  if (floats == 1)
+    st.dn->ao.add_open(open);
+  else
+    st.dn->ao.add(st.dn->guides);
+}
+
+// Estimates and denoises the still's average on a worker of its own (it takes about as long as
+// a sample, and would hold one of CAF's few scheduler threads), then shows the frame. The
+// still's state moves into the job and back: the session starts no frame before this one is
+// answered.
+void denoise_and_show(self_ptr self) {
+  auto& st = self->state;
+  auto job = std::make_shared<DenoiseJob>();
+  job->acc = std::move(st.acc);
+  job->dn = std::move(st.dn);
+  job->below_db = st.settings->denoise_below_db;
+  job->width = st.cur.meta.width;
+  job->height = st.cur.meta.height;
+  st.denoising = true;
+  auto work = [job](caf::event_based_actor* a) -> caf::behavior {
+    return {[=](denoise_atom) {
+      a->quit();
+      run_denoise(*job);
+      return true;
+    }};
+  };
+  // Deterministic tests run every actor on the test scheduler.
+  auto worker = st.settings->detached ? self->spawn<caf::detached + caf::hidden>(work) : self->spawn<caf::hidden>(work);
+  auto back = [self, job](std::string error) {
+    auto& st = self->state;
+    st.denoising = false;
+    st.acc = std::move(job->acc);
+    st.dn = std::move(job->dn);
+    FrameMeta& meta = st.cur.meta;
+    if (error.empty()) error = job->error;
+    if (!error.empty() || !st.dn) {  // a fault of this node, not the client's: the still goes on plainly
+      log(self, Event(Ev::error, "denoising failed, the still is averaged plainly: " + error));
+      st.dn.reset();
+      job->image = st.acc.average();
+    } else {
+      meta.estimated_db = job->estimate_db;
+      meta.denoised = job->denoised;
+      meta.denoise_ms = job->ms;
+      st.dn->shown = st.acc.samples();
+      if (!job->denoised) st.dn->on = false;  // past the threshold: plain from now on, no more guides
+    }
+    deliver(self, {whole_frame(meta, std::move(job->image))}, {});
+  };
+  self->request(worker, caf::infinite, denoise_atom::value)
+      .then([back](bool) { back({}); }, [back](caf::error&) { back("the denoising worker ended"); });
 }
 
 void finish_frame(self_ptr self, std::vector<TileResult>&& tiles, std::vector<double>&& perf) {
@@ -130,37 +298,25 @@ void finish_frame(self_ptr self, std::vector<TileResult>&& tiles, std::vector<do
                   .with("per_node", Json::array(std::move(per_node))));
   }
   if (error.empty() && st.cur.refine) {
-    // The still's average replaces the sample's own pixels.
+    // The still's average (while it is denoised, the denoised average) replaces the sample's
+    // own pixels.
     try {
-      if (st.cur.sample == 0)
-        st.acc.reset(meta.width, meta.height, st.cur.scene.scene->environment().linear);
-      else if (st.acc.samples() != st.cur.sample || st.acc.width() != meta.width || st.acc.height() != meta.height)
-        throw std::logic_error("sample " + std::to_string(st.cur.sample) + " of a still that has " +
-                               std::to_string(st.acc.samples()));
-      for (const TileResult& t : shown)
-        st.acc.add_bytes(t.radiance, t.pixels.width(), t.pixels.height(), t.pixels.x0, t.pixels.y0);
-      st.acc.end_sample();
-      Image avg = st.acc.average();
-      TileResult whole;
-      whole.frame = meta.seq;
-      whole.pixels = Rect{0, 0, meta.width, meta.height};
-      whole.rgba = std::move(avg.rgba);
-      shown.clear();
-      shown.push_back(std::move(whole));
+      add_sample(self, shown);
       meta.samples = st.acc.samples();
+      if (st.dn && st.dn->on && st.acc.samples() >= 2) {
+        if (shown_while_denoising(st.acc.samples(), st.dn->shown, st.cur.target)) return denoise_and_show(self);
+        return deliver(self, {}, {}, false);  // averaged, shown with a later sample
+      }
+      shown.clear();
+      shown.push_back(whole_frame(meta, st.acc.average()));
+      if (st.dn) st.dn->shown = st.acc.samples();
     } catch (const std::exception& e) {
       error = std::string("refine: ") + e.what();
       st.acc.reset(0, 0, true);
+      st.dn.reset();
     }
   }
-  auto done = std::move(st.done);
-  st.cur.scene = {};  // the sync actor may change its scene once it has the answer
-  if (!error.empty()) {
-    done.deliver(protocol::make_error(ErrorCode::render_failed, "frame " + std::to_string(meta.client_frame) + ": " + error));
-    return;
-  }
-  self->send(st.a.display, display_atom::value, FrameTiles{meta, std::move(shown)});
-  done.deliver(meta.seq);
+  deliver(self, std::move(shown), error);
 }
 
 // Tasks whose node failed (down, too late, impossible tiles) are rendered here, so the frame
@@ -209,6 +365,12 @@ void render_batch(self_ptr self) {
   batch.sample = st.cur.sample;
   batch.seed = st.cur.seed;
   batch.radiance = st.cur.refine;
+  // A denoised still: sample 0 brings all the guides, the later ones their open fractions until
+  // the estimate passes the threshold.
+  batch.guides = !st.cur.refine || !st.cur.denoise ? kNoGuides
+                 : st.cur.sample == 0              ? kAllGuides
+                 : st.dn && st.dn->on              ? kOpenGuides
+                                                   : kNoGuides;
   // The balancer's reprojection needs each packet's depth, which only the ray tracer gives.
   batch.hit_points = st.settings->reproject && st.cur.renderer == 0;
   // Bounded delay for lost nodes: the configured timeout, or 3x the last frame if longer.

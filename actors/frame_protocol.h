@@ -39,11 +39,15 @@ struct FrameStart {
   // `seed`: the frame number that seeds the still's sample pattern (its first frame).
   bool refine = false;
   uint32_t sample = 0, seed = 0;
+  // With refine: the samples the still refines to (its last is always shown), and whether it
+  // is denoised (renderer/denoise.h; a scene with a sky and AO, NodeSettings::denoise_below_db).
+  uint32_t target = 0;
+  bool denoise = false;
 };
 template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, FrameStart& x) {
   return f(caf::meta::type_name("tessera::frame_start"), x.meta, x.scene, x.ao_samples, x.max_depth, x.renderer, x.refine,
-           x.sample, x.seed);
+           x.sample, x.seed, x.target, x.denoise);
 }
 
 using frame_actor = caf::typed_actor<caf::replies_to<nodes_atom, uint32_t>::with<uint32_t>,

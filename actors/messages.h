@@ -134,6 +134,12 @@ struct FrameMeta {
   // whether it refines the last requested frame (sent unasked, with that frame's number).
   uint32_t samples = 1;
   bool refined = false;
+  // A refined frame of a still being denoised (renderer/denoise.h): the plain average's
+  // estimated PSNR (dB; 0: not estimated), whether the frame shows it denoised, and the time
+  // that took (estimate, filter and encoding to 8 bits).
+  double estimated_db = 0;
+  bool denoised = false;
+  double denoise_ms = 0;
   // The H.264 display: the bitrate to encode at (kbit/s), and how many keyframes the client has
   // asked for so far; a frame whose count is above the encoder's last one is a keyframe (a count,
   // not a flag, so that a frame replaced before encoding does not lose the request).
@@ -144,7 +150,8 @@ template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, FrameMeta& x) {
   return f(caf::meta::type_name("tessera::frame_meta"), x.seq, x.client_frame, x.width, x.height, x.display,
            x.quality, x.kernel_ms, x.rendering_ms, x.sat_ms, x.tiling_ms, x.render_start_ns, x.render_end_ns, x.nodes,
-           x.dropped, x.scene_bytes, x.triangles, x.samples, x.refined, x.video_kbps, x.keyframe_requests);
+           x.dropped, x.scene_bytes, x.triangles, x.samples, x.refined, x.estimated_db, x.denoised, x.denoise_ms, x.video_kbps,
+           x.keyframe_requests);
 }
 
 }  // namespace tessera

@@ -24,6 +24,7 @@
 #include "actors/subtree_protocol.h"
 #include "actors/tiler_protocol.h"
 #include "protocol/memory_budget.h"
+#include "renderer/denoise.h"
 #include "update/asset_store.h"
 #include "protocol/protocol.h"
 #include "lb/tiler.h"
@@ -70,6 +71,9 @@ struct NodeSettings {
   // Samples per pixel a still refines to after each requested frame, for a client that does
   // not say (protocol record refine); 0 or 1: no refinement.
   uint32_t refine_samples = 0;
+  // A refining still on a scene with a sky and AO is denoised (renderer/denoise.h) while its
+  // plain average's estimated PSNR is below this (dB); 0: never denoised.
+  double denoise_below_db = kDenoiseBelowDb;
   // The H.264 display's bitrate (kbit/s) for a client that does not say (protocol record video).
   uint32_t video_kbps = 8000;
   // Interactive frames (requested while the view changes) are rendered at a scale that keeps

@@ -42,6 +42,9 @@ renderer_actor::behavior_type renderer_impl(renderer_actor::stateful_pointer<ren
         if (task.renderer > 1) return make_error(ErrorCode::bad_task, "unknown renderer " + std::to_string(int(task.renderer)));
         if (task.radiance && task.renderer != 0)
           return make_error(ErrorCode::bad_task, "radiance asked of the rasterizer (progressive stills are ray traced)");
+        if (task.guides > kOpenGuides || (task.guides != kNoGuides && !task.radiance))
+          return make_error(ErrorCode::bad_task, "guides kind " + std::to_string(int(task.guides)) +
+                                                     " (guides go with radiance: 1 all, 2 the open fraction)");
         if (!snap.scene) return make_error(ErrorCode::bad_task, "render task without a scene");
         if (snap.scene->width() != task.width || snap.scene->height() != task.height)
           return make_error(ErrorCode::bad_task, "scene resolution does not match the task");
@@ -66,6 +69,7 @@ renderer_actor::behavior_type renderer_impl(renderer_actor::stateful_pointer<ren
           s.frame = task.seed ? task.seed : task.frame;
           s.sample = task.sample;
           s.radiance = task.radiance;
+          s.guides = task.guides != kNoGuides;
           s.cost_map = true;
           s.hit_points = task.hit_points && task.renderer == 0;
           TaskResult r;
@@ -78,6 +82,15 @@ renderer_actor::behavior_type renderer_impl(renderer_actor::stateful_pointer<ren
           if (task.radiance) {
             out.radiance.resize(r.radiance.size() * sizeof(float));
             if (!r.radiance.empty()) std::memcpy(out.radiance.data(), r.radiance.data(), out.radiance.size());
+          }
+          if (task.guides == kAllGuides) {
+            out.guides.resize(r.guides.size() * sizeof(float));
+            if (!r.guides.empty()) std::memcpy(out.guides.data(), r.guides.data(), out.guides.size());
+          } else if (task.guides == kOpenGuides) {  // the open fraction alone (the last of a pixel's guides)
+            const size_t pixels = r.guides.size() / kGuideFloats;
+            out.guides.resize(pixels * sizeof(float));
+            for (size_t p = 0; p < pixels; ++p)
+              std::memcpy(out.guides.data() + p * sizeof(float), &r.guides[p * kGuideFloats + kGuideFloats - 1], sizeof(float));
           }
           if (!r.cost.cost.empty()) {
             auto t0 = std::chrono::steady_clock::now();

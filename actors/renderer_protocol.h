@@ -12,6 +12,11 @@
 
 namespace tessera {
 
+// RenderTask::guides: none; all of TaskResult::guides (kGuideFloats floats a pixel: what a
+// still's first sample gives the denoiser); only the open fraction of the AO rays (1 float a
+// pixel: what each later sample adds).
+constexpr uint8_t kNoGuides = 0, kAllGuides = 1, kOpenGuides = 2;
+
 // One rendering task: a pixel rectangle of frame `frame` at width x height.
 struct RenderTask {
   uint32_t frame = 0;  // the session's frame sequence number (not the client's)
@@ -30,11 +35,13 @@ struct RenderTask {
   // Also return each packet's first-hit depth (TileResult::depth), for the balancer's
   // reprojection (lb/reproject.h). The ray tracer only; the rasterizer gives none.
   bool hit_points = false;
+  // Also return the denoiser's guides of each pixel (TileResult::guides), with radiance.
+  uint8_t guides = kNoGuides;
 };
 template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, RenderTask& x) {
   return f(caf::meta::type_name("tessera::render_task"), x.frame, x.width, x.height, x.pixels, x.ao_samples,
-           x.max_depth, x.renderer, x.sample, x.seed, x.radiance, x.hit_points);
+           x.max_depth, x.renderer, x.sample, x.seed, x.radiance, x.hit_points, x.guides);
 }
 
 // What a rendering node returns for a task: RGBA pixels of the rectangle and the serialised
@@ -50,6 +57,9 @@ struct TileResult {
   // With RenderTask::hit_points: lb/reproject.h's encode_depths over the SAT's packets (4 bytes
   // a packet); else empty.
   std::vector<uint8_t> depth;
+  // With RenderTask::guides: the guides it asked for as float32 (kAllGuides: area x 32 bytes,
+  // kOpenGuides: area x 4 bytes, row by row); else empty.
+  std::vector<uint8_t> guides;
   double kernel_ms = 0, rendering_ms = 0, sat_ms = 0;
   uint64_t rays = 0;
   protocol::ErrorCode code = protocol::ErrorCode::ok;  // not ok: the task failed (pixels are not valid)
@@ -59,7 +69,7 @@ struct TileResult {
 template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, TileResult& x) {
   return f(caf::meta::type_name("tessera::tile_result"), x.frame, x.pixels, BytesField{x.rgba}, BytesField{x.sat},
-           BytesField{x.radiance}, BytesField{x.depth}, x.kernel_ms,
+           BytesField{x.radiance}, BytesField{x.depth}, BytesField{x.guides}, x.kernel_ms,
            x.rendering_ms, x.sat_ms, x.rays, x.code, x.error);
 }
 

@@ -7,6 +7,7 @@
 #include "actors/session_state.h"
 #include "protocol/scene_records.h"
 #include "renderer/accumulation.h"
+#include "renderer/denoise.h"
 #include "renderer/embree_device.h"
 #include "renderer/raytracer.h"
 #include "update/scene_update.h"
@@ -100,10 +101,17 @@ void start_frame(self_ptr self, uint32_t client_frame, bool refine) {
     if (st.closed) return;
   }
   fs.refine = st.frame_scale == 1 && st.still.target > 1 && can_refine;
+  // Denoised while the plain average is noisy (renderer/denoise.h): only AO under a sky is
+  // noise the filter knows.
+  fs.denoise = fs.refine && st.settings->denoise_below_db > 0 && st.render.ao_samples > 0 &&
+               ineffective_settings(*st.scene, int(st.render.ao_samples), false).empty();
+  fs.target = st.still.target;
   if (fs.refine) {
-    // The still's average is held by the frame actor while it refines: it counts against the
-    // node's memory budget like the scene; a still it cannot hold is not refined.
-    const uint64_t need = Accumulation::bytes(st.scene->width(), st.scene->height());
+    // The still's average (and what its denoising holds) is held by the frame actor while it
+    // refines: it counts against the node's memory budget like the scene; a still it cannot
+    // hold is not refined.
+    uint64_t need = Accumulation::bytes(st.scene->width(), st.scene->height());
+    if (fs.denoise) need += denoise_bytes(st.scene->width(), st.scene->height());
     if (need > st.acc_bytes && !st.share.reserve(need - st.acc_bytes)) {
       fs.refine = false;
       st.still.active = st.still.after_scaled = false;

@@ -152,7 +152,8 @@ void send_batch(subtree_ptr self, SubtreeChild& c, uint64_t id, size_t part) {
                 const Rect want = join.reply.tiles[p.begin + i].pixels;
                 if (!t.failed()) {
                   const std::string bad = check_tile(t, join.batch.frame, want, {st.req.packet_w, st.req.packet_h},
-                                                     join.batch.width, join.batch.height, join.batch.radiance);
+                                                     join.batch.width, join.batch.height, join.batch.radiance,
+                                                     join.batch.guides);
                   if (!bad.empty()) {
                     subtree_log(self, Event(Ev::rejected_tile, p.name).with("reason", bad));
                     t = TileResult{};

@@ -69,11 +69,12 @@ struct RenderBatch {
   uint32_t sample = 0, seed = 0;  // RenderTask's: the sample of a progressive still and its seed
   bool radiance = false;          // tiles carry their linear colour (TileResult::radiance)
   bool hit_points = false;        // tiles carry their packets' depths (TileResult::depth)
+  uint8_t guides = kNoGuides;     // tiles carry the denoiser's guides (RenderTask::guides)
 };
 template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, RenderBatch& x) {
   return f(caf::meta::type_name("tessera::render_batch"), x.frame, x.width, x.height, x.ao_samples, x.max_depth,
-           x.timeout_ms, x.tasks, x.renderer, x.sample, x.seed, x.radiance, x.hit_points);
+           x.timeout_ms, x.tasks, x.renderer, x.sample, x.seed, x.radiance, x.hit_points, x.guides);
 }
 
 // tiles[i] answers tasks[i] (its code set when that node failed); changed: the sub-tree lost or

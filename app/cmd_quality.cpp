@@ -31,7 +31,9 @@ const char* kHelp =
     "  averaged, until --seconds (default 5) of rendering or --max-samples (default 65536).\n"
     "  progressive+denoise: the same, each average denoised (renderer/denoise.h) with the guides\n"
     "  of its first sample; the denoising counts in the time. --denoise-iterations K (default 5)\n"
-    "  sets its passes, --denoise-sigma S (default 4) its value weight.\n"
+    "  sets its passes, --denoise-sigma S (default 4) its value weight. It denoises while the plain\n"
+    "  average's estimated PSNR (renderer/denoise.h) is below --denoise-below-db D (default the\n"
+    "  node's, 0..99; 99: always), and averages plainly after.\n"
     "--write-png F writes the last image measured (the last step's average, or the last fixed frame).\n"
     "One JSON line per step (samples, elapsed_ms, psnr_db), then a summary line with\n"
     "seconds_to_psnr for 30, 35 and 40 dB (null: not reached), the step that reached each level\n"
@@ -147,6 +149,7 @@ int run(const std::vector<std::string>& argv) {
   DenoiseOptions denoise_options;
   denoise_options.iterations = int(args.integer("--denoise-iterations", denoise_options.iterations));
   denoise_options.sigma_value = float(args.number("--denoise-sigma", denoise_options.sigma_value));
+  const double denoise_below_db = args.number("--denoise-below-db", kDenoiseBelowDb);
   args.finish();
   const bool denoised = mode == "progressive+denoise";
   if (mode != "fixed" && mode != "progressive" && !denoised)
@@ -155,6 +158,7 @@ int run(const std::vector<std::string>& argv) {
     throw std::invalid_argument("--denoise-iterations must be in 0..10");
   if (!(denoise_options.sigma_value > 0) || !std::isfinite(denoise_options.sigma_value))
     throw std::invalid_argument("--denoise-sigma must be a number > 0");
+  if (!(denoise_below_db >= 0 && denoise_below_db <= 99)) throw std::invalid_argument("--denoise-below-db must be in 0..99");
   if (!(seconds > 0)) throw std::invalid_argument("--seconds must be > 0");
   if (ao < 0 || ao > 4096 || ref_ao < 1 || ref_ao > 4096) throw std::invalid_argument("--ao 0..4096, --reference-ao 1..4096");
   if (depth < 1 || depth > 64) throw std::invalid_argument("--depth must be in 1..64");
@@ -252,13 +256,24 @@ int run(const std::vector<std::string>& argv) {
     std::vector<float> guides;
     RenderSettings s = base;
     s.ao_samples = ao;
+    // Denoising, while the plain average's estimated PSNR is below --denoise-below-db: the
+    // node's rule (NodeSettings::denoise_below_db). Past it the still is averaged plainly, and
+    // its later samples write no guides.
+    bool denoising = filter;
     while (elapsed_s < seconds && acc.samples() < uint32_t(max_samples)) {
       const auto t0 = std::chrono::steady_clock::now();
-      refine(rt, full, s, acc.samples(), 1, acc, filter ? &still_ao : nullptr, &guides);
-      Image avg = filter ? Accumulation::encode(denoise(acc.mean(), guides, still_ao.mean(),
-                                                         still_ao.variance_of_mean(guides), W, H, denoise_options),
-                                                 W, H, srgb)
-                           : acc.average();
+      refine(rt, full, s, acc.samples(), 1, acc, denoising ? &still_ao : nullptr, &guides);
+      double estimate = -1;  // the plain average's estimated PSNR; -1: not estimated
+      Image avg;
+      if (denoising) {
+        const std::vector<float> mean = acc.mean(), var = still_ao.variance_of_mean(guides);
+        estimate = estimated_psnr_db(mean, guides, var, W, H, srgb);
+        if (estimate < denoise_below_db)
+          avg = Accumulation::encode(denoise(mean, guides, still_ao.mean(), var, W, H, denoise_options), W, H, srgb);
+        else
+          denoising = false;
+      }
+      if (avg.rgba.empty()) avg = acc.average();
       const double dt = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
       elapsed_s += dt;
       step_ms.push_back(dt * 1e3);
@@ -267,8 +282,14 @@ int run(const std::vector<std::string>& argv) {
       levels.see(db, elapsed_s, long(acc.samples()));
       last_db = db;
       samples = acc.samples();
-      std::printf("{\"mode\": \"%s\", \"ao\": %d, \"samples\": %u, \"elapsed_ms\": %.1f, \"psnr_db\": %.3f}\n",
+      std::printf("{\"mode\": \"%s\", \"ao\": %d, \"samples\": %u, \"elapsed_ms\": %.1f, \"psnr_db\": %.3f",
                   mode.c_str(), ao, samples, elapsed_s * 1e3, db);
+      if (estimate >= 0) {  // untimed: how the estimate and the plain average compare
+        const double plain_db = finite_db(compare(acc.average(), ref).psnr);
+        std::printf(", \"plain_psnr_db\": %.3f, \"estimated_plain_db\": %.3f, \"denoised\": %s", plain_db,
+                    finite_db(estimate), denoising ? "true" : "false");
+      }
+      std::printf("}\n");
       std::fflush(stdout);
     }
   }

@@ -73,6 +73,8 @@ NodeConfig::NodeConfig() {
       .add(max_texture_size, "max-texture-size", "largest texture width/height")
       .add(refine_samples, "refine-samples",
            "samples per pixel a still refines to after a requested frame, for clients that do not say (0: none)")
+      .add(denoise_below_db, "denoise-below-db",
+           "a refining still with AO under a sky is denoised while its estimated PSNR is below this (dB, 0..99; 0: never)")
       .add(video_kbps, "video-kbps",
            "H.264 display: the bitrate (kbit/s) for clients that do not say (100..200000)")
       .add(frame_budget_ms, "frame-budget-ms",
@@ -209,6 +211,9 @@ std::shared_ptr<NodeSettings> NodeConfig::node_settings() const {
   if (refine_samples < 0 || uint32_t(refine_samples) > s->limits.max_refine_samples)
     throw std::invalid_argument("tessera.refine-samples must be in 0.." + std::to_string(s->limits.max_refine_samples));
   s->refine_samples = uint32_t(refine_samples);
+  if (!(denoise_below_db >= 0 && denoise_below_db <= 99))
+    throw std::invalid_argument("tessera.denoise-below-db must be in 0..99");
+  s->denoise_below_db = denoise_below_db;
   if (video_kbps < int(kH264MinKbps) || video_kbps > int(kH264MaxKbps))
     throw std::invalid_argument("tessera.video-kbps must be in " + std::to_string(kH264MinKbps) + ".." +
                                 std::to_string(kH264MaxKbps));

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstddef>
 #include <cstring>
+#include <limits>
 #include <stdexcept>
 
 #include <tbb/blocked_range.h>
@@ -13,6 +14,8 @@
 
 namespace tessera {
 namespace {
+
+static_assert(kDenoiseGuideFloats == kGuideFloats, "denoise.h's guide count is renderer.h's");
 
 // Offsets into one pixel's guides.
 constexpr int kNormal = 0, kDistance = 3, kAmbient = 4, kOpen = 7;
@@ -168,6 +171,16 @@ void StillAo::add(const std::vector<float>& guides) {
   ++samples_;
 }
 
+void StillAo::add_open(const std::vector<float>& open) {
+  if (open.size() != sum_.size()) throw std::invalid_argument("StillAo::add_open: open fractions not the still's size");
+  for (size_t p = 0; p < open.size(); ++p) {
+    const double v = open[p];
+    sum_[p] += v;
+    sum_sq_[p] += v * v;
+  }
+  ++samples_;
+}
+
 std::vector<float> StillAo::mean() const {
   std::vector<float> m(sum_.size(), 0.0f);
   if (samples_ == 0) return m;
@@ -301,6 +314,34 @@ std::vector<float> denoise(const std::vector<float>& mean, const std::vector<flo
     for (int c = 0; c < 3; ++c) out[p * 3 + size_t(c)] = std::max(0.0f, out[p * 3 + size_t(c)] + a[c] * d);
   }
   return out;
+}
+
+
+double estimated_psnr_db(const std::vector<float>& mean, const std::vector<float>& guides,
+                         const std::vector<float>& open_variance, int32_t width, int32_t height, bool srgb) {
+  const size_t pixels = size_t(std::max(width, 0)) * size_t(std::max(height, 0));
+  if (width < 0 || height < 0 || mean.size() != pixels * 3 || guides.size() != pixels * kGuideFloats ||
+      open_variance.size() != pixels)
+    throw std::invalid_argument("estimated_psnr_db: radiance, guides and variances must all be width x height");
+  // The encoding's slope (per unit of linear radiance, in units of the full 8-bit range).
+  auto slope = [srgb](float c) -> double {
+    if (!(c < 1.0f)) return 0.0;  // clips (or not a number)
+    if (!srgb) return 1.0;
+    if (c <= 0.0031308f) return 12.92;
+    return 1.055 / 2.4 * std::pow(double(c), 1.0 / 2.4 - 1.0);
+  };
+  double sum = 0;
+  for (size_t p = 0; p < pixels; ++p) {
+    const float v = open_variance[p];
+    if (!(v > 0)) continue;
+    const float* a = &guides[p * kGuideFloats + kAmbient];
+    for (int c = 0; c < 3; ++c) {
+      const double s = slope(mean[p * 3 + size_t(c)]) * double(a[c]);
+      sum += s * s * double(v);
+    }
+  }
+  if (pixels == 0 || !(sum > 0)) return std::numeric_limits<double>::infinity();
+  return -10.0 * std::log10(sum / double(pixels * 3));
 }
 
 }  // namespace tessera

@@ -21,6 +21,11 @@
 
 namespace tessera {
 
+constexpr int kDenoiseGuideFloats = 8;
+// The PSNR (estimated_psnr_db) up to which a refining still's average is denoised by default;
+// past it the plain average wins (docs/results/quality.md).
+constexpr double kDenoiseBelowDb = 36.0;  // renderer.h's kGuideFloats (checked in denoise.cpp)
+
 struct DenoiseOptions {
   int iterations = 5;           // a-trous passes (tap spacing 1, 2, 4, ...); 0 returns the input
   float sigma_value = 4.0f;     // open-fraction distance, in standard deviations of the mean
@@ -35,6 +40,9 @@ class StillAo {
   void reset(int32_t width, int32_t height);
   // One sample's guides (TaskResult::guides).
   void add(const std::vector<float>& guides);
+  // One sample's open fractions alone, one float a pixel (what a still's later samples carry
+  // between nodes: their normals, distances and ambient light are the first sample's).
+  void add_open(const std::vector<float>& open);
   uint32_t samples() const { return samples_; }
   std::vector<float> mean() const;
   // The variance of each pixel's mean; `guides` (the first sample's) tell which neighbours
@@ -55,5 +63,21 @@ class StillAo {
 std::vector<float> denoise(const std::vector<float>& mean, const std::vector<float>& guides,
                            const std::vector<float>& open_mean, const std::vector<float>& open_variance,
                            int32_t width, int32_t height, const DenoiseOptions& options = {});
+
+// The PSNR (dB, of the 8-bit encoded image, as `tessera quality` measures it) that the plain
+// average `mean` is estimated to have against the converged still, from its AO noise alone: per
+// pixel and channel, the unoccluded ambient light squared times the open fraction's variance of
+// the mean (StillAo), through the slope of the encoding at the mean (`srgb`: the sRGB curve,
+// else plain; 0 where the value clips). It leaves out the aliasing that later samples still
+// average away, so it is an upper bound of the true PSNR while AO dominates. +infinity when no
+// pixel is noisy. Throws std::invalid_argument on sizes that do not match.
+double estimated_psnr_db(const std::vector<float>& mean, const std::vector<float>& guides,
+                         const std::vector<float>& open_variance, int32_t width, int32_t height, bool srgb);
+
+// What a still being denoised holds beside its average, per pixel: the first sample's guides
+// and the open fractions' sums and sums of squares (StillAo).
+inline uint64_t denoise_bytes(int32_t width, int32_t height) {
+  return uint64_t(width) * uint64_t(height) * (kDenoiseGuideFloats * sizeof(float) + 2 * sizeof(double));
+}
 
 }  // namespace tessera

@@ -427,6 +427,179 @@ CAF_TEST(a still whose average would not fit the memory budget is not refined an
   CAF_CHECK_EQUAL(budget->used(), before + Accumulation::bytes(64, 64));
 }
 
+// A floor and a wall meeting at a corner under a sky (docs/renderer.md, "Denoising a still's
+// first samples"): ambient occlusion that finds occluders, so a still with AO is noisy.
+std::vector<ClientRecord> corner_scene() {
+  SetBuffer pos;
+  pos.id = 11;
+  pos.buffer.type = Buffer::Type::f32;
+  pos.buffer.components = 3;
+  pos.buffer.f = {-2, -1, -2, 2, -1, -2, 2, -1, 2, -2, -1, 2,   // the floor, y = -1
+                  -2, -1, -1, 2, -1, -1, 2, 2, -1, -2, 2, -1};  // the wall, z = -1
+  SetBuffer idx;
+  idx.id = 12;
+  idx.buffer.type = Buffer::Type::u32;
+  idx.buffer.components = 1;
+  idx.buffer.u = {0, 1, 2, 0, 2, 3, 4, 5, 6, 4, 6, 7};
+  SetMaterial white;
+  white.id = 14;
+  white.material.model = Material::Model::diffuse;
+  white.material.diffuse_color = {0.5f, 0.5f, 0.5f};
+  SetMesh mesh;
+  mesh.id = 13;
+  mesh.mesh.positions = 11;
+  mesh.mesh.indices = 12;
+  mesh.mesh.material = 14;
+  SetEnvironment env;
+  env.environment.ambient = {0.6f, 0.6f, 0.6f};
+  env.environment.background = {0.2f, 0.3f, 0.4f};
+  return {pos, idx, white, mesh, env, SetCamera{camera_at(3)}};
+}
+
+// What the client sends beside the scene: one AO ray per hit, 32x32.
+std::vector<ClientRecord> corner_session() {
+  std::vector<ClientRecord> recs = corner_scene();
+  recs.push_back(protocol::Settings{1, 4});
+  recs.push_back(Resolution{32, 32});
+  return recs;
+}
+
+// The plain average of a still's first `samples` samples of `recs` (`ao` AO rays each; the
+// session's: one), seeded by frame `seed`, as the session's renderer and frame actor make it.
+Image plain_average(const std::vector<ClientRecord>& recs, uint32_t seed, uint32_t samples, int32_t ao = 1) {
+  Scene scene;
+  CAF_REQUIRE_EQUAL(apply_records(scene, encode(recs), Limits{}), "");
+  scene.set_resolution(32, 32);
+  RayTracer rt({4, 4});
+  std::vector<std::string> warnings;
+  rt.sync(scene, warnings);
+  const Rect full{0, 0, scene.width(), scene.height()};
+  Accumulation acc;
+  acc.reset(full.width(), full.height(), scene.environment().linear);
+  for (uint32_t k = 0; k < samples; ++k) {
+    RenderSettings s;
+    s.ao_samples = ao;
+    s.frame = seed;
+    s.sample = k;
+    s.radiance = true;
+    TaskResult r;
+    rt.render(full, s, r);
+    acc.add(r.radiance, full.width(), full.height(), 0, 0);
+    acc.end_sample();
+  }
+  return acc.average();
+}
+
+// An image through the JPEG display's encoding (quality 85) and back.
+Image through_jpeg(const Image& img) {
+  JpegEncoder jpeg;
+  std::vector<uint8_t> bytes;
+  std::string err;
+  CAF_REQUIRE(jpeg.encode(img.rgba.data(), img.width, img.height, 85, bytes, err, 0));
+  Image out;
+  CAF_REQUIRE(jpeg_decode(bytes.data(), bytes.size(), out, err));
+  return out;
+}
+
+Image decoded(const Frame& f) {
+  Image out;
+  std::string err;
+  CAF_REQUIRE(jpeg_decode(f.payload.data(), f.payload.size(), out, err));
+  return out;
+}
+
+CAF_TEST(a still with AO under a sky is denoised while noisy and shows fewer and better frames) {
+  settings->refine_samples = 16;
+  settings->denoise_below_db = 99;  // denoised to its end
+  std::vector<ClientRecord> recs = tiny_scene();  // the fixture's, and the corner
+  for (auto& r : corner_scene()) recs.push_back(r);
+  client(corner_session());
+  client({RenderRequest{1}});
+  run();
+  std::vector<uint32_t> samples;
+  auto frames = sink->all<Frame>();
+  for (auto& f : frames) samples.push_back(f.samples);
+  // Every sample is rendered; shown are the first four, then a quarter more each time, and the last.
+  CAF_CHECK_EQUAL(samples, (std::vector<uint32_t>{1, 2, 3, 4, 5, 6, 7, 8, 10, 12, 15, 16}));
+  CAF_CHECK_EQUAL(status().frames_started, 16u);
+  CAF_CHECK_EQUAL(sink->all<ErrorReply>().size(), 0u);
+  // The requested frame is the plain one. Each denoised frame is closer than the plain average
+  // of as many samples to what those samples converge to with AO alone converged (256 rays
+  // each, at the same sub-pixel positions: the anti-aliasing is not the denoiser's to do), all
+  // through the same JPEG encoding (whose error at 32x32 would otherwise outweigh the noise).
+  CAF_CHECK(decoded(frames[0]).rgba == through_jpeg(plain_average(recs, 1, 1)).rgba);
+  for (size_t i = 1; i < frames.size(); ++i) {
+    const uint32_t n = frames[i].samples;
+    const Image converged = through_jpeg(plain_average(recs, 1, n, 256));
+    const double denoised = compare(decoded(frames[i]), converged).psnr;
+    const double plain = compare(through_jpeg(plain_average(recs, 1, n)), converged).psnr;
+    CAF_MESSAGE(n << " samples: denoised " << denoised << " dB, plain " << plain << " dB");
+    // Past about 36 dB (the default threshold) the filter's blur costs as much as it removes.
+    if (n <= 8) CAF_CHECK_GREATER(denoised, plain + 1.0);
+  }
+}
+
+CAF_TEST(a still is denoised until the estimate of its plain average reaches the threshold and plain after) {
+  settings->refine_samples = 24;  // the default threshold: kDenoiseBelowDb
+  std::mutex mu;
+  std::vector<Event> shown;
+  settings->log = [&](const Event& e) {
+    std::lock_guard<std::mutex> lock(mu);
+    if (e.kind == Ev::frame) shown.push_back(e);
+  };
+  std::vector<ClientRecord> recs = tiny_scene();  // the fixture's, and the corner
+  for (auto& r : corner_scene()) recs.push_back(r);
+  client(corner_session());
+  client({RenderRequest{1}});
+  run();
+  auto frames = sink->all<Frame>();
+  CAF_REQUIRE_EQUAL(frames.size(), shown.size());
+  CAF_CHECK_EQUAL(frames.back().samples, 24u);
+  CAF_CHECK_EQUAL(status().frames_started, 24u);
+  bool plain_since = false;
+  size_t denoised = 0;
+  for (size_t i = 1; i < frames.size(); ++i) {
+    const Json* est = shown[i].field("estimated_db");
+    const Json* den = shown[i].field("denoised");
+    const bool is_denoised = den && den->as_bool();
+    if (is_denoised) {
+      ++denoised;
+      CAF_CHECK(!plain_since);  // no going back
+      CAF_REQUIRE(est);
+      CAF_CHECK_LESS(est->as_double(), kDenoiseBelowDb);
+    } else {
+      if (!plain_since && est) CAF_CHECK_GREATER_OR_EQUAL(est->as_double(), kDenoiseBelowDb);  // the frame that passed
+      plain_since = true;
+      CAF_CHECK(decoded(frames[i]).rgba == through_jpeg(plain_average(recs, 1, frames[i].samples)).rgba);
+    }
+  }
+  CAF_CHECK_GREATER(denoised, 2u);
+  CAF_CHECK(plain_since);
+}
+
+CAF_TEST(a still is averaged plainly once its estimate passes the threshold and when denoising is off) {
+  settings->refine_samples = 6;
+  std::vector<ClientRecord> recs = tiny_scene();  // the fixture's, and the corner
+  for (auto& r : corner_scene()) recs.push_back(r);
+  for (double below : {1.0, 0.0}) {  // 1 dB: passed at the first estimate; 0: never denoised
+    settings->denoise_below_db = below;
+    {
+      std::lock_guard<std::mutex> lock(sink->mu);
+      sink->records.clear();
+    }
+    client(corner_session());
+    client({RenderRequest{uint32_t(below + 1)}});
+    run();
+    std::vector<uint32_t> samples;
+    auto frames = sink->all<Frame>();
+    for (auto& f : frames) samples.push_back(f.samples);
+    CAF_CHECK_EQUAL(samples, (std::vector<uint32_t>{1, 2, 3, 4, 5, 6}));
+    // Every frame the plain average, as without a denoiser (the still seeded by its own first frame).
+    const uint32_t seed = below > 0 ? 1 : 7;
+    for (auto& f : frames) CAF_CHECK(decoded(f).rgba == through_jpeg(plain_average(recs, seed, f.samples)).rgba);
+  }
+}
+
 CAF_TEST(a refine record from the client sets its target and 0 turns refinement off) {
   settings->refine_samples = 8;
   client({Refine{3}, SetCamera{camera_at(3)}, RenderRequest{1}});

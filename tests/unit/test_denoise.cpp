@@ -270,3 +270,92 @@ TEST_CASE("denoise: a 4-sample still comes closer to the converged one than its 
   INFO("PSNR against 128 samples: 4 samples " << db_plain << " dB, denoised " << db_denoised << " dB");
   CHECK(db_denoised > db_plain + 3);
 }
+
+TEST_CASE("StillAo::add_open adds what add adds of the same sample", "[denoise]") {
+  const int W = 16, H = 8;
+  std::vector<float> normals(size_t(W) * H * 3, 0.0f);
+  for (size_t p = 0; p < size_t(W) * H; ++p) normals[p * 3 + 2] = 1.0f;
+  StillAo all, open_only;
+  std::vector<float> first;
+  noisy_samples(all, first, W, H, 6, [](int x, int) { return 0.1f + 0.05f * float(x); }, normals);
+  // The same samples again (the same seed), the first with all its guides, the rest alone.
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<float> u(0, 1);
+  open_only.reset(W, H);
+  for (int s = 0; s < 6; ++s) {
+    std::vector<float> open(size_t(W) * H);
+    for (int y = 0; y < H; ++y)
+      for (int x = 0; x < W; ++x) open[size_t(y) * W + x] = u(rng) < 0.1f + 0.05f * float(x) ? 1.0f : 0.0f;
+    if (s == 0) {
+      std::vector<float> g = first;
+      for (size_t p = 0; p < open.size(); ++p) g[p * kGuideFloats + 7] = open[p];
+      open_only.add(g);
+    } else {
+      open_only.add_open(open);
+    }
+  }
+  CHECK(open_only.samples() == all.samples());
+  CHECK(open_only.mean() == all.mean());
+  CHECK(open_only.variance_of_mean(first) == all.variance_of_mean(first));
+  CHECK_THROWS_AS(open_only.add_open(std::vector<float>(size_t(W) * H - 1)), std::invalid_argument);
+}
+
+TEST_CASE("estimated_psnr_db: the plain average's PSNR from its AO noise", "[denoise]") {
+  const int W = 32, H = 16;
+  const size_t pixels = size_t(W) * H;
+  std::vector<float> guides(pixels * kGuideFloats, 0.0f), mean(pixels * 3, 0.5f), var(pixels, 0.01f);
+  for (size_t p = 0; p < pixels; ++p) {
+    guides[p * kGuideFloats + 2] = 1.0f;
+    guides[p * kGuideFloats + 3] = 5.0f;
+    for (int c = 0; c < 3; ++c) guides[p * kGuideFloats + 4 + size_t(c)] = 0.5f;
+  }
+  SECTION("plain encoding: ambient^2 x variance is the error's MSE") {
+    // 0.5^2 x 0.01 = 0.0025 in every pixel and channel: 10 log10(1 / 0.0025) = 26.02 dB.
+    CHECK(estimated_psnr_db(mean, guides, var, W, H, false) == Approx(26.0206).margin(1e-3));
+    // Half the pixels noise-free: half the MSE, 3 dB more.
+    for (size_t p = 0; p < pixels / 2; ++p) var[p] = 0.0f;
+    CHECK(estimated_psnr_db(mean, guides, var, W, H, false) == Approx(26.0206 + 3.0103).margin(1e-3));
+    // Pixels that show no ambient light (misses, unlit) or clip at white add nothing.
+    for (size_t p = pixels / 2; p < pixels; ++p) mean[p * 3] = mean[p * 3 + 1] = mean[p * 3 + 2] = 1.5f;
+    CHECK(std::isinf(estimated_psnr_db(mean, guides, var, W, H, false)));
+  }
+  SECTION("sRGB: through the curve's slope at the mean") {
+    // The slope of the sRGB encoding at 0.5, from the encoding itself: 8-bit steps over a span.
+    Image lo = Accumulation::encode(std::vector<float>(3, 0.45f), 1, 1, true);
+    Image hi = Accumulation::encode(std::vector<float>(3, 0.55f), 1, 1, true);
+    const double slope = double(hi.rgba[0] - lo.rgba[0]) / 255.0 / 0.1;
+    const double want = -10 * std::log10(slope * slope * 0.25 * 0.01);
+    CHECK(estimated_psnr_db(mean, guides, var, W, H, true) == Approx(want).margin(0.15));
+  }
+  SECTION("no noise: +infinity; sizes must match") {
+    std::fill(var.begin(), var.end(), 0.0f);
+    CHECK(std::isinf(estimated_psnr_db(mean, guides, var, W, H, true)));
+    CHECK_THROWS_AS(estimated_psnr_db(mean, guides, std::vector<float>(pixels - 1), W, H, true), std::invalid_argument);
+  }
+}
+
+TEST_CASE("estimated_psnr_db matches the measured PSNR of independent samples' average", "[denoise]") {
+  // Independent coin flips per sample (no low-discrepancy sequence, which converges faster
+  // than this estimate assumes): the estimate from the samples' own variance meets the error
+  // of their average against the truth.
+  const int W = 96, H = 64;
+  std::vector<float> normals(size_t(W) * H * 3, 0.0f);
+  for (size_t p = 0; p < size_t(W) * H; ++p) normals[p * 3 + 2] = 1.0f;
+  auto truth = [](int x, int y) { return 0.2f + 0.6f * float((x / 8 + y / 8) % 2); };
+  for (int N : {8, 32}) {
+    StillAo ao;
+    std::vector<float> first;
+    noisy_samples(ao, first, W, H, N, truth, normals);
+    const std::vector<float> mean = radiance_of(ao.mean());  // ambient 1: radiance = open fraction
+    double mse = 0;
+    for (int y = 0; y < H; ++y)
+      for (int x = 0; x < W; ++x) {
+        const double d = mean[(size_t(y) * W + x) * 3] - truth(x, y);
+        mse += d * d;
+      }
+    const double measured = -10 * std::log10(mse / (double(W) * H));
+    const double estimate = estimated_psnr_db(mean, first, ao.variance_of_mean(first), W, H, false);
+    INFO("N = " << N << ": measured " << measured << " dB, estimated " << estimate << " dB");
+    CHECK(std::fabs(estimate - measured) < 0.5);
+  }
+}
