@@ -29,6 +29,17 @@ class ClientSink {
   // been written to the socket or replaced, i.e. when frames_unsent() has fallen. Set once,
   // before the first frame; the display actor uses it to encode its waiting frame.
   virtual void on_frame_gone(std::function<void()> f) { (void)f; }
+  // How fast the connection has lately drained frames that waited for it, in kbit/s (smoothed;
+  // net/link_meter.h); 0 when it has not been measured in the last two seconds (a link that
+  // keeps up is not measured). The H.264 display fits its bitrate to it. Any thread.
+  virtual uint32_t link_kbps() const { return 0; }
+  // Frames given to send_frame that found the connection still holding an earlier frame for
+  // the link (they had to wait instead of going to the socket at once), so far. While it grows
+  // the link, not rendering, bounds the frame rate. Any thread.
+  virtual uint32_t frames_waited() const { return 0; }
+  // The link has lately been saturated: bytes waited in the kernel for it most of the time
+  // (net/link_meter.h), so frames wait for it there even if none waits in the node. Any thread.
+  virtual bool link_saturated() const { return false; }
   // One JPEG for the session's MJPEG streams (multipart/x-mixed-replace on HTTP).
   virtual void send_mjpeg(std::shared_ptr<const std::vector<uint8_t>> jpeg) = 0;
   // Ends the connection after a fatal protocol error (the session has sent the error).

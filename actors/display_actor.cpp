@@ -8,6 +8,7 @@
 #include <caf/all.hpp>
 
 #include "actors/node.h"
+#include "codecs/video_rate.h"
 #include "core/image.h"
 
 namespace tessera {
@@ -42,6 +43,12 @@ struct display_state {
   bool encoding = false;
   std::optional<EncodeJob> waiting;
   uint64_t replaced = 0;
+  // Bandwidth adaptation (codecs/video_rate.h): the stream's target bitrate, which the link's
+  // measured throughput (ClientSink::link_kbps) holds below the client's or the node's while
+  // frames wait for the link (ClientSink::frames_waited grows, or link_saturated), and the
+  // count last seen.
+  VideoRateControl rate;
+  uint32_t frames_waited = 0;
 
   static inline const char* name = "tessera.display";
 };
@@ -152,7 +159,10 @@ void send_encoded(display_state& st, EncodedFrame& ef) {
                     : f.encoding == protocol::FrameEncoding::dxt1 ? "s3tc"
                     : f.encoding == protocol::FrameEncoding::h264 ? "h264"
                                                                   : "jpeg");
-  if (f.encoding == protocol::FrameEncoding::h264) e.with("keyframe", ef.keyframe);
+  if (f.encoding == protocol::FrameEncoding::h264) {
+    // The bitrate this frame was encoded for (bandwidth adaptation), and the link as measured.
+    e.with("keyframe", ef.keyframe).with("target_kbps", m.video_kbps).with("link_kbps", st.sink->link_kbps());
+  }
   e.with("kernel_ms", Json::number(m.kernel_ms)).with("rendering_ms", Json::number(m.rendering_ms));
   e.with("sat_ms", Json::number(m.sat_ms)).with("tiling_ms", Json::number(m.tiling_ms));
   e.with("encode_ms", Json::number(ef.encode_ms)).with("pipeline_ms", Json::number(f.timings.pipeline_ms));
@@ -180,6 +190,15 @@ void next(display_ptr self) {
   if (is_video(*st.waiting) && st.sink->frames_unsent() > 0) return;
   EncodeJob job = std::move(*st.waiting);
   st.waiting.reset();
+  if (is_video(job)) {
+    // meta.video_kbps: the ceiling (client or node) in, the target out (the encoder's and the log's).
+    const uint32_t waited = st.sink->frames_waited();
+    // The link bounds the frames: one waited in the node since the last encode, or the kernel
+    // has lately held bytes back most of the time.
+    const bool link_bound = waited != st.frames_waited || st.sink->link_saturated();
+    job.meta.video_kbps = st.rate.update(steady_ns(), job.meta.video_kbps, st.sink->link_kbps(), link_bound);
+    st.frames_waited = waited;
+  }
   encode(self, std::move(job));
 }
 

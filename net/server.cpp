@@ -15,12 +15,18 @@
 #include <array>
 #include <ctime>
 
+#include <netinet/in.h>
+#include <netinet/tcp.h>
+#include <sys/socket.h>
+
 #include <caf/all.hpp>
 
 #include <websocketpp/config/asio.hpp>  // asio (plain) and asio_tls
 #include <websocketpp/server.hpp>
 
 #include "net/http.h"
+#include "net/link_meter.h"
+#include "net/tcp_stats.h"
 #include "net/tls.h"
 
 namespace tessera {
@@ -115,6 +121,9 @@ constexpr const char* kTokenParam = "access_token";
 // Application close code for a refused access token (4000-4999 are the application's; 4401
 // mirrors HTTP's 401, as other WebSocket protocols do).
 constexpr uint16_t kCloseBadToken = 4401;
+// TCP_NOTSENT_LOWAT of WebSocket connections (see on_open): at 1 Mbit/s 32 KiB is 0.26 s of
+// latency; at 1 Gbit/s the network thread has ~0.13 ms to refill it (it is woken at half).
+constexpr int kNotSentLowat = 32 << 10;
 
 // The client's address (remote) or the address it connected to, as text ("" when the socket
 // is gone).
@@ -191,6 +200,7 @@ struct Endpoint final : Server::Impl, std::enable_shared_from_this<Endpoint<Conf
     size_t largest_frame = 0;
     uint64_t backlog = 0;   // out_bytes + websocketpp's queue, as last seen
     BudgetShare share;      // backlog, in the node's budget
+    LinkMeter link;         // the link's throughput (the H.264 display adapts its bitrate to it)
   };
   // Touched only on the network thread.
   std::map<connection_hdl, std::shared_ptr<Conn>, std::owner_less<connection_hdl>> conns;
@@ -312,6 +322,19 @@ struct Sink : ClientSink {
   }
   uint32_t frames_dropped() const override { return dropped; }
   uint32_t frames_unsent() const override { return *unsent; }
+  // The connection's LinkMeter, published by the network thread after each sample.
+  std::atomic<uint32_t> link{0};
+  std::atomic<int64_t> link_ns{0};
+  std::atomic<uint32_t> waited{0};  // frames_waited()
+  uint32_t frames_waited() const override { return waited; }
+  std::atomic<int64_t> saturated_ns{0};  // the end of the link's last saturated window
+  bool link_saturated() const override {
+    const int64_t s = saturated_ns.load();
+    return s > 0 && steady_ns() - s <= LinkMeter::kSaturatedNs;
+  }
+  uint32_t link_kbps() const override {
+    return steady_ns() - link_ns.load() > LinkMeter::kStaleNs ? 0 : link.load();
+  }
   void send_mjpeg(std::shared_ptr<const std::vector<uint8_t>> jpeg) override {
     auto t = tok;
     post([t, jpeg](Impl& i) {
@@ -368,6 +391,7 @@ bool Endpoint<Config>::enqueue(connection_hdl h, std::shared_ptr<const std::vect
   c.out_bytes += msg->size();
   c.out.push_back(Out{std::move(msg), frame});
   flush(h, c);
+  if (frame && c.frame_waiting) c.sink->waited++;  // it waits for the link
   return true;
 }
 
@@ -387,6 +411,14 @@ void Endpoint<Config>::flush(connection_hdl h, Conn& c) {
     }
     c.out.pop_front();
   }
+  // The link's throughput, while it holds bytes back (net/link_meter.h).
+  const TcpFigures tcp = tcp_figures(con->get_raw_socket().native_handle());
+  const int64_t now = steady_ns();
+  if (tcp.ok && c.link.look(now, tcp.acked, tcp.notsent)) {
+    c.sink->link = c.link.kbps(now);
+    c.sink->link_ns = now;
+    c.sink->saturated_ns = now;
+  }
   const uint64_t backlog = c.out_bytes + con->get_buffered_amount();
   queued += backlog - c.backlog;  // unsigned wrap-around adds the (possibly negative) difference
   c.backlog = backlog;
@@ -399,7 +431,7 @@ void Endpoint<Config>::flush(connection_hdl h, Conn& c) {
     close_conn(h, c, websocketpp::close::status::policy_violation, "client is not reading");
     return;
   }
-  if (backlog > 0) arm_poll();
+  if (backlog > 0 || c.link.watching()) arm_poll();
 }
 
 template <class Config>
@@ -413,7 +445,7 @@ void Endpoint<Config>::arm_poll() {
     // flush() may close (and not erase) a connection: iterate over a copy of the handles.
     std::vector<std::pair<connection_hdl, std::shared_ptr<Conn>>> busy;
     for (auto& [h, c] : conns)
-      if (c->backlog > 0 && !c->closing) busy.emplace_back(h, c);
+      if ((c->backlog > 0 || c->link.watching()) && !c->closing) busy.emplace_back(h, c);
     for (auto& [h, c] : busy) flush(h, *c);
   });
 }
@@ -551,6 +583,12 @@ void Endpoint<Config>::on_open(connection_hdl h) {
     return;
   }
   auto con = ws.get_con_from_hdl(h);
+  // The kernel keeps at most kNotSentLowat bytes that the link has not yet taken (beside those
+  // in flight): a slow link's frames wait in the node, where the newest replaces older ones
+  // and the H.264 display sees the link (net/link_meter.h), not in a socket buffer of
+  // megabytes that would only add latency.
+  const int lowat = kNotSentLowat;
+  ::setsockopt(con->get_raw_socket().native_handle(), IPPROTO_TCP, TCP_NOTSENT_LOWAT, &lowat, sizeof lowat);
   auto sink = std::make_shared<Sink<Config>>();
   sink->impl = this->shared_from_this();
   sink->hdl = h;
