@@ -62,14 +62,6 @@ void run_denoise(DenoiseJob& j) {
   j.ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
 }
 
-// While a still is denoised, the frames shown: every one of its first 4 samples, then each
-// with a quarter more samples than the last one shown, and its last. A denoising costs about as
-// much as a sample (docs/renderer.md); the samples between are averaged and not shown, so the
-// still converges nearly as fast as a plain one, and each frame the client gets is better.
-bool shown_while_denoising(uint32_t samples, uint32_t last_shown, uint32_t target) {
-  return samples <= 4 || samples >= target || samples >= last_shown + std::max<uint32_t>(1, last_shown / 4);
-}
-
 struct frame_state {
   std::shared_ptr<const NodeSettings> settings;
   uint64_t id = 0;

@@ -29,11 +29,13 @@ const char* kHelp =
     "  fixed: today's frame (one sample per pixel, N AO rays per hit) for each N of --ao-list.\n"
     "  progressive: a still that refines: sample after sample (--ao N rays each, default 1)\n"
     "  averaged, until --seconds (default 5) of rendering or --max-samples (default 65536).\n"
-    "  progressive+denoise: the same, each average denoised (renderer/denoise.h) with the guides\n"
-    "  of its first sample; the denoising counts in the time. --denoise-iterations K (default 5)\n"
-    "  sets its passes, --denoise-sigma S (default 4) its value weight. It denoises while the plain\n"
-    "  average's estimated PSNR (renderer/denoise.h) is below --denoise-below-db D (default the\n"
-    "  node's, 0..99; 99: always), and averages plainly after.\n"
+    "  progressive+denoise: the same, denoised as the node denoises a still (renderer/denoise.h,\n"
+    "  with the guides of its first sample) while the plain average's estimated PSNR is below\n"
+    "  --denoise-below-db D (default the node's, 0..99; 99: always), averaged plainly after; while\n"
+    "  denoised, only the steps the node shows are measured (samples 1-4, then each a quarter\n"
+    "  more), the others count in the time. The denoising counts in the time.\n"
+    "  --denoise-iterations K (default 5) sets its passes, --denoise-sigma S (default 4) its value\n"
+    "  weight.\n"
     "--write-png F writes the last image measured (the last step's average, or the last fixed frame).\n"
     "One JSON line per step (samples, elapsed_ms, psnr_db), then a summary line with\n"
     "seconds_to_psnr for 30, 35 and 40 dB (null: not reached), the step that reached each level\n"
@@ -256,16 +258,26 @@ int run(const std::vector<std::string>& argv) {
     std::vector<float> guides;
     RenderSettings s = base;
     s.ao_samples = ao;
-    // Denoising, while the plain average's estimated PSNR is below --denoise-below-db: the
-    // node's rule (NodeSettings::denoise_below_db). Past it the still is averaged plainly, and
-    // its later samples write no guides.
+    // Denoising as the node does (frame_actor.cpp): while the plain average's estimated PSNR
+    // is below --denoise-below-db (NodeSettings::denoise_below_db), and only at the steps the
+    // node shows (shown_while_denoising); the samples between count in the time and are not
+    // measured. Past the threshold the still is averaged plainly, and its later samples write
+    // no guides.
     bool denoising = filter;
+    uint32_t shown = 0;
     while (elapsed_s < seconds && acc.samples() < uint32_t(max_samples)) {
       const auto t0 = std::chrono::steady_clock::now();
       refine(rt, full, s, acc.samples(), 1, acc, denoising ? &still_ao : nullptr, &guides);
+      if (denoising && acc.samples() >= 2 && !shown_while_denoising(acc.samples(), shown, uint32_t(max_samples))) {
+        const double dt = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        elapsed_s += dt;
+        step_ms.push_back(dt * 1e3);
+        continue;
+      }
+      shown = acc.samples();
       double estimate = -1;  // the plain average's estimated PSNR; -1: not estimated
       Image avg;
-      if (denoising) {
+      if (denoising && acc.samples() >= 2) {  // sample 0 is the plain frame, as in the node
         const std::vector<float> mean = acc.mean(), var = still_ao.variance_of_mean(guides);
         estimate = estimated_psnr_db(mean, guides, var, W, H, srgb);
         if (estimate < denoise_below_db)

@@ -74,6 +74,16 @@ std::vector<float> denoise(const std::vector<float>& mean, const std::vector<flo
 double estimated_psnr_db(const std::vector<float>& mean, const std::vector<float>& guides,
                          const std::vector<float>& open_variance, int32_t width, int32_t height, bool srgb);
 
+// While a still is denoised, the steps shown: each of its first 4 samples, then each with a
+// quarter more samples than the last one shown (`last_shown`), and its last (`target`). A
+// denoising costs about as much as a sample (docs/renderer.md); the samples between are
+// averaged and not shown, so the still converges nearly as fast as a plain one, and each
+// frame shown is better than the one before.
+inline bool shown_while_denoising(uint32_t samples, uint32_t last_shown, uint32_t target) {
+  const uint32_t step = last_shown / 4 > 1 ? last_shown / 4 : 1;
+  return samples <= 4 || samples >= target || samples >= last_shown + step;
+}
+
 // What a still being denoised holds beside its average, per pixel: the first sample's guides
 // and the open fractions' sums and sums of squares (StillAo).
 inline uint64_t denoise_bytes(int32_t width, int32_t height) {

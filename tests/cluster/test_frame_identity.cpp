@@ -29,6 +29,7 @@
 #include "codecs/dxt1.h"
 #include "codecs/jpeg.h"
 #include "renderer/accumulation.h"
+#include "renderer/denoise.h"
 #include "tests/cluster/serve_node.h"
 #include "tests/e2e/node_fixture.h"
 
@@ -84,12 +85,18 @@ Image direct(const SharedScene& s, size_t k, uint32_t seq) {
 }
 
 // The progressive still of camera `k` as a session refines it: samples 0..n-1 seeded by the
-// still's first frame `seed`, averaged as radiance (renderer/accumulation.h).
+// still's first frame `seed`, averaged as radiance (renderer/accumulation.h), and denoised as
+// the node denoises it (AO under a sky, the node's default threshold; frame_actor.cpp).
 Image direct_refined(const SharedScene& s, size_t k, uint32_t seed, uint32_t n) {
   Scene scene;
   auto rt = synced(s, k, scene);
   Accumulation acc;
   acc.reset(W, H, scene.environment().linear);
+  bool denoising = kAo > 0 && max_component(scene.environment().ambient) > 0;
+  StillAo ao;
+  std::vector<float> guides;
+  uint32_t shown = 0;
+  Image out;
   for (uint32_t i = 0; i < n; ++i) {
     RenderSettings settings;
     settings.ao_samples = kAo;
@@ -97,12 +104,29 @@ Image direct_refined(const SharedScene& s, size_t k, uint32_t seed, uint32_t n) 
     settings.frame = seed;
     settings.sample = i;
     settings.radiance = true;
+    settings.guides = denoising;
     TaskResult r;
     rt->render({0, 0, W, H}, settings, r);
     acc.add(r.radiance, W, H, 0, 0);
     acc.end_sample();
+    out = {};
+    if (denoising) {
+      if (i == 0) {
+        ao.reset(W, H);
+        guides = r.guides;
+      }
+      ao.add(r.guides);  // only the open fractions count after sample 0
+      if (i > 0 && shown_while_denoising(i + 1, shown, n)) {
+        shown = i + 1;
+        const std::vector<float> mean = acc.mean(), var = ao.variance_of_mean(guides);
+        if (estimated_psnr_db(mean, guides, var, W, H, acc.srgb()) < kDenoiseBelowDb)
+          out = Accumulation::encode(denoise(mean, guides, ao.mean(), var, W, H), W, H, acc.srgb());
+        else
+          denoising = false;
+      }
+    }
   }
-  return acc.average();
+  return out.rgba.empty() ? acc.average() : out;
 }
 
 std::vector<uint8_t> encoded(const Image& img, DisplayKind display) {

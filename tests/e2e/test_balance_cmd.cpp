@@ -321,18 +321,31 @@ TEST_CASE("tessera quality: a refining still gains PSNR sample by sample, the re
   CHECK(f.lines[1]["ao"].get<int>() == 4);
   CHECK(f.lines.back()["reference"]["cached"].get<bool>());
   // Denoised, the first samples come closer to the reference than plainly averaged ones (the
-  // pavilion's frame shows the sky's ambient light, so its AO is filtered).
-  Run d = run_tessera(base + " --mode progressive+denoise --max-samples 2 --seconds 60");
+  // pavilion's frame shows the sky's ambient light, so its AO is filtered); sample 1 is the
+  // plain frame, as the node shows it.
+  Run d = run_tessera(base + " --mode progressive+denoise --max-samples 4 --seconds 60");
   REQUIRE(d.rc == 0);
-  REQUIRE(d.lines.size() == 3);
+  REQUIRE(d.lines.size() == 5);
   CHECK(d.lines.back()["mode"].get<std::string>() == "progressive+denoise");
-  for (size_t i = 0; i < 2; ++i) {
+  CHECK(d.lines[0]["psnr_db"].get<double>() == p.lines[0]["psnr_db"].get<double>());
+  CHECK(!d.lines[0].contains("estimated_plain_db"));
+  for (size_t i = 1; i < 4; ++i) {
     INFO("sample " << i + 1 << ": plain " << p.lines[i]["psnr_db"].get<double>() << " dB, denoised "
                    << d.lines[i]["psnr_db"].get<double>() << " dB");
+    CHECK(d.lines[i]["denoised"].get<bool>());
+    CHECK(d.lines[i]["estimated_plain_db"].get<double>() < 36);
+    CHECK(d.lines[i]["plain_psnr_db"].get<double>() == p.lines[i]["psnr_db"].get<double>());
     CHECK(d.lines[i]["psnr_db"].get<double>() > p.lines[i]["psnr_db"].get<double>() + 0.5);
   }
+  // Past the threshold (here at once) the still is averaged plainly, as without the denoiser.
+  Run plain_after = run_tessera(base + " --mode progressive+denoise --denoise-below-db 1 --max-samples 3 --seconds 60");
+  REQUIRE(plain_after.rc == 0);
+  REQUIRE(plain_after.lines.size() == 4);
+  CHECK(!plain_after.lines[1]["denoised"].get<bool>());
+  for (size_t i = 0; i < 3; ++i) CHECK(plain_after.lines[i]["psnr_db"].get<double>() == p.lines[i]["psnr_db"].get<double>());
   for (const char* bad : {"--mode x", "--seconds 0", "--max-samples 0", "--reference-samples 70000", "--ao -1",
-                          "--denoise-iterations 11", "--mode progressive+denoise --denoise-sigma 0"}) {
+                          "--denoise-iterations 11", "--mode progressive+denoise --denoise-sigma 0",
+                          "--denoise-below-db 100"}) {
     INFO(bad);
     CHECK(run_tessera(base + " " + bad).rc != 0);
   }
