@@ -11,6 +11,7 @@
 import { SyncChannel } from './SyncChannel.js';
 import { JpegDisplay, S3tcDisplay, MjpegDisplay, VideoDisplay } from './FrameDisplay.js';
 import { hasS3TC, probeH264, warnOnce } from './Features.js';
+import { LinkProbe } from './LinkProbe.js';
 import { readRenderSettings, readVideoKbps, refineStatus } from './RenderSettings.js';
 import { accessToken, withToken, redact } from './AccessToken.js';
 import { pageBackground } from './PageBackground.js';
@@ -35,8 +36,9 @@ export const DISPLAYS = ['jpeg', 's3tc', 'mjpeg', 'h264', 'auto'];
 // The display for display="h264" or "auto", once WebCodecs has been asked (probeH264, once per
 // page): h264 when it decodes the node's stream, else jpeg. For "h264" that fallback is one
 // console warning per page naming the reason; "auto" falls back silently (JPEG is one of its
-// choices). "auto" does not measure the bandwidth: H.264 whenever the browser can decode it
-// (at the same picture quality its frames are a fraction of JPEG's, which helps on any link).
+// choices). For "auto", h264 means that H.264 may be used: the page starts with JPEG and
+// switches to H.264 when it measures that the link, not the node, bounds the JPEG frames
+// (LinkProbe.js, RemoteBackend.autoSwitch).
 export async function chooseDisplay(display) {
   if (display !== 'h264' && display !== 'auto') return display;
   const { ok, reason } = await probeH264();
@@ -98,13 +100,20 @@ export class RemoteBackend {
       onFrame: (f) => this.frame(f),
       onServerError: (e) => handler.setStatus(`server:${e.codeName}:${e.message}`, `⚠ server: ${e.codeName}: ${e.message}`, true),
       onStats: (s) => { this.stats = s; },
+      onRequest: (n) => { if (this.probe) this.probe.request(n, performance.now()); },
       onProgress: (sent, queued) => handler.setStatus('upload', queued && sent < queued
         ? `uploading scene: ${Math.round(100 * sent / queued)}% of ${(queued / 1048576).toFixed(1)} MB` : null),
     });
     // The display (and the handshake, which names it) waits for the H.264 probe when it matters;
     // the others start at once, as before.
-    if (display === 'h264' || display === 'auto') chooseDisplay(display).then((d) => this.start(d));
-    else this.start(display);
+    if (display === 'h264') chooseDisplay(display).then((d) => this.start(d));
+    else if (display === 'auto') {
+      // JPEG first; H.264 once the link is measured to hold JPEG back (where it decodes).
+      chooseDisplay(display).then((d) => {
+        if (d === 'h264') this.probe = new LinkProbe({ rate: this.channel.rate });
+        this.start('jpeg');
+      });
+    } else this.start(display);
   }
 
   // Shows frames of `display` and connects with it.
@@ -173,7 +182,26 @@ export class RemoteBackend {
     }
   }
 
+  // display="auto": the link holds the JPEG frames back (LinkProbe's figures): a new session
+  // with H.264, which needs a fraction of JPEG's bytes and which the node fits to the link
+  // (docs/protocol.md, "Bandwidth adaptation"). One console line says why; the page keeps
+  // H.264 from then on.
+  autoSwitch(v) {
+    this.probe = null;
+    console.info(`XML3D/Tessera: display="auto": JPEG frames came at ${v.fps.toFixed(1)}/s (${(v.kbps / 1000).toFixed(2)} Mbit/s) `
+      + `where the node gives ${v.nodeFps.toFixed(1)}/s: the link bounds them, switching to H.264`);
+    const doc = this.handler.container.ownerDocument;
+    this.display = 'h264';
+    this.useView(new VideoDisplay(doc, { onNeedKeyframe: (e) => this.needKeyframe(e) }));
+    this.channel.handshake.display = 'h264';
+    this.channel.restart();
+  }
+
   async frame(f) {
+    if (this.probe && f.encoding === 'jpeg' && !f.refined) {
+      const verdict = this.probe.got(f, performance.now());
+      if (verdict) { this.autoSwitch(verdict); return; }  // the next session's frames show
+    }
     try {
       if (f.encoding === 'jpeg' && (this.display === 's3tc' || this.display === 'h264')) {
         // The node answered JPEG after all: switch displays.

@@ -36,9 +36,9 @@ let refusalsWarned = false;
 export class SyncChannel {
   constructor({ url, handshake, settings = null, videoKbps = 0, rate = 30, highWater = 4 << 20, messageBytes = 1 << 20, references = true,
     onFrame = () => {}, onState = () => {}, onServerError = () => {}, onStats = () => {}, onProgress = () => {},
-    onReferencesAnswered = () => {} }) {
+    onReferencesAnswered = () => {}, onRequest = () => {} }) {
     Object.assign(this, { url, handshake, settings, videoKbps, rate, highWater, messageBytes, onFrame, onState, onServerError, onStats, onProgress,
-      onReferencesAnswered });
+      onReferencesAnswered, onRequest });
     this.sync = new SceneSync({ references });
     this.queue = [];          // {size, record: Promise|object}
     this.frameNumber = 0;
@@ -93,6 +93,20 @@ export class SyncChannel {
     const delay = Math.min(10000, 500 * 2 ** this.retry++);
     this.setState('disconnected', `${reason}; reconnecting in ${(delay / 1000).toFixed(1)} s`);
     this.reconnectTimer = setTimeout(() => this.connect(), delay);
+  }
+
+  // A new session at once (display="auto" switching to H.264 with a new handshake): the old
+  // connection is dropped unheard, and the scene goes to the new session as after a reconnect.
+  restart() {
+    if (this.closed) return;
+    const ws = this.ws;
+    this.ws = null;
+    this.endWait();
+    clearInterval(this.timer);
+    this.timer = null;
+    clearTimeout(this.reconnectTimer);
+    if (ws) { ws.onmessage = null; ws.onclose = null; ws.close(); }
+    this.connect();
   }
 
   close() {
@@ -352,5 +366,6 @@ export class SyncChannel {
     this.renderWanted = false;
     this.outstanding++;
     this.send(encodeClient([...records, { type: 'render', frame: ++this.frameNumber }]));
+    this.onRequest(this.frameNumber);
   }
 }

@@ -10,6 +10,7 @@ import { resetFeatures } from '../../../src/net/Features.js';
 import { RemoteBackend, chooseDisplay } from '../../../src/net/RemoteBackend.js';
 import { readVideoKbps } from '../../../src/net/RenderSettings.js';
 import { SyncChannel } from '../../../src/net/SyncChannel.js';
+import { LinkProbe } from '../../../src/net/LinkProbe.js';
 import { FakeSocket } from './fake_socket.js';
 
 // An Annex B access unit with NAL units of the given types (4-byte start codes, or 3-byte ones
@@ -375,4 +376,68 @@ test('a bad video-kbps warns once and shows on the status line like ao-samples; 
     assert.deepEqual(ws2.sent.flat().filter((r) => r.type === 'video'), [], 'the video record is for h264 sessions only');
     j.dispose();
   });
+});
+
+// display="auto" (docs/web-client.md, "H.264 display"): JPEG first where H.264 decodes; a link
+// that holds the JPEG frames back switches the page to H.264 in a new session, with one console
+// line; a fast one changes nothing and says nothing.
+const jpegFrame = (frame) => ({ type: 'frame', frame, width: 8, height: 8, encoding: 'jpeg', refined: false, samples: 1,
+  timings: { kernel: 0, rendering: 1, sat: 0, tiling: 0, pipeline: 0, encode: 1 }, payload: new Uint8Array(4000) });
+async function autoPage(make, gapMs, frames) {
+  const { handler } = backendPage('display="auto" sync-rate="100"');
+  const b = make(handler);
+  await until(() => FakeSocket.last && FakeSocket.last.sent.length === 1, 'handshake');
+  const ws = FakeSocket.last;
+  assert.equal(ws.sent[0][0].display, 'jpeg', 'JPEG first');
+  assert.ok(b.probe, 'measuring');
+  b.probe = new LinkProbe({ rate: 100, windowMs: 150, minFrames: 4 });  // a short window for the test
+  ws.reply([{ ...REPLY, display: 'jpeg' }]);
+  await new Promise((r) => setTimeout(r, 20));
+  for (let i = 0; i < frames && b.display === 'jpeg'; i++) {
+    b.channel.outstanding = 0;
+    b.channel.requestRender();
+    const n = b.channel.frameNumber;
+    await new Promise((r) => setTimeout(r, gapMs));
+    ws.reply([jpegFrame(n)]);
+  }
+  return { b, ws };
+}
+
+test('display="auto" starts with JPEG; a link that holds the frames back switches to H.264 in a new session, with one console line', async () => {
+  const saved = console.info;
+  const infos = [];
+  console.info = (m) => infos.push(m);
+  try {
+    await withBrowser(async (warnings, make) => {
+      const { b, ws } = await autoPage(make, 40, 12);  // 25 frames/s where the node gives 100
+      assert.equal(b.display, 'h264');
+      assert.equal(b.frameView.constructor.name, 'VideoDisplay');
+      assert.equal(b.probe, null);
+      assert.equal(infos.length, 1, infos.join('\n'));
+      assert.match(infos[0], /^XML3D\/Tessera: display="auto": JPEG frames came at \d+\.\d\/s \([\d.]+ Mbit\/s\) where the node gives 100\.0\/s: the link bounds them, switching to H\.264$/);
+      await until(() => FakeSocket.last !== ws && FakeSocket.last.sent.length === 1, 'a new session');
+      assert.equal(FakeSocket.last.sent[0][0].display, 'h264');
+      assert.equal(ws.readyState, 3, 'the JPEG session is closed');
+      assert.deepEqual(warnings, []);
+    });
+  } finally {
+    console.info = saved;
+  }
+});
+
+test('display="auto" on a link that keeps up stays with JPEG and says nothing', async () => {
+  const saved = console.info;
+  const infos = [];
+  console.info = (m) => infos.push(m);
+  try {
+    await withBrowser(async (warnings, make) => {
+      const { b, ws } = await autoPage(make, 2, 120);  // as fast as the node gives them
+      assert.ok(b.probe.windows >= 1, 'measured');
+      assert.equal(b.display, 'jpeg');
+      assert.equal(FakeSocket.last, ws);
+      assert.deepEqual(infos, []);
+    });
+  } finally {
+    console.info = saved;
+  }
 });
