@@ -85,7 +85,6 @@ struct frame_state {
   // since its sample 0, composed here, where the tiles of all nodes meet.
   Accumulation acc;
   std::unique_ptr<Denoising> dn;  // FrameStart::denoise: the still's denoising (none: plain)
-  bool denoising = false;         // a worker has acc and dn (moved into its job)
   static inline const char* name = "tessera.frame";
 };
 using self_ptr = frame_actor::stateful_pointer<frame_state>;
@@ -208,7 +207,6 @@ void denoise_and_show(self_ptr self) {
   job->below_db = st.settings->denoise_below_db;
   job->width = st.cur.meta.width;
   job->height = st.cur.meta.height;
-  st.denoising = true;
   auto work = [job](caf::event_based_actor* a) -> caf::behavior {
     return {[=](denoise_atom) {
       a->quit();
@@ -220,7 +218,6 @@ void denoise_and_show(self_ptr self) {
   auto worker = st.settings->detached ? self->spawn<caf::detached + caf::hidden>(work) : self->spawn<caf::hidden>(work);
   auto back = [self, job](std::string error) {
     auto& st = self->state;
-    st.denoising = false;
     st.acc = std::move(job->acc);
     st.dn = std::move(job->dn);
     FrameMeta& meta = st.cur.meta;

@@ -61,7 +61,7 @@ md = ["# Image quality against render time: fixed frames and refining stills", "
       "  linear radiance (`renderer/sampling.h`, `renderer/accumulation.h`).",
       "- **progressive+denoise**: the same still, denoised as the node denoises it",
       "  (`renderer/denoise.h`: the AO open fraction filtered by SVGF's spatial filter, guided by normal",
-      "  and distance) while the plain average's estimated PSNR is below 36 dB, and only at the steps",
+      "  and distance) while the plain average's estimated PSNR is below 40 dB, and only at the steps",
       "  the node shows (samples 1-4, then each a quarter more); the samples between and the",
       "  denoising count in the time. Past the threshold it is averaged plainly.", "",
       "The sample counts are exact (the sequences are deterministic); the seconds are this machine's",
