@@ -253,7 +253,12 @@ test('display=auto starts with JPEG where WebCodecs decodes H.264, stays with it
     assert.equal(switched, 'h264');
     assert.equal(lines.length, 1, page.logs.join('\n'));
     assert.match(lines[0], /^info: XML3D\/Tessera: display="auto": JPEG frames came at [\d.]+\/s \([\d.]+ Mbit\/s\) where the node gives [\d.]+\/s: the link bounds them, switching to H\.264$/);
-    // The new session shows H.264 frames of the view.
+    // The new session shows H.264 frames of the view. The view may be camera 0 already (the
+    // moves cycle 0, 1, 2), and the new session's first frame may have come: move it away and
+    // wait for that frame, so that setting camera 0 is a change whose frame comes after n.
+    await page.evaluate(() => window.setCameraFrame(1));
+    const away = await frameCount(page);
+    for (const t1 = Date.now(); Date.now() - t1 < 20000 && await frameCount(page) <= away;) await new Promise((r) => setTimeout(r, 50));
     const n = await frameCount(page);
     await page.evaluate(() => window.setCameraFrame(0));
     const h = await untilMatches(page, 0, MATCH_DB.h264, { after: n });
