@@ -20,6 +20,7 @@
 
 #include "net/http.h"
 #include "tests/e2e/node_fixture.h"
+#include "tests/e2e/raw_ws.h"
 
 using namespace tessera;
 using namespace tessera::test;
@@ -95,21 +96,8 @@ struct RawSocket {
   }
   // One binary WebSocket message, masked as a client must.
   bool send_ws(const std::vector<uint8_t>& payload) {
-    std::vector<uint8_t> f{0x82};
-    const size_t n = payload.size();
-    if (n < 126) {
-      f.push_back(uint8_t(0x80 | n));
-    } else if (n < 65536) {
-      f.push_back(0x80 | 126);
-      f.push_back(uint8_t(n >> 8));
-      f.push_back(uint8_t(n));
-    } else {
-      f.push_back(0x80 | 127);
-      for (int s = 56; s >= 0; s -= 8) f.push_back(uint8_t(uint64_t(n) >> s));
-    }
     const uint8_t mask[4] = {0x12, 0x34, 0x56, 0x78};
-    f.insert(f.end(), mask, mask + 4);
-    for (size_t i = 0; i < n; ++i) f.push_back(payload[i] ^ mask[i % 4]);
+    const std::vector<uint8_t> f = masked_ws_frame(payload, mask);
     return write(f.data(), f.size());
   }
 };

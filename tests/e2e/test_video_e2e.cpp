@@ -21,6 +21,7 @@
 
 #include "codecs/h264.h"
 #include "tests/e2e/node_fixture.h"
+#include "tests/e2e/raw_ws.h"
 
 using namespace tessera;
 using namespace tessera::test;
@@ -223,21 +224,8 @@ struct ThrottledClient {
   }
   // One binary message, masked as a client must.
   bool send(const std::vector<uint8_t>& payload) {
-    std::vector<uint8_t> f{0x82};
-    const size_t n = payload.size();
-    if (n < 126) {
-      f.push_back(uint8_t(0x80 | n));
-    } else if (n < 65536) {
-      f.push_back(0x80 | 126);
-      f.push_back(uint8_t(n >> 8));
-      f.push_back(uint8_t(n));
-    } else {
-      f.push_back(0x80 | 127);
-      for (int s = 56; s >= 0; s -= 8) f.push_back(uint8_t(uint64_t(n) >> s));
-    }
     const uint8_t mask[4] = {0x3a, 0x5c, 0x71, 0x0e};
-    f.insert(f.end(), mask, mask + 4);
-    for (size_t i = 0; i < n; ++i) f.push_back(payload[i] ^ mask[i % 4]);
+    const std::vector<uint8_t> f = masked_ws_frame(payload, mask);
     return write(f.data(), f.size());
   }
   bool send(const std::vector<protocol::ClientRecord>& recs) { return send(protocol::encode(recs)); }
