@@ -545,11 +545,13 @@ CAF_TEST(a still with AO under a sky is denoised while noisy and shows fewer and
 
 CAF_TEST(a still is denoised until the estimate of its plain average reaches the threshold and plain after) {
   settings->refine_samples = 24;  // the default threshold: kDenoiseBelowDb
-  std::mutex mu;
-  std::vector<Event> shown;
-  settings->log = [&](const Event& e) {
-    std::lock_guard<std::mutex> lock(mu);
-    if (e.kind == Ev::frame) shown.push_back(e);
+  // Held by the log itself: the fixture's teardown still logs (the session's end) after this
+  // body's locals are gone.
+  auto mu = std::make_shared<std::mutex>();
+  auto logged = std::make_shared<std::vector<Event>>();
+  settings->log = [mu, logged](const Event& e) {
+    std::lock_guard<std::mutex> lock(*mu);
+    if (e.kind == Ev::frame) logged->push_back(e);
   };
   std::vector<ClientRecord> recs = tiny_scene();  // the fixture's, and the corner
   for (auto& r : corner_scene()) recs.push_back(r);
@@ -557,6 +559,11 @@ CAF_TEST(a still is denoised until the estimate of its plain average reaches the
   client({RenderRequest{1}});
   run();
   auto frames = sink->all<Frame>();
+  std::vector<Event> shown;
+  {
+    std::lock_guard<std::mutex> lock(*mu);
+    shown = *logged;
+  }
   CAF_REQUIRE_EQUAL(frames.size(), shown.size());
   const std::vector<Image> plain = plain_averages(recs, 1, 24);
   CAF_CHECK_EQUAL(frames.back().samples, 24u);
