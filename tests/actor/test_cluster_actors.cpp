@@ -18,6 +18,7 @@
 
 #include "actors/node.h"
 #include "actors/checks.h"
+#include "renderer/renderer.h"
 #include "actors/subtree_state.h"
 #include "protocol/protocol.h"
 #include "protocol/scene_records.h"
@@ -854,12 +855,50 @@ CAF_TEST(check_tile and check_nodes reject impossible tiles and node lists) {
   CAF_CHECK(bad_radiance(std::numeric_limits<float>::infinity()));
   lit.radiance.pop_back();
   CAF_CHECK(!check_tile(lit, 7, task, pl, kSize, kSize, true).empty());
+  lit.radiance.assign(size_t(task.area()) * 12, 0);
+  // A denoised still's tiles carry its guides: all 8 floats a pixel (sample 0) or the open
+  // fraction alone, each in its range; missing, unasked or out of range is an impossible tile.
+  TileResult guided = lit;
+  std::vector<float> g(size_t(task.area()) * kGuideFloats, 0.0f);
+  for (size_t p = 0; p < size_t(task.area()); ++p) g[p * kGuideFloats + 2] = 1, g[p * kGuideFloats + 3] = 2, g[p * kGuideFloats + 7] = 0.5f;
+  guided.guides.resize(g.size() * 4);
+  std::memcpy(guided.guides.data(), g.data(), guided.guides.size());
+  CAF_CHECK_EQUAL(check_tile(guided, 7, task, pl, kSize, kSize, true, kAllGuides), "");
+  CAF_CHECK(!check_tile(guided, 7, task, pl, kSize, kSize, true, kOpenGuides).empty());  // the wrong size
+  CAF_CHECK(!check_tile(guided, 7, task, pl, kSize, kSize, true).empty());               // not asked for
+  CAF_CHECK(!check_tile(lit, 7, task, pl, kSize, kSize, true, kAllGuides).empty());     // asked for and missing
+  auto bad_guide = [&](size_t at, float v) {
+    TileResult t = guided;
+    std::memcpy(t.guides.data() + (5 * kGuideFloats + at) * 4, &v, 4);
+    return !check_tile(t, 7, task, pl, kSize, kSize, true, kAllGuides).empty();
+  };
+  CAF_CHECK(!bad_guide(3, -1.0f));  // a miss
+  CAF_CHECK(bad_guide(0, std::nanf("")));
+  CAF_CHECK(bad_guide(3, -0.5f));
+  CAF_CHECK(bad_guide(4, -1.0f));
+  CAF_CHECK(bad_guide(7, 1.5f));
+  CAF_CHECK(bad_guide(6, std::numeric_limits<float>::infinity()));
+  TileResult open = lit;
+  open.guides.assign(size_t(task.area()) * 4, 0);
+  CAF_CHECK_EQUAL(check_tile(open, 7, task, pl, kSize, kSize, true, kOpenGuides), "");
+  const float over = 2.0f;
+  std::memcpy(open.guides.data() + 8, &over, 4);
+  CAF_CHECK(!check_tile(open, 7, task, pl, kSize, kSize, true, kOpenGuides).empty());
   // Radiance is asked of the ray tracer only.
   RenderBatch b;
   b.width = b.height = 16;
   b.tasks = {Rect{0, 0, 16, 16}};
   b.radiance = true;
   CAF_CHECK_EQUAL(check_batch(b, Limits{}), "");
+  b.guides = kAllGuides;
+  CAF_CHECK_EQUAL(check_batch(b, Limits{}), "");
+  b.guides = 3;  // no such kind
+  CAF_CHECK(!check_batch(b, Limits{}).empty());
+  b.guides = kOpenGuides;
+  b.radiance = false;  // guides serve a refining still
+  CAF_CHECK(!check_batch(b, Limits{}).empty());
+  b.guides = kNoGuides;
+  b.radiance = true;
   b.renderer = uint8_t(RendererKind::rasterizer);
   CAF_CHECK(!check_batch(b, Limits{}).empty());
   CAF_CHECK_EQUAL(check_nodes({NodeInfo{"a:1", 4, 1.5}}), "");
