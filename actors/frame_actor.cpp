@@ -35,7 +35,6 @@ struct DenoiseJob {
   Accumulation acc;
   std::unique_ptr<Denoising> dn;
   double below_db = 0;
-  int32_t width = 0, height = 0;
   Image image;          // the frame shown: denoised, or the plain average
   double estimate_db = 0, ms = 0;
   bool denoised = false;
@@ -46,16 +45,10 @@ struct DenoiseJob {
 void run_denoise(DenoiseJob& j) {
   const auto t0 = std::chrono::steady_clock::now();
   try {
-    const Denoising& dn = *j.dn;
-    const std::vector<float> mean = j.acc.mean();
-    const std::vector<float> var = dn.ao.variance_of_mean(dn.guides);
-    j.estimate_db = estimated_psnr_db(mean, dn.guides, var, j.width, j.height, j.acc.srgb());
-    j.denoised = j.estimate_db < j.below_db;
-    if (j.denoised)
-      j.image = Accumulation::encode(denoise(mean, dn.guides, dn.ao.mean(), var, j.width, j.height), j.width,
-                                     j.height, j.acc.srgb());
-    else
-      j.image = j.acc.average();
+    DenoisedStep step = denoise_step(j.acc, j.dn->guides, j.dn->ao, j.below_db);
+    j.image = std::move(step.image);
+    j.estimate_db = step.estimate_db;
+    j.denoised = step.denoised;
   } catch (const std::exception& e) {
     j.error = e.what();
   }
@@ -205,8 +198,6 @@ void denoise_and_show(self_ptr self) {
   job->acc = std::move(st.acc);
   job->dn = std::move(st.dn);
   job->below_db = st.settings->denoise_below_db;
-  job->width = st.cur.meta.width;
-  job->height = st.cur.meta.height;
   auto work = [job](caf::event_based_actor* a) -> caf::behavior {
     return {[=](denoise_atom) {
       a->quit();

@@ -278,14 +278,13 @@ int run(const std::vector<std::string>& argv) {
       double estimate = -1;  // the plain average's estimated PSNR; -1: not estimated
       Image avg;
       if (denoising && acc.samples() >= 2) {  // sample 0 is the plain frame, as in the node
-        const std::vector<float> mean = acc.mean(), var = still_ao.variance_of_mean(guides);
-        estimate = estimated_psnr_db(mean, guides, var, W, H, srgb);
-        if (estimate < denoise_below_db)
-          avg = Accumulation::encode(denoise(mean, guides, still_ao.mean(), var, W, H, denoise_options), W, H, srgb);
-        else
-          denoising = false;
+        DenoisedStep step = denoise_step(acc, guides, still_ao, denoise_below_db, denoise_options);
+        estimate = step.estimate_db;
+        denoising = step.denoised;
+        avg = std::move(step.image);
+      } else {
+        avg = acc.average();
       }
-      if (avg.rgba.empty()) avg = acc.average();
       const double dt = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
       elapsed_s += dt;
       step_ms.push_back(dt * 1e3);

@@ -344,4 +344,16 @@ double estimated_psnr_db(const std::vector<float>& mean, const std::vector<float
   return -10.0 * std::log10(sum / double(pixels * 3));
 }
 
+DenoisedStep denoise_step(const Accumulation& acc, const std::vector<float>& guides, const StillAo& ao,
+                          double below_db, const DenoiseOptions& options) {
+  const std::vector<float> mean = acc.mean(), var = ao.variance_of_mean(guides);
+  DenoisedStep out;
+  out.estimate_db = estimated_psnr_db(mean, guides, var, acc.width(), acc.height(), acc.srgb());
+  out.denoised = out.estimate_db < below_db;
+  out.image = out.denoised ? Accumulation::encode(denoise(mean, guides, ao.mean(), var, acc.width(), acc.height(), options),
+                                                  acc.width(), acc.height(), acc.srgb())
+                           : acc.average();
+  return out;
+}
+
 }  // namespace tessera

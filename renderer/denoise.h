@@ -19,6 +19,8 @@
 #include <cstdint>
 #include <vector>
 
+#include "renderer/accumulation.h"
+
 namespace tessera {
 
 constexpr int kDenoiseGuideFloats = 8;  // renderer.h's kGuideFloats (checked in denoise.cpp)
@@ -85,6 +87,17 @@ inline bool shown_while_denoising(uint32_t samples, uint32_t last_shown, uint32_
   const uint32_t step = last_shown / 4 > 1 ? last_shown / 4 : 1;
   return samples <= 4 || samples >= target || samples >= last_shown + step;
 }
+
+// One shown step of a still being denoised, by the node's rule (actors/frame_actor.cpp): the
+// plain average's estimated PSNR and, below `below_db`, the average denoised with the still's
+// first guides and open fractions, else the plain average; encoded as the renderer encodes.
+struct DenoisedStep {
+  Image image;
+  double estimate_db = 0;
+  bool denoised = false;
+};
+DenoisedStep denoise_step(const Accumulation& acc, const std::vector<float>& guides, const StillAo& ao,
+                          double below_db, const DenoiseOptions& options = {});
 
 // What a still being denoised holds beside its average, per pixel: the first sample's guides
 // and the open fractions' sums and sums of squares (StillAo).

@@ -118,11 +118,9 @@ Image direct_refined(const SharedScene& s, size_t k, uint32_t seed, uint32_t n) 
       ao.add(r.guides);  // only the open fractions count after sample 0
       if (i > 0 && shown_while_denoising(i + 1, shown, n)) {
         shown = i + 1;
-        const std::vector<float> mean = acc.mean(), var = ao.variance_of_mean(guides);
-        if (estimated_psnr_db(mean, guides, var, W, H, acc.srgb()) < kDenoiseBelowDb)
-          out = Accumulation::encode(denoise(mean, guides, ao.mean(), var, W, H), W, H, acc.srgb());
-        else
-          denoising = false;
+        DenoisedStep step = denoise_step(acc, guides, ao, kDenoiseBelowDb);
+        denoising = step.denoised;
+        if (denoising) out = std::move(step.image);
       }
     }
   }
