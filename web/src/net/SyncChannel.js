@@ -5,8 +5,10 @@
 // depth) go as a settings record after the handshake and again whenever they change, the
 // refinement target (samples per pixel of a still) likewise as a refine record, and the frame
 // budget (milliseconds an interactive frame should take) as a budget record, and the H.264
-// display's bitrate as a video record (only in an h264 session). Frames the node
-// sends unasked while it refines a still (`refined`) answer no render request. Buffers and
+// display's bitrate as a video record (only in an h264 session). A frame answers the render
+// request of its frame number and every earlier one, refined or not: the node merges requests
+// and replaces a rendered frame that waits for a slow link by a newer one (its refinement, or
+// a later request's), so counting frames would lose requests for good. Buffers and
 // textures the node can load from their URLs go as references (docs/protocol.md, "References";
 // off with the option `references: false`): in messages of their own, before the rest of the
 // scene change, which waits for the node's answers; a refused one is uploaded instead. On
@@ -41,8 +43,8 @@ export class SyncChannel {
       onReferencesAnswered, onRequest });
     this.sync = new SceneSync({ references });
     this.queue = [];          // {size, record: Promise|object}
-    this.frameNumber = 0;
-    this.outstanding = 0;
+    this.frameNumber = 0;     // of the last render request sent
+    this.answered = 0;        // the highest frame number a frame has come back with
     this.renderWanted = false;
     this.state = 'idle';
     this.retry = 0;
@@ -169,7 +171,7 @@ export class SyncChannel {
         this.endWait();
         this.sync.reset();
         this.queue = [];
-        this.outstanding = 0;
+        this.answered = this.frameNumber;  // the old session's requests are gone with it
         this.dirty = true;
         this.setState('ready', `${r.serverVersion || 'Tessera'}, ${r.nodes} node${r.nodes > 1 ? 's' : ''}, ${r.renderer}, ${r.display}`);
         this.settingsDirty = !!this.settings;
@@ -180,9 +182,10 @@ export class SyncChannel {
         this.timer = setInterval(() => this.tick(), 1000 / this.rate);
         this.tick();
       } else if (r.type === 'frame') {
-        // A refined frame is the node's unasked refinement of the last requested one (same
-        // frame number): it answers no request, but is shown like any other.
-        if (!r.refined) this.outstanding = Math.max(0, this.outstanding - 1);
+        // A frame answers its request and every earlier one, whether it is the requested frame
+        // or a refinement of it (same frame number; the requested one may have been replaced
+        // on its way by it) or a later request's (earlier ones merged or replaced).
+        if (r.frame > this.answered && r.frame <= this.frameNumber) this.answered = r.frame;
         this.onFrame(r);
         if (this.renderWanted && this.outstanding < MAX_OUTSTANDING_RENDERS) this.requestRender();
       } else if (r.type === 'error') {
@@ -355,6 +358,9 @@ export class SyncChannel {
     if (w) w.done();
   }
 
+  // Render requests sent that no frame has answered yet.
+  get outstanding() { return this.frameNumber - this.answered; }
+
   // `records`: records to send first, in the same message (a keyframe request); they go at
   // once even when the render request itself has to wait for a frame.
   requestRender(records = []) {
@@ -364,7 +370,6 @@ export class SyncChannel {
       return;
     }
     this.renderWanted = false;
-    this.outstanding++;
     this.send(encodeClient([...records, { type: 'render', frame: ++this.frameNumber }]));
     this.onRequest(this.frameNumber);
   }

@@ -341,11 +341,11 @@ async function openPage(spec, mode) {
   page.on('pageerror', (e) => page.logs.push(`pageerror: ${e.message}`));
   // Server mode without a frame budget (frame-budget="0" on every <xml3d> the page's markup
   // makes, before the client reads it): the probes check the settled picture, which must not
-  // be a scaled interactive frame. Under load (a full CTest run on two cores) the xml3d-api
-  // page twice showed a full-resolution picture of an earlier state of its animation 10 s
-  // after the last change, not the final one (an open finding; its last frames were probably
-  // scaled with no still after them). The budget has tests of its own (test_node_e2e [budget],
-  // remote.test.js).
+  // be a scaled interactive frame. The budget has tests of its own (test_node_e2e [budget],
+  // remote.test.js). (Under load, a full CTest run on two cores, the xml3d-api page showed an
+  // earlier state of its animation 10 s after the last change three times: the client counted
+  // frames, not frame numbers, as answers, and the node had replaced requested frames by newer
+  // ones; SyncChannel.test.js has that case now.)
   if (mode === 'server') {
     await page.addInitScript(() => {
       new MutationObserver((records) => {

@@ -231,7 +231,7 @@ test('after a reconnect the refine record is sent again; without a target none i
   assert.equal(b.all().filter((r) => r.type === 'refine').length, 0);
 }));
 
-test('refined frames are shown but answer no render request', () => withFakeSocket(async (opened) => {
+test('refined frames are shown, and answer the request of their frame number (the requested frame may have been replaced by them)', () => withFakeSocket(async (opened) => {
   const shown = [];
   const { ch, ws, all } = await connected({ settings: { aoSamples: 0, maxDepth: 4, refineSamples: 8 }, onFrame: (f) => shown.push(f) });
   opened.push(ch);
@@ -243,18 +243,50 @@ test('refined frames are shown but answer no render request', () => withFakeSock
   assert.equal(ch.renderWanted, true);
   const requests = () => all().filter((r) => r.type === 'render').length;
   const before = requests();
-  ws.reply([frameRecord(1, { refined: true, samples: 2 }), frameRecord(1, { refined: true, samples: 3 })]);
-  assert.equal(ch.outstanding, 2, 'refined frames do not count as answers');
-  assert.equal(ch.renderWanted, true);
-  assert.equal(requests(), before, 'no request is sent for them');
-  assert.deepEqual(shown.map((f) => [f.frame, f.refined, f.samples]), [[1, true, 2], [1, true, 3]]);
   ws.reply([frameRecord(1)]);  // the answer to request 1
   assert.equal(ch.outstanding, 2, 'the waiting request went out');
   assert.equal(ch.renderWanted, false);
   assert.equal(requests(), before + 1);
-  ws.reply([frameRecord(2), frameRecord(3), frameRecord(3, { refined: true, samples: 2 })]);
+  // Frame 2 and its refinements: the refinements of a request already answered answer nothing more.
+  ws.reply([frameRecord(2), frameRecord(2, { refined: true, samples: 2 }), frameRecord(2, { refined: true, samples: 3 })]);
+  assert.equal(ch.outstanding, 1);
+  assert.equal(requests(), before + 1, 'no request is sent for refined frames');
+  // Frame 3 reached the client only as its refinement: the node's display replaced the
+  // requested frame, which waited for the link, by the next sample. It answers request 3.
+  ws.reply([frameRecord(3, { refined: true, samples: 2 })]);
   assert.equal(ch.outstanding, 0);
-  assert.equal(shown.length, 6);
+  assert.deepEqual(shown.map((f) => [f.frame, !!f.refined, f.samples]),
+    [[1, false, 1], [2, false, 1], [2, true, 2], [2, true, 3], [3, true, 2]]);
+}));
+
+test('a frame answers every earlier request too: after requests merged by the node and frames replaced on the way, the last change is still rendered', () => withFakeSocket(async (opened) => {
+  // The stuck state this guards against: each lost answer used to leave a request counted as
+  // outstanding for good, and after two the channel held every later change back (the page
+  // showed an earlier state of its animation for ever).
+  const { ch, ws, all } = await connected({ settings: { aoSamples: 0, maxDepth: 4, refineSamples: 8 } });
+  opened.push(ch);
+  const requests = () => all().filter((r) => r.type === 'render').map((r) => r.frame);
+  ws.reply([frameRecord(1)]);
+  assert.equal(ch.outstanding, 0);
+  for (let round = 0; round < 5; round++) {
+    ch.requestRender();
+    ch.requestRender();
+    ch.requestRender();  // waits: two outstanding
+    assert.equal(ch.renderWanted, true);
+    const last = ch.frameNumber;
+    // Only the newest request's refinement comes back: the earlier frame was replaced.
+    ws.reply([frameRecord(last, { refined: true, samples: 2 })]);
+    assert.equal(ch.renderWanted, false, `round ${round}: the waiting request went out`);
+    assert.equal(ch.outstanding, 1);
+    ws.reply([frameRecord(ch.frameNumber)]);
+    assert.equal(ch.outstanding, 0, `round ${round}`);
+  }
+  // A frame number the client never asked for (a confused node) answers nothing it did not send.
+  ws.reply([frameRecord(ch.frameNumber + 7)]);
+  assert.equal(ch.outstanding, 0);
+  ch.requestRender();
+  assert.equal(ch.outstanding, 1);
+  assert.equal(requests().at(-1), ch.frameNumber);
 }));
 
 test('the budget record goes in the first message after the handshake reply, with the settings and the refine record, and again when it changes', () => withFakeSocket(async (opened) => {

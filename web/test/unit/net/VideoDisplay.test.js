@@ -394,7 +394,6 @@ async function autoPage(make, gapMs, frames) {
   ws.reply([{ ...REPLY, display: 'jpeg' }]);
   await new Promise((r) => setTimeout(r, 20));
   for (let i = 0; i < frames && b.display === 'jpeg'; i++) {
-    b.channel.outstanding = 0;
     b.channel.requestRender();
     const n = b.channel.frameNumber;
     await new Promise((r) => setTimeout(r, gapMs));
