@@ -9,6 +9,7 @@
 #include "app/bench_kernels.h"
 #include "app/command.h"
 #include "app/common.h"
+#include "renderer/embree_device.h"
 #include "renderer/rasterizer.h"
 #include "renderer/raytracer.h"
 
@@ -19,6 +20,7 @@ const char* kHelp =
     "tessera bench --scene S.gltf --camera-loop L.json [--frames N] [--step K] [--size W H]\n"
     "              [--ao N] [--depth D] [--shadows 0|1] [--threads T] [--warmup W] [--reps R]\n"
     "              [--compare bare|specialised|costmap|disturbance|breakdown] [--plain] [--renderer raytracer|rasterizer]\n"
+    "              [--bvh-quality high|medium]\n"
     "Replays the camera loop (every K-th frame with --step K) and prints one JSON line per frame:\n"
     "kernel_ms (sum of the cost map), rendering_ms (wall), rays by kind and Mrays/s, then a summary\n"
     "line with medians and conditions. --compare adds, in the same run and per frame (with --reps R\n"
@@ -289,6 +291,7 @@ int run(const std::vector<std::string>& argv) {
               settings.max_depth, median(kernel), median(rendering), median(rate), scene.triangle_count(),
               feat.secondary ? "true" : "false", feat.textures ? "true" : "false", feat.alpha_masks ? "true" : "false",
               rt.plain_kernel(settings) ? "specialised" : "general", json_str(cpu_model()).c_str(), json_str(isa_name(pl)).c_str(), pl.w, pl.h, threads);
+  std::printf(", \"bvh_quality\": \"%s\"", EmbreeDevice::high_quality_bvh() ? "high" : "medium");
   std::printf(", \"disturbed_packets\": %llu", (unsigned long long)disturbed_packets);
   // Where loading went: tinygltf (JSON and buffers), the textures' images (decoded in
   // parallel), the scene model, and the ray tracer's first sync (Embree BVHs, textures).

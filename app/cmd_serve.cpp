@@ -143,6 +143,7 @@ int run(const std::vector<std::string>& argv) {
   // The ray tracers' Embree device lives as long as the node, and with it the BVHs that sessions
   // share (renderer/geometry_cache.h): a later visitor of a scene finds its meshes built.
   EmbreeDevice::set_geometry_cache_limit(uint64_t(cfg.geometry_cache_mb) << 20);
+  EmbreeDevice::set_high_quality_bvh(cfg.bvh_quality == "high");
   std::shared_ptr<EmbreeDevice> embree;
   if (cfg.renders) embree = EmbreeDevice::acquire();
   if (renderer != "client")

@@ -7,6 +7,7 @@
 #include <fstream>
 #include <thread>
 
+#include "renderer/embree_device.h"
 #include "renderer/rasterizer.h"
 #include "renderer/raytracer.h"
 
@@ -90,6 +91,9 @@ SceneSetup load_scene(Args& args, int default_w, int default_h, LoopOption loop_
   std::string loop = args.str("--camera-loop");
   if (loop_option == LoopOption::required && loop.empty()) throw std::invalid_argument("--camera-loop is required");
   bool plain = args.flag("--plain");
+  const std::string bvh = args.str("--bvh-quality", "high");
+  if (bvh != "high" && bvh != "medium") throw std::invalid_argument("--bvh-quality must be high or medium, not '" + bvh + "'");
+  EmbreeDevice::set_high_quality_bvh(bvh == "high");
   s.loaded = load_gltf(s.scene_path);
   if (plain) {  // strip every optional shading feature (for kernel comparisons)
     Scene& sc = s.loaded.scene;

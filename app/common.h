@@ -27,7 +27,8 @@ std::string read_renderer_kind(Args& args);
 // A renderer of that kind ("raytracer" or "rasterizer").
 std::unique_ptr<Renderer> make_renderer(const std::string& kind);
 
-// Loads --scene (+ optional --camera-loop), sets the resolution from --size W H.
+// Loads --scene (+ optional --camera-loop), sets the resolution from --size W H, and the
+// quality of the meshes' BVHs from --bvh-quality high|medium (default high).
 struct SceneSetup {
   LoadedScene loaded;
   CameraLoop loop;     // empty frames when no loop was given

@@ -105,6 +105,8 @@ NodeConfig::NodeConfig() {
   custom_options_.add(string_option(host, "tessera", "host", "listen address (default 127.0.0.1: local only)"));
   custom_options_.add(string_option(web_root, "tessera", "web-root", "folder served over HTTP (web client, demo pages)"));
   custom_options_.add(string_option(scene, "tessera", "scene", "glTF scene given to clients that connect with an empty scene"));
+  custom_options_.add(string_option(bvh_quality, "tessera", "bvh-quality",
+                                    "meshes' BVHs: high (fastest frames) or medium (builds 2.5-5x faster, docs/results/load.md)"));
   custom_options_.add(string_option(token_key, "tessera", "token-key", "key file of signed access tokens (tessera token); a token is then required"));
   custom_options_.add(string_option(token_file, "tessera", "token-file", "static access tokens, one per line; a token is then required"));
   custom_options_.add(string_option(tls_cert, "tessera", "tls-cert", "PEM certificate (chain) of the port: HTTPS and WSS only (with tls-key)"));
@@ -349,6 +351,8 @@ void NodeConfig::set_admission(ServerOptions& o) const {
   if (asset_cache_mb < 0) throw std::invalid_argument("tessera.asset-cache-mb must be >= 0");
   if (asset_max_file_mb < 1) throw std::invalid_argument("tessera.asset-max-file-mb must be >= 1");
   if (geometry_cache_mb < 0) throw std::invalid_argument("tessera.geometry-cache-mb must be >= 0");
+  if (bvh_quality != "high" && bvh_quality != "medium")
+    throw std::invalid_argument("tessera.bvh-quality must be high or medium, not '" + bvh_quality + "'");
   o.max_connections_per_ip = size_t(max_connections_per_ip);
 }
 

@@ -64,21 +64,4 @@ bool jpeg_dimensions(const uint8_t* data, size_t size, int& width, int& height, 
   return ok;
 }
 
-bool jpeg_decode(const uint8_t* data, size_t size, Image& out, std::string& error) {
-  tjhandle h = tjInitDecompress();
-  if (!h) {
-    error = "jpeg: could not create a TurboJPEG decompressor";
-    return false;
-  }
-  int w = 0, hgt = 0, subsamp = 0, colorspace = 0;
-  bool ok = tjDecompressHeader3(h, data, static_cast<unsigned long>(size), &w, &hgt, &subsamp, &colorspace) == 0;
-  if (ok) {
-    out = Image(w, hgt);
-    ok = tjDecompress2(h, data, static_cast<unsigned long>(size), out.rgba.data(), w, 0, hgt, TJPF_RGBA, TJFLAG_LIMITSCANS) == 0;
-  }
-  if (!ok) error = std::string("jpeg: ") + tjGetErrorStr2(h);
-  tjDestroy(h);
-  return ok;
-}
-
 }  // namespace tessera

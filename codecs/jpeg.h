@@ -37,9 +37,6 @@ class JpegEncoder {
 
 // Reads width and height from a JPEG header without decoding the image.
 bool jpeg_dimensions(const uint8_t* data, size_t size, int& width, int& height, std::string& error);
-// Decodes a JPEG into RGBA8 (alpha 255). Creates a handle per call (tests, texture uploads).
-// Progressive files with an unreasonable number of scans are rejected (TJFLAG_LIMITSCANS),
-// so client-sent textures cannot make decoding take minutes.
-bool jpeg_decode(const uint8_t* data, size_t size, Image& out, std::string& error);
+// Decoding a JPEG: jpeg_decode in core/image.h (the glTF loader decodes with it too).
 
 }  // namespace tessera

@@ -311,9 +311,9 @@ LoadedScene load_gltf(const std::string& path, const GltfOptions& options) {
 
   // Every image a texture uses, decoded to RGBA8 (in parallel unless options say otherwise).
   const auto t_images = std::chrono::steady_clock::now();
-  std::vector<char> used(model.images.size(), 0);
+  std::vector<int> used(model.images.size(), 0);  // textures that use each image
   for (const auto& gt : model.textures)
-    if (gt.source >= 0 && size_t(gt.source) < used.size()) used[size_t(gt.source)] = 1;
+    if (gt.source >= 0 && size_t(gt.source) < used.size()) used[size_t(gt.source)]++;
   std::vector<Image> decoded(model.images.size());
   std::vector<std::string> decode_errors(model.images.size());
   auto decode = [&](size_t i) {
@@ -338,7 +338,7 @@ LoadedScene load_gltf(const std::string& path, const GltfOptions& options) {
       out.warnings.push_back(path + ": texture " + std::to_string(ti) + " has no image");
       continue;
     }
-    const Image& img = decoded[size_t(gt.source)];
+    Image& img = decoded[size_t(gt.source)];
     if (img.width <= 0 || img.height <= 0 || img.rgba.size() != size_t(img.width) * size_t(img.height) * 4) {
       const std::string& why = decode_errors[size_t(gt.source)];
       out.warnings.push_back(path + ": image '" + model.images[gt.source].uri + "' could not be decoded" +
@@ -348,7 +348,11 @@ LoadedScene load_gltf(const std::string& path, const GltfOptions& options) {
     Texture tex;
     tex.width = img.width;
     tex.height = img.height;
-    tex.rgba = img.rgba;  // a texture may share its image with others
+    // A texture may share its image with others: the last one takes it, the others copy it.
+    if (--used[size_t(gt.source)] == 0)
+      tex.rgba = std::move(img.rgba);
+    else
+      tex.rgba = img.rgba;
     if (gt.sampler >= 0 && size_t(gt.sampler) < model.samplers.size()) {
       const auto& s = model.samplers[gt.sampler];
       auto wrap = [](int w) { return w == TINYGLTF_TEXTURE_WRAP_CLAMP_TO_EDGE ? Sampler::Wrap::clamp : Sampler::Wrap::repeat; };

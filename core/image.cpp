@@ -19,6 +19,7 @@
 #if defined(__GNUC__)
 #pragma GCC diagnostic pop
 #endif
+#include <turbojpeg.h>
 
 namespace tessera {
 
@@ -41,6 +42,11 @@ bool decode_image(const uint8_t* data, size_t size, Image& out, std::string& err
     error = "image data too large";
     return false;
   }
+  if (size >= 3 && data[0] == 0xFF && data[1] == 0xD8 && data[2] == 0xFF) {
+    std::string jpeg_error;
+    if (jpeg_decode(data, size, out, jpeg_error)) return true;
+    // stb_image may still read it (CMYK, for one); its error, if any, is the one reported.
+  }
   int w = 0, h = 0, n = 0;
   stbi_uc* px = stbi_load_from_memory(data, int(size), &w, &h, &n, 4);
   if (!px) {
@@ -52,6 +58,23 @@ bool decode_image(const uint8_t* data, size_t size, Image& out, std::string& err
   out.rgba.assign(px, px + size_t(w) * h * 4);
   stbi_image_free(px);
   return true;
+}
+
+bool jpeg_decode(const uint8_t* data, size_t size, Image& out, std::string& error) {
+  tjhandle h = tjInitDecompress();
+  if (!h) {
+    error = "jpeg: could not create a TurboJPEG decompressor";
+    return false;
+  }
+  int w = 0, hgt = 0, subsamp = 0, colorspace = 0;
+  bool ok = tjDecompressHeader3(h, data, static_cast<unsigned long>(size), &w, &hgt, &subsamp, &colorspace) == 0;
+  if (ok) {
+    out = Image(w, hgt);
+    ok = tjDecompress2(h, data, static_cast<unsigned long>(size), out.rgba.data(), w, 0, hgt, TJPF_RGBA, TJFLAG_LIMITSCANS) == 0;
+  }
+  if (!ok) error = std::string("jpeg: ") + tjGetErrorStr2(h);
+  tjDestroy(h);
+  return ok;
 }
 
 Image read_image(const std::string& path) {

@@ -10,6 +10,7 @@ namespace {
 std::mutex g_mu;
 std::weak_ptr<EmbreeDevice> g_device;
 std::atomic<uint64_t> g_geometry_limit{uint64_t(1) << 30};
+std::atomic<bool> g_high_quality_bvh{true};
 
 const char* code_name(RTCError code) {
   switch (code) {
@@ -44,6 +45,9 @@ void EmbreeDevice::set_geometry_cache_limit(uint64_t bytes) {
   g_geometry_limit.store(bytes);
   if (auto d = g_device.lock()) d->geometries_.set_limit(bytes);
 }
+
+void EmbreeDevice::set_high_quality_bvh(bool high) { g_high_quality_bvh.store(high); }
+bool EmbreeDevice::high_quality_bvh() { return g_high_quality_bvh.load(); }
 
 bool EmbreeDevice::geometry_stats(GeometryCache::Stats& out) {
   std::shared_ptr<EmbreeDevice> d;

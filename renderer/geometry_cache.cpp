@@ -39,7 +39,7 @@ uint64_t hash_bytes(const void* data, size_t n, uint64_t seed) {
 uint64_t GeometryCache::default_hash(const GeometryContent& c) {
   uint64_t h = hash_bytes(c.positions, c.vertex_count * 3 * sizeof(float), 0x7e55e7a);
   h = hash_bytes(c.indices, c.triangle_count * 3 * sizeof(uint32_t), h);
-  return h ^ (uint64_t(c.filter) << 1 | uint64_t(c.see_through));
+  return h ^ (uint64_t(c.high_quality) << 2 | uint64_t(c.filter) << 1 | uint64_t(c.see_through));
 }
 
 uint64_t GeometryCache::estimate_bytes(size_t vertex_count, size_t triangle_count) {
@@ -48,7 +48,7 @@ uint64_t GeometryCache::estimate_bytes(size_t vertex_count, size_t triangle_coun
 
 bool GeometryCache::same(const SharedGeometry& e, const GeometryContent& c) {
   return e.vertex_count == c.vertex_count && e.triangle_count == c.triangle_count && e.filter == c.filter &&
-         e.see_through == c.see_through &&
+         e.see_through == c.see_through && e.high_quality == c.high_quality &&
          std::memcmp(e.positions.data(), c.positions, c.vertex_count * 3 * sizeof(float)) == 0 &&
          std::memcmp(e.indices.data(), c.indices, c.triangle_count * 3 * sizeof(uint32_t)) == 0;
 }
@@ -68,7 +68,8 @@ std::shared_ptr<const SharedGeometry> GeometryCache::find(const GeometryContent&
 
 std::shared_ptr<const SharedGeometry> GeometryCache::insert(std::shared_ptr<SharedGeometry> e) {
   std::lock_guard<std::mutex> l(mu_);
-  GeometryContent c{e->positions.data(), e->vertex_count, e->indices.data(), e->triangle_count, e->filter, e->see_through};
+  GeometryContent c{e->positions.data(), e->vertex_count, e->indices.data(), e->triangle_count, e->filter, e->see_through,
+                    e->high_quality};
   auto [lo, hi] = by_hash_.equal_range(e->hash);
   for (auto it = lo; it != hi; ++it)
     if (same(**it->second, c)) return *it->second;

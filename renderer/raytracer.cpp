@@ -9,6 +9,7 @@
 #include <tbb/combinable.h>
 #include <tbb/parallel_for.h>
 #include <cpuid.h>
+#include <sys/mman.h>
 #include <x86intrin.h>
 
 #include <algorithm>
@@ -17,6 +18,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <fstream>
 #include <map>
@@ -87,6 +89,31 @@ double tsc_khz() {
   return khz;
 }
 
+namespace raytracer_detail {
+
+namespace {
+constexpr size_t kHugePage = size_t(2) << 20;
+constexpr size_t kLargeBytes = size_t(4) << 20;  // below this: operator new
+}  // namespace
+
+void* allocate_large(size_t bytes) {
+  if (bytes < kLargeBytes) return ::operator new(bytes);
+  const size_t rounded = (bytes + kHugePage - 1) / kHugePage * kHugePage;
+  void* p = std::aligned_alloc(kHugePage, rounded);
+  if (!p) throw std::bad_alloc();
+  madvise(p, rounded, MADV_HUGEPAGE);  // a hint: where the kernel has none, 4 KiB pages
+  return p;
+}
+
+void free_large(void* p, size_t bytes) noexcept {
+  if (bytes < kLargeBytes)
+    ::operator delete(p);
+  else
+    std::free(p);
+}
+
+}  // namespace raytracer_detail
+
 namespace {
 
 // ---------------------------------------------------------------------------------------
@@ -95,10 +122,14 @@ namespace {
 
 struct SrgbLut {
   std::array<float, 256> to_linear;
+  // A texel channel (16 bits) for each 8-bit value: decoded from sRGB, or as it is (x 257).
+  std::array<uint64_t, 256> texel_linear, texel_plain;
   SrgbLut() {
     for (int i = 0; i < 256; ++i) {
       float c = i / 255.0f;
       to_linear[i] = c <= 0.04045f ? c / 12.92f : std::pow((c + 0.055f) / 1.055f, 2.4f);
+      texel_linear[size_t(i)] = uint64_t(std::lround(to_linear[size_t(i)] * 65535.0f));
+      texel_plain[size_t(i)] = uint64_t(i) * 257;
     }
   }
 };
@@ -197,7 +228,7 @@ std::shared_ptr<SharedGeometry> RayTracer::Impl::build_geom(const Scene& scene, 
   g.colors = col_id != kNoId ? scene.buffer(col_id)->f : std::vector<float>{};
   for (float& c : g.colors) c = std::fmax(c, 0.0f);  // colours are >= 0 (validate_mesh refused NaN and Inf)
   const size_t nt = idx->size() / 3;
-  GeometryContent content{pos.f.data(), nv, idx->data(), nt, g.filter, g.see_through};
+  GeometryContent content{pos.f.data(), nv, idx->data(), nt, g.filter, g.see_through, EmbreeDevice::high_quality_bvh()};
   GeometryCache& cache = shared_device->geometries();
   const uint64_t h = cache.hash(content);
   g.shared = cache.find(content, h);
@@ -212,13 +243,14 @@ std::shared_ptr<SharedGeometry> RayTracer::Impl::build_geom(const Scene& scene, 
   e->triangle_count = nt;
   e->filter = g.filter;
   e->see_through = g.see_through;
+  e->high_quality = content.high_quality;
   e->hash = h;
   e->bytes = GeometryCache::estimate_bytes(nv, nt);
   e->positions.assign(pos.f.begin(), pos.f.begin() + ptrdiff_t(nv * 3));
   e->positions.resize(nv * 3 + 4, 0.0f);  // Embree may read 16 bytes at the last vertex
   e->indices.assign(idx->begin(), idx->begin() + ptrdiff_t(nt * 3));
   e->blas = rtcNewScene(device);
-  rtcSetSceneBuildQuality(e->blas, RTC_BUILD_QUALITY_HIGH);
+  rtcSetSceneBuildQuality(e->blas, e->high_quality ? RTC_BUILD_QUALITY_HIGH : RTC_BUILD_QUALITY_MEDIUM);
   RTCGeometry tri = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
   rtcSetSharedGeometryBuffer(tri, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, e->positions.data(), 0, 3 * sizeof(float), nv);
   rtcSetSharedGeometryBuffer(tri, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, e->indices.data(), 0, 3 * sizeof(uint32_t), nt);
@@ -239,7 +271,6 @@ void RayTracer::Impl::sync(const Scene& scene, std::vector<std::string>& warning
   // Textures, converted once to what shading reads (Tex::texels).
   for (auto it = textures.begin(); it != textures.end();)
     it = scene.textures().count(it->first) ? std::next(it) : textures.erase(it);
-  const auto& to_linear = srgb_lut().to_linear;
   for (auto& [id, e] : scene.textures()) {
     Tex& t = textures[id];
     const Texture& src = e.value;
@@ -258,18 +289,18 @@ void RayTracer::Impl::sync(const Scene& scene, std::vector<std::string>& warning
                              src.sampler.wrap_t == Sampler::Wrap::repeat, src.sampler.filter == Sampler::Filter::nearest);
     t.decoded = decode;
     t.version = e.version;
-    t.texels.resize(size_t(src.width) * size_t(src.height));
-    // In parallel: a scene's textures hold tens of millions of texels (the kitchen: 46 M).
+    t.texels.resize(size_t(src.width) * size_t(src.height));  // not zeroed: every texel is written below
+    // In parallel: a scene's textures hold tens of millions of texels (the kitchen: 46 M; a
+    // San Miguel-sized scene 230 M), through a table per channel.
     std::atomic<bool> translucent{false};
+    const std::array<uint64_t, 256>& lut = decode ? srgb_lut().texel_linear : srgb_lut().texel_plain;
     tbb::parallel_for(tbb::blocked_range<size_t>(0, t.texels.size(), 1 << 16), [&](const tbb::blocked_range<size_t>& r) {
       uint8_t min_alpha = 255;
-      for (size_t i = r.begin(); i < r.end(); ++i) {
-        const uint8_t* p = &src.rgba[i * 4];
+      const uint8_t* p = &src.rgba[r.begin() * 4];
+      uint64_t* out = t.texels.data();
+      for (size_t i = r.begin(); i < r.end(); ++i, p += 4) {
         min_alpha = std::min(min_alpha, p[3]);
-        uint64_t v = uint64_t(p[3]) * 257 << 48;
-        for (int c = 0; c < 3; ++c)
-          v |= uint64_t(decode ? std::lround(to_linear[p[c]] * 65535.0f) : p[c] * 257) << (16 * c);
-        t.texels[i] = v;
+        out[i] = lut[p[0]] | lut[p[1]] << 16 | lut[p[2]] << 32 | (uint64_t(p[3]) * 257) << 48;
       }
       if (min_alpha < 255) translucent.store(true, std::memory_order_relaxed);
     });
