@@ -20,7 +20,7 @@ const char* kHelp =
     "tessera bench --scene S.gltf --camera-loop L.json [--frames N] [--step K] [--size W H]\n"
     "              [--ao N] [--depth D] [--shadows 0|1] [--threads T] [--warmup W] [--reps R]\n"
     "              [--compare bare|specialised|costmap|disturbance|breakdown] [--plain] [--renderer raytracer|rasterizer]\n"
-    "              [--bvh-quality high|medium]\n"
+    "              [--bvh-quality medium|high]\n"
     "Replays the camera loop (every K-th frame with --step K) and prints one JSON line per frame:\n"
     "kernel_ms (sum of the cost map), rendering_ms (wall), rays by kind and Mrays/s, then a summary\n"
     "line with medians and conditions. --compare adds, in the same run and per frame (with --reps R\n"

@@ -13,7 +13,7 @@ int run(const std::vector<std::string>& argv) {
   if (args.flag("--help")) {
     std::puts("tessera render --scene S.gltf [--camera-loop L.json --frame K] [--size W H] [--ao N] [--depth D]\n"
               "               [--shadows 0|1] [--ao-distance X] [--threads T] [--renderer raytracer|rasterizer]\n"
-              "               [--bvh-quality high|medium] --out F.png\n"
+              "               [--bvh-quality medium|high] --out F.png\n"
               "Renders one image (with the ray tracer by default) and prints its figures as one JSON line.\n"
               "The rasterizer has no AO, reflection, refraction or shadows; --threads does not limit it\n"
               "(llvmpipe's threads are set by LP_NUM_THREADS).");

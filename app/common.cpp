@@ -91,7 +91,7 @@ SceneSetup load_scene(Args& args, int default_w, int default_h, LoopOption loop_
   std::string loop = args.str("--camera-loop");
   if (loop_option == LoopOption::required && loop.empty()) throw std::invalid_argument("--camera-loop is required");
   bool plain = args.flag("--plain");
-  const std::string bvh = args.str("--bvh-quality", "high");
+  const std::string bvh = args.str("--bvh-quality", "medium");
   if (bvh != "high" && bvh != "medium") throw std::invalid_argument("--bvh-quality must be high or medium, not '" + bvh + "'");
   EmbreeDevice::set_high_quality_bvh(bvh == "high");
   s.loaded = load_gltf(s.scene_path);

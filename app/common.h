@@ -28,7 +28,7 @@ std::string read_renderer_kind(Args& args);
 std::unique_ptr<Renderer> make_renderer(const std::string& kind);
 
 // Loads --scene (+ optional --camera-loop), sets the resolution from --size W H, and the
-// quality of the meshes' BVHs from --bvh-quality high|medium (default high).
+// quality of the meshes' BVHs from --bvh-quality medium|high (default medium).
 struct SceneSetup {
   LoadedScene loaded;
   CameraLoop loop;     // empty frames when no loop was given

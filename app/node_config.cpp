@@ -106,7 +106,7 @@ NodeConfig::NodeConfig() {
   custom_options_.add(string_option(web_root, "tessera", "web-root", "folder served over HTTP (web client, demo pages)"));
   custom_options_.add(string_option(scene, "tessera", "scene", "glTF scene given to clients that connect with an empty scene"));
   custom_options_.add(string_option(bvh_quality, "tessera", "bvh-quality",
-                                    "meshes' BVHs: high (fastest frames) or medium (builds 2.5-5x faster, docs/results/load.md)"));
+                                    "meshes' BVHs: medium (default) or high (Embree's spatial splits: builds 2.5-5x slower, docs/results/load.md)"));
   custom_options_.add(string_option(token_key, "tessera", "token-key", "key file of signed access tokens (tessera token); a token is then required"));
   custom_options_.add(string_option(token_file, "tessera", "token-file", "static access tokens, one per line; a token is then required"));
   custom_options_.add(string_option(tls_cert, "tessera", "tls-cert", "PEM certificate (chain) of the port: HTTPS and WSS only (with tls-key)"));

@@ -55,7 +55,7 @@ struct NodeConfig : caf::actor_system_config {
   int64_t asset_cache_mb = 512;             // decoded textures kept for later sessions
   int64_t asset_max_file_mb = 1024;         // the largest file a reference may name
   int64_t geometry_cache_mb = 1024;         // meshes' BVHs kept for later sessions (renderer/geometry_cache.h)
-  std::string bvh_quality = "high";         // of the meshes' BVHs: high or medium (EmbreeDevice::set_high_quality_bvh)
+  std::string bvh_quality = "medium";       // of the meshes' BVHs: medium or high (EmbreeDevice::set_high_quality_bvh)
   // Cluster (docs/operations.md): this node's CAF endpoint and its children.
   int cluster_port = -1;          // publish the node actor here (-1: not a child of anyone; 0: any port)
   std::string cluster_host = "127.0.0.1";  // address the cluster port binds to

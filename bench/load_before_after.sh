@@ -2,10 +2,11 @@
 # Loading a big glTF scene, before and after (issue 20: "a San Miguel-sized glTF loads on the
 # node at least 3x faster than today, measured in the same run"). Runs `tessera render` of a
 # 64x36 image (the load, the renderer's sync with its BVH builds and texel conversion, then a
-# frame that takes milliseconds) with the old binary, the new one and the new one with
-# --bvh-quality medium in turns, RUNS times each, and prints one JSON line per run (wall
-# seconds, peak memory), then a summary with the medians, the old one's over each new one's,
-# and the new binary's own breakdown at each quality (`tessera bench`'s "load").
+# frame that takes milliseconds) with the old binary and the new one at each BVH quality
+# (--bvh-quality medium, the default, and high, the old binary's) in turns, RUNS times each,
+# and prints one JSON line per run (wall seconds, peak memory), then a summary with the
+# medians, the old one's over each new one's, and the new binary's own breakdown at each
+# quality (`tessera bench`'s "load").
 #
 # Usage: bench/load_before_after.sh [OLD] [SCENE_DIR] [RUNS] [THREADS]
 #   OLD       a tessera binary, or a commit to build one from (default a1eaed9: the tree
@@ -56,11 +57,11 @@ one() {  # $1 = label, $2 = binary, then its further options
 }
 for ((r = 0; r < RUNS; r++)); do
   one "old ($OLD_NAME)" "$OLD"
-  one "new" "$NEW"
   one "new-medium" "$NEW" --bvh-quality medium
+  one "new-high" "$NEW" --bvh-quality high
 done
 median() { grep "^$1 " "$out/walls" | awk '{print $NF}' | sort -n | awk '{a[NR]=$1} END {print a[int((NR+1)/2)]}'; }
-old_m=$(median old); new_m=$(median new); med_m=$(median new-medium)
+old_m=$(median old); med_m=$(median new-medium); high_m=$(median new-high)
 breakdown() {
   "$NEW" bench --scene "$SCENE/scene.gltf" --camera-loop "$SCENE/camera-loop.json" --frames 1 --threads "$THREADS" \
     --size 64 36 --bvh-quality "$1" 2>/dev/null | grep -o '"load": {[^}]*}' | sed "s/\"load\"/\"load_$1\"/" || echo "\"load_$1\": null"
@@ -68,7 +69,7 @@ breakdown() {
 ratio() { awk -v a="$1" -v b="$2" 'BEGIN {printf "%.2f", a / b}'; }
 printf '{"summary": true, "bench": "load_before_after", "scene": "%s", "old": "%s", "runs": %d, "threads": %d, ' \
   "$SCENE" "$OLD_NAME" "$RUNS" "$THREADS"
-printf '"old_median_s": %s, "new_median_s": %s, "new_medium_median_s": %s, "speedup": %s, "speedup_medium": %s, %s, %s, ' \
-  "$old_m" "$new_m" "$med_m" "$(ratio "$old_m" "$new_m")" "$(ratio "$old_m" "$med_m")" "$(breakdown high)" "$(breakdown medium)"
+printf '"old_median_s": %s, "new_medium_median_s": %s, "new_high_median_s": %s, "speedup_medium": %s, "speedup_high": %s, %s, %s, ' \
+  "$old_m" "$med_m" "$high_m" "$(ratio "$old_m" "$med_m")" "$(ratio "$old_m" "$high_m")" "$(breakdown medium)" "$(breakdown high)"
 printf '"cpu": "%s", "load_average": "%s"}\n' \
   "$(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //')" "$(cut -d' ' -f1-3 /proc/loadavg)"

@@ -10,7 +10,7 @@ namespace {
 std::mutex g_mu;
 std::weak_ptr<EmbreeDevice> g_device;
 std::atomic<uint64_t> g_geometry_limit{uint64_t(1) << 30};
-std::atomic<bool> g_high_quality_bvh{true};
+std::atomic<bool> g_high_quality_bvh{false};
 
 const char* code_name(RTCError code) {
   switch (code) {

@@ -41,9 +41,9 @@ class EmbreeDevice {
   // The cache's byte limit, for the device now live and every later one (default 1 GiB).
   static void set_geometry_cache_limit(uint64_t bytes);
   // The quality of the meshes' BVHs built from now on, for every ray tracer of the process
-  // (tessera.bvh-quality, --bvh-quality): true RTC_BUILD_QUALITY_HIGH (the default: spatial
-  // splits, the fastest traversal, the slowest builds), false MEDIUM (builds 2.5-5x faster,
-  // docs/results/load.md). Entries of the other quality in the cache are not used.
+  // (tessera.bvh-quality, --bvh-quality): false RTC_BUILD_QUALITY_MEDIUM (the default: builds
+  // 2.5-5x faster, frames as fast within the noise on the shared scenes, docs/results/load.md),
+  // true HIGH (spatial splits). Entries of the other quality in the cache are not used.
   static void set_high_quality_bvh(bool high);
   static bool high_quality_bvh();
   // The live device's cache figures; false (and nothing made) when no device lives.

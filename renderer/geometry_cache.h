@@ -33,7 +33,7 @@ struct SharedGeometry {
   size_t triangle_count = 0;
   bool filter = false;       // the alpha-mask intersection filter is attached
   bool see_through = false;  // the occlusion filter is attached
-  bool high_quality = true;  // built with RTC_BUILD_QUALITY_HIGH (else MEDIUM; EmbreeDevice::bvh_quality)
+  bool high_quality = true;  // built with RTC_BUILD_QUALITY_HIGH (else MEDIUM; EmbreeDevice::high_quality_bvh)
   uint64_t hash = 0;
   uint64_t bytes = 0;        // what it holds, with an estimate of the BVH's size
 

@@ -181,22 +181,22 @@ TEST_CASE("the BVH quality is part of a cached geometry: medium-quality BVHs ren
   const std::vector<uint32_t> idx = {0, 1, 2};
   {
     GeometryCache cache(uint64_t(1) << 30, same_hash);
-    auto a = cache.insert(entry(cache, pa, idx));
+    auto a = cache.insert(entry(cache, pa, idx));  // built at HIGH (SharedGeometry's default)
     GeometryContent medium = content(pa, idx);
     medium.high_quality = false;
-    CHECK(cache.find(medium, 42) == nullptr);  // built at HIGH: not what a MEDIUM build asks for
+    CHECK(cache.find(medium, 42) == nullptr);  // not what a MEDIUM build asks for
     CHECK(cache.find(content(pa, idx), 42) == a);
   }
   auto device = EmbreeDevice::acquire();
   device->geometries().clear();
   std::vector<std::string> warnings;
-  REQUIRE(EmbreeDevice::high_quality_bvh());  // the default
+  REQUIRE(!EmbreeDevice::high_quality_bvh());  // the default: medium
+  EmbreeDevice::set_high_quality_bvh(true);
   RayTracer high;
   const Image img_high = render_full(high, cutout_scene(100, true), no_ao(), &warnings);
   EmbreeDevice::set_high_quality_bvh(false);
   RayTracer medium;
   const Image img_medium = render_full(medium, cutout_scene(100, true), no_ao(), &warnings);
-  EmbreeDevice::set_high_quality_bvh(true);
   REQUIRE(warnings.empty());
   CHECK(high.last_sync().geometries_built == 2);
   CHECK(medium.last_sync().geometries_built == 2);
