@@ -8,6 +8,8 @@
 #define STB_IMAGE_IMPLEMENTATION
 #define STB_IMAGE_WRITE_IMPLEMENTATION
 #define STBI_FAILURE_USERMSG
+// Each side at most 16384 (kMaxDecodedPixels in all): a header cannot make stb_image allocate more.
+#define STBI_MAX_DIMENSIONS 16384
 #if defined(__GNUC__)
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wmissing-field-initializers"
@@ -37,6 +39,36 @@ bool png_dimensions(const uint8_t* p, size_t n, uint32_t& w, uint32_t& h) {
   return true;
 }
 
+namespace {
+
+enum class Jpeg { ok, too_large, failed };
+
+// libjpeg-turbo's decoding; too_large: the header declares more than kMaxDecodedPixels, and
+// nothing was allocated.
+Jpeg turbo_decode(const uint8_t* data, size_t size, Image& out, std::string& error) {
+  tjhandle h = tjInitDecompress();
+  if (!h) {
+    error = "jpeg: could not create a TurboJPEG decompressor";
+    return Jpeg::failed;
+  }
+  int w = 0, hgt = 0, subsamp = 0, colorspace = 0;
+  Jpeg r = tjDecompressHeader3(h, data, static_cast<unsigned long>(size), &w, &hgt, &subsamp, &colorspace) == 0 ? Jpeg::ok : Jpeg::failed;
+  if (r == Jpeg::ok && int64_t(w) * hgt > kMaxDecodedPixels) {
+    error = "jpeg: " + std::to_string(w) + "x" + std::to_string(hgt) + " is more than " + std::to_string(kMaxDecodedPixels) +
+            " pixels; not decoded";
+    r = Jpeg::too_large;
+  } else if (r == Jpeg::ok) {
+    out = Image(w, hgt);
+    if (tjDecompress2(h, data, static_cast<unsigned long>(size), out.rgba.data(), w, 0, hgt, TJPF_RGBA, TJFLAG_LIMITSCANS) != 0)
+      r = Jpeg::failed;
+  }
+  if (r == Jpeg::failed) error = std::string("jpeg: ") + tjGetErrorStr2(h);
+  tjDestroy(h);
+  return r;
+}
+
+}  // namespace
+
 bool decode_image(const uint8_t* data, size_t size, Image& out, std::string& error) {
   if (size > size_t(std::numeric_limits<int>::max())) {
     error = "image data too large";
@@ -44,8 +76,11 @@ bool decode_image(const uint8_t* data, size_t size, Image& out, std::string& err
   }
   if (size >= 3 && data[0] == 0xFF && data[1] == 0xD8 && data[2] == 0xFF) {
     std::string jpeg_error;
-    if (jpeg_decode(data, size, out, jpeg_error)) return true;
-    // stb_image may still read it (CMYK, for one); its error, if any, is the one reported.
+    switch (turbo_decode(data, size, out, jpeg_error)) {
+      case Jpeg::ok: return true;
+      case Jpeg::too_large: error = jpeg_error; return false;
+      case Jpeg::failed: break;  // stb_image may still read it (CMYK, for one); its error is the one reported
+    }
   }
   int w = 0, h = 0, n = 0;
   stbi_uc* px = stbi_load_from_memory(data, int(size), &w, &h, &n, 4);
@@ -61,20 +96,7 @@ bool decode_image(const uint8_t* data, size_t size, Image& out, std::string& err
 }
 
 bool jpeg_decode(const uint8_t* data, size_t size, Image& out, std::string& error) {
-  tjhandle h = tjInitDecompress();
-  if (!h) {
-    error = "jpeg: could not create a TurboJPEG decompressor";
-    return false;
-  }
-  int w = 0, hgt = 0, subsamp = 0, colorspace = 0;
-  bool ok = tjDecompressHeader3(h, data, static_cast<unsigned long>(size), &w, &hgt, &subsamp, &colorspace) == 0;
-  if (ok) {
-    out = Image(w, hgt);
-    ok = tjDecompress2(h, data, static_cast<unsigned long>(size), out.rgba.data(), w, 0, hgt, TJPF_RGBA, TJFLAG_LIMITSCANS) == 0;
-  }
-  if (!ok) error = std::string("jpeg: ") + tjGetErrorStr2(h);
-  tjDestroy(h);
-  return ok;
+  return turbo_decode(data, size, out, error) == Jpeg::ok;
 }
 
 Image read_image(const std::string& path) {

@@ -27,6 +27,9 @@ bool decode_image(const uint8_t* data, size_t size, Image& out, std::string& err
 // Decodes a JPEG into RGBA8 (alpha 255) with libjpeg-turbo. Creates a handle per call (so any
 // thread may call it). Progressive files with an unreasonable number of scans are rejected
 // (TJFLAG_LIMITSCANS), so client-sent textures cannot make decoding take minutes.
+// A JPEG whose header declares more than kMaxDecodedPixels (a 16384 x 16384 image, 1 GiB as
+// RGBA8) is refused before anything is allocated.
+constexpr int64_t kMaxDecodedPixels = int64_t(1) << 28;
 bool jpeg_decode(const uint8_t* data, size_t size, Image& out, std::string& error);
 
 // A PNG's size from its signature and IHDR chunk (big-endian width and height), read before

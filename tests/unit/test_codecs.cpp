@@ -115,6 +115,34 @@ TEST_CASE("JPEG encoder rejects bad quality and empty images with a message", "[
   CHECK_FALSE(jpeg_decode(junk, sizeof junk, back, err));
 }
 
+TEST_CASE("a JPEG that declares a huge size is refused before decoding, by jpeg_decode and decode_image", "[codecs][jpeg]") {
+  JpegEncoder enc;
+  std::vector<uint8_t> jpeg;
+  std::string err;
+  REQUIRE(enc.encode(smooth_image(16, 16), 80, jpeg, err));
+  // The frame header (SOF0: FF C0, length, precision, height, width): claim 60000 x 60000.
+  size_t sof = 0;
+  for (size_t i = 2; i + 9 < jpeg.size(); ++i)
+    if (jpeg[i] == 0xFF && jpeg[i + 1] == 0xC0) { sof = i; break; }
+  REQUIRE(sof > 0);
+  for (size_t k : {sof + 5, sof + 7}) { jpeg[k] = 0xEA; jpeg[k + 1] = 0x60; }  // 60000
+  Image back;
+  CHECK_FALSE(jpeg_decode(jpeg.data(), jpeg.size(), back, err));
+  CHECK(err.find("60000x60000 is more than") != std::string::npos);
+  CHECK(back.rgba.empty());
+  // decode_image (the glTF loader's) refuses it too, without handing it to stb_image (which
+  // would allocate 14 GB for it).
+  CHECK_FALSE(decode_image(jpeg.data(), jpeg.size(), back, err));
+  CHECK(err.find("60000x60000 is more than") != std::string::npos);
+  // And an ordinary JPEG decodes through both, to the same pixels.
+  REQUIRE(enc.encode(smooth_image(16, 16), 80, jpeg, err));
+  Image a, b;
+  REQUIRE(jpeg_decode(jpeg.data(), jpeg.size(), a, err));
+  REQUIRE(decode_image(jpeg.data(), jpeg.size(), b, err));
+  CHECK(a.width == 16);
+  CHECK(a.rgba == b.rgba);
+}
+
 TEST_CASE("DXT1 sizes are ceil(w/4)*ceil(h/4)*8", "[codecs][dxt1]") {
   CHECK(dxt1_size(1, 1) == 8);
   CHECK(dxt1_size(5, 3) == 16);
