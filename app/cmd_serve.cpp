@@ -207,7 +207,7 @@ int run(const std::vector<std::string>& argv) {
   for (auto& c : cfg.children) kids += (kids.empty() ? "" : ", ") + json_str(c);
   std::printf("{\"listening\": %s, \"websocket\": %s, \"cluster\": %s, \"name\": %s, \"children\": [%s], "
               "\"render\": %s, \"web_root\": %s, \"scene\": %s, \"max_clients\": %d, \"render_threads\": %d, "
-              "\"cpu\": %s, \"renderer\": %s, \"rasterizer\": %s, \"max_node_bytes\": %llu, "
+              "\"cpu\": %s, \"renderer\": %s, \"rasterizer\": %s, \"bvh_quality\": %s, \"max_node_bytes\": %llu, "
               "\"handshake_timeout_ms\": %u, \"admission\": %s, \"http_redirect\": %s, \"hsts_max_age\": %u}\n",
               server ? json_str(std::string(opts.tls() ? "https" : "http") + "://" + opts.host + ":" +
                                 std::to_string(server->port()) + "/").c_str()
@@ -220,6 +220,7 @@ int run(const std::vector<std::string>& argv) {
               json_str(opts.web_root).c_str(), json_str(cfg.scene).c_str(), cfg.max_clients,
               cfg.render_threads > 0 ? cfg.render_threads : hardware_threads(), json_str(cpu_model()).c_str(),
               json_str(renderer).c_str(), json_str(gl_ok ? "available" : "unavailable: " + gl_why).c_str(),
+              json_str(cfg.bvh_quality).c_str(),
               static_cast<unsigned long long>(settings->budget ? settings->budget->limit() : 0),
               settings->handshake_timeout_ms, admission_json(opts).c_str(),
               server && server->redirect_port()
