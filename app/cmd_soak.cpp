@@ -52,6 +52,7 @@
 #include "protocol/protocol.h"
 #include "protocol/scene_records.h"
 #include "net/ws_client.h"
+#include "net/ws_frame.h"
 #include "renderer/raytracer.h"
 
 namespace tessera::app {
@@ -634,21 +635,9 @@ void malformed_client(const ClientSetup& cs, const std::vector<Malformed>& kinds
 // its receive buffer is small, so whatever the node sends piles up on the node's side.
 
 void ws_frame(std::vector<uint8_t>& out, const std::vector<uint8_t>& payload, uint32_t mask_seed) {
-  out.push_back(0x82);  // FIN, binary
-  const size_t n = payload.size();
-  if (n < 126) {
-    out.push_back(uint8_t(0x80 | n));
-  } else if (n < 65536) {
-    out.push_back(0x80 | 126);
-    out.push_back(uint8_t(n >> 8));
-    out.push_back(uint8_t(n));
-  } else {
-    out.push_back(0x80 | 127);
-    for (int i = 7; i >= 0; --i) out.push_back(uint8_t(uint64_t(n) >> (8 * i)));
-  }
-  uint8_t mask[4] = {uint8_t(mask_seed), uint8_t(mask_seed >> 8), uint8_t(mask_seed >> 16), uint8_t(mask_seed >> 24)};
-  out.insert(out.end(), mask, mask + 4);
-  for (size_t i = 0; i < n; ++i) out.push_back(payload[i] ^ mask[i % 4]);
+  const uint8_t mask[4] = {uint8_t(mask_seed), uint8_t(mask_seed >> 8), uint8_t(mask_seed >> 16), uint8_t(mask_seed >> 24)};
+  const std::vector<uint8_t> f = masked_ws_frame(payload, mask);
+  out.insert(out.end(), f.begin(), f.end());
 }
 
 // Sends all of `bytes` (blocking, bounded by deadline). False when the connection is gone.

@@ -21,7 +21,7 @@
 
 #include "codecs/h264.h"
 #include "tests/e2e/node_fixture.h"
-#include "tests/e2e/raw_ws.h"
+#include "net/ws_frame.h"
 
 using namespace tessera;
 using namespace tessera::test;

@@ -1,10 +1,11 @@
 #pragma once
-// WebSocket framing for tests that speak raw TCP to a node (a slow or never-reading client).
+// WebSocket framing for clients that speak raw TCP to a node: tessera soak's never-reading
+// client and the tests' slow or never-reading clients (everything else goes through websocketpp).
 #include <cstddef>
 #include <cstdint>
 #include <vector>
 
-namespace tessera::test {
+namespace tessera {
 
 // One binary WebSocket message as a client must send it (RFC 6455: masked).
 inline std::vector<uint8_t> masked_ws_frame(const std::vector<uint8_t>& payload, const uint8_t (&mask)[4]) {
@@ -25,4 +26,4 @@ inline std::vector<uint8_t> masked_ws_frame(const std::vector<uint8_t>& payload,
   return f;
 }
 
-}  // namespace tessera::test
+}  // namespace tessera
