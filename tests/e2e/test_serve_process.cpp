@@ -103,6 +103,33 @@ static long long field(const std::string& line, const std::string& key) {
   return at == std::string::npos ? -1 : std::stoll(line.substr(at + key.size() + 4));
 }
 
+TEST_CASE("tessera serve builds medium-quality BVHs unless tessera.bvh-quality says high, and refuses any other value",
+          "[e2e]") {
+  for (const auto& [setting, quality] : std::vector<std::pair<std::string, std::string>>{
+           {"", "medium"}, {"--tessera.bvh-quality=high", "high"}, {"--tessera.bvh-quality=medium", "medium"}}) {
+    INFO("setting '" << setting << "'");
+    std::vector<std::string> args{"--port", "0"};
+    if (!setting.empty()) args.push_back(setting);
+    Process p(serve(args));
+    auto line = p.first_line(30000);
+    INFO("stderr: " << p.err());
+    REQUIRE(line);
+    CHECK(line->find("\"bvh_quality\": \"" + quality + "\"") != std::string::npos);
+    p.signal(SIGTERM);
+    REQUIRE(p.wait(15000));
+  }
+  for (const std::string bad : {"fast", "HIGH", "0"}) {
+    Process p(serve({"--port", "0", "--tessera.bvh-quality=" + bad}));
+    auto status = p.wait(15000);
+    REQUIRE(status);
+    INFO("'" << bad << "': stderr: " << p.err());
+    CHECK(WIFEXITED(*status));
+    CHECK(WEXITSTATUS(*status) != 0);
+    CHECK(p.err().find("tessera.bvh-quality must be high or medium") != std::string::npos);
+    CHECK(p.out().find("listening") == std::string::npos);
+  }
+}
+
 TEST_CASE("tessera serve keeps the meshes' BVHs for later sessions: a second visitor of a scene builds none; "
           "with geometry-cache-mb=0 it keeps none", "[e2e]") {
   for (const bool keep : {true, false}) {
