@@ -21,8 +21,13 @@ uint32_t VideoRateControl::update(int64_t now_ns, uint32_t ceiling_kbps, uint32_
     // The link bounds the frame rate: fit the stream to what it carries.
     last_wait_ns_ = now_ns;
     if (link_kbps > 0) {
-      link_ = double(link_kbps);
-      if (target_ > p_.fit * link_) target_ = std::max(floor, p_.fit * link_);
+      const double link = double(link_kbps);
+      if (target_ > p_.fit * link) target_ = std::max(floor, p_.fit * link);
+      // Remembered: the highest throughput of the last memory_s (a new one once that has passed).
+      if (link >= link_ || double(now_ns - link_ns_) / 1e9 > p_.memory_s) {
+        link_ = link;
+        link_ns_ = now_ns;
+      }
       if (target_ < link_) above_ns_ = 0;
     }
   } else if (target_ < ceiling && double(now_ns - last_wait_ns_) / 1e9 >= p_.hold_s && dt > 0) {

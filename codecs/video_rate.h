@@ -9,7 +9,10 @@
 //  - The frame waited for the link (the connection was still writing the frames before it when
 //    it came) and the link's throughput is measured: the target falls to `fit` (80%) of that
 //    throughput if it is above it (a frame that waits while the target is already below only
-//    holds the target where it is); that throughput is remembered as the link's.
+//    holds the target where it is); that throughput is remembered as the link's, unless the
+//    link carried more within the last `memory_s` (10 s): a throughput measured low for a
+//    moment (a receiver that stalled, a loaded peer) then does not hold the target low for
+//    long, as a windowed maximum of delivery rates does in TCP's BBR.
 //  - The frame did not wait, and no frame has waited for `hold_s` (1 s): the target rises, by
 //    elapsed time (at most `max_step_s` of it per frame, so a pause in the frames does not jump
 //    it), up to the ceiling: by `growth_per_s` (50%) a second up to the remembered link
@@ -36,6 +39,7 @@ class VideoRateControl {
     double probe_s = 5.0;       // ... for this long
     double hold_s = 1.0;        // no rise until the link has kept up this long
     double max_step_s = 0.25;   // the most elapsed time one frame's rise counts
+    double memory_s = 10.0;     // the link's remembered throughput: the highest measured this recently
   };
 
   VideoRateControl() = default;
@@ -57,7 +61,8 @@ class VideoRateControl {
   bool limited_ = false;
   int64_t last_ns_ = 0;       // the previous frame
   int64_t last_wait_ns_ = 0;  // the last frame that waited for the link
-  double link_ = 0;           // the link's throughput when a frame last waited (kbit/s; 0: none)
+  double link_ = 0;           // the link's remembered throughput (kbit/s; 0: none)
+  int64_t link_ns_ = 0;       // when link_ was measured
   int64_t above_ns_ = 0;      // when the target rose beyond link_ (0: it is not beyond)
 };
 

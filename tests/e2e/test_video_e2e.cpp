@@ -346,10 +346,18 @@ TEST_CASE("A client on a slow link gets a stream fitted to it with bounded laten
   const uint32_t late_min = *std::min_element(late.begin(), late.end());
   double late_mean = 0;
   for (uint32_t t : late) late_mean += double(t) / double(late.size());
+  // What the node measured of the link meanwhile (0: not measured lately), for the message.
+  std::string measured;
+  {
+    size_t k = 0;  // the H.264 frames' events (those with a target), as targets() counts them
+    for (auto& e : node.events(Ev::frame))
+      if (e.field("target_kbps") && k++ >= half_targets)
+        if (const Json* l = e.field("link_kbps")) measured += std::to_string(l->as_int()) + " ";
+  }
   const double link_kbps = kSlow * 8 / 1000;
   INFO("slow phase: " << slow_frames << " frames in the second half, worst latency " << worst_ms << " ms, targets "
                       << late_min << ".." << late_max << " (mean " << late_mean << ") kbit/s for a " << link_kbps << " kbit/s link; errors "
-                      << c.errors.size());
+                      << c.errors.size() << "; the link as measured, frame by frame: " << measured);
   CHECK(c.errors.empty());
   // The target fell to fit the link: it saw-tooths from 80% of the link's measured throughput
   // to a little above it (the law probes for more; measured over busy stretches, a

@@ -78,6 +78,34 @@ TEST_CASE("The target rises step by step once the link has kept up for a second,
   CHECK(rc.update(t, 8000, 0, false) <= uint32_t(800 * 1.125 + 1));
 }
 
+TEST_CASE("A throughput measured low for a moment does not hold the target low: the link remembers its best of the last 10 s",
+          "[unit][video]") {
+  VideoRateControl rc;
+  rc.update(0, 4000, 0, false);
+  int64_t t = 0;
+  REQUIRE(rc.update(t += 33 * kMs, 4000, 500, true) == 400);  // the link: 500 kbit/s
+  // The receiver stalls for a moment: the link reads 125 kbit/s, and the target is cut to it.
+  REQUIRE(rc.update(t += 33 * kMs, 4000, 125, true) == 100);
+  // Then the link keeps up: after the hold, 50% a second back up to the 500 it carried 0.07 s
+  // before (in ~3.3 s), not 10% a second beyond the 125 of the stall (that would take ~14 s).
+  const int64_t stall = t;
+  while (t < stall + 4800 * kMs) rc.update(t += 33 * kMs, 4000, 0, false);
+  CHECK(rc.target_kbps() >= 500);
+  CHECK(rc.target_kbps() < 560);  // and then slowly beyond it
+  // A link that really became slower: its higher throughput is forgotten after 10 s, and the
+  // target then probes slowly beyond what the link now carries.
+  VideoRateControl slow;
+  slow.update(0, 4000, 0, false);
+  t = 0;
+  REQUIRE(slow.update(t += 33 * kMs, 4000, 2000, true) == 1600);
+  t += 11'000 * kMs;
+  REQUIRE(slow.update(t, 4000, 400, true) == 320);
+  const int64_t cut = t;
+  while (t < cut + 4800 * kMs) slow.update(t += 33 * kMs, 4000, 0, false);
+  CHECK(slow.target_kbps() > 400);
+  CHECK(slow.target_kbps() < 600);  // 50% a second to 400, then 10% a second (~3.3 s: ~1.4x)
+}
+
 TEST_CASE("The client's ceiling bounds the target, and a new one applies at once unless the link holds it",
           "[unit][video]") {
   VideoRateControl rc;
