@@ -332,6 +332,7 @@ LoadedScene load_gltf(const std::string& path, const GltfOptions& options) {
 
   // Textures: decode images (tinygltf already did, via stb_image) and attach the sampler.
   std::map<int, Id> texture_ids;
+  std::vector<SharedBytes> shared(model.images.size());  // each image's bytes, once a texture took them
   for (size_t ti = 0; ti < model.textures.size(); ++ti) {
     const auto& gt = model.textures[ti];
     if (gt.source < 0 || size_t(gt.source) >= model.images.size()) {
@@ -339,7 +340,8 @@ LoadedScene load_gltf(const std::string& path, const GltfOptions& options) {
       continue;
     }
     Image& img = decoded[size_t(gt.source)];
-    if (img.width <= 0 || img.height <= 0 || img.rgba.size() != size_t(img.width) * size_t(img.height) * 4) {
+    SharedBytes& bytes = shared[size_t(gt.source)];
+    if (bytes.empty() && (img.width <= 0 || img.height <= 0 || img.rgba.size() != size_t(img.width) * size_t(img.height) * 4)) {
       const std::string& why = decode_errors[size_t(gt.source)];
       out.warnings.push_back(path + ": image '" + model.images[gt.source].uri + "' could not be decoded" +
                              (why.empty() ? "" : " (" + why + ")") + "; texture left out");
@@ -348,11 +350,9 @@ LoadedScene load_gltf(const std::string& path, const GltfOptions& options) {
     Texture tex;
     tex.width = img.width;
     tex.height = img.height;
-    // A texture may share its image with others: the last one takes it, the others copy it.
-    if (--used[size_t(gt.source)] == 0)
-      tex.rgba = std::move(img.rgba);
-    else
-      tex.rgba = img.rgba;
+    // Textures of one image share its bytes.
+    if (bytes.empty()) bytes = SharedBytes(std::move(img.rgba));
+    tex.rgba = bytes;
     if (gt.sampler >= 0 && size_t(gt.sampler) < model.samplers.size()) {
       const auto& s = model.samplers[gt.sampler];
       auto wrap = [](int w) { return w == TINYGLTF_TEXTURE_WRAP_CLAMP_TO_EDGE ? Sampler::Wrap::clamp : Sampler::Wrap::repeat; };

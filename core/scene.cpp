@@ -1,11 +1,17 @@
 #include "core/scene.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 
 #include "core/validate.h"
 
 namespace tessera {
+
+uint64_t Scene::next_version() {
+  static std::atomic<uint64_t> counter{0};
+  return counter.fetch_add(1, std::memory_order_relaxed) + 1;
+}
 
 bool Texture::has_alpha() const {
   for (size_t i = 3; i < rgba.size(); i += 4)

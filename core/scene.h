@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "core/math.h"
+#include "core/shared_bytes.h"
 
 namespace tessera {
 
@@ -42,7 +43,7 @@ struct Sampler {
 // RGBA8 texels, row 0 at the top (texcoord v = 0), as images are stored and as glTF maps them.
 struct Texture {
   int32_t width = 0, height = 0;
-  std::vector<uint8_t> rgba;
+  SharedBytes rgba;  // shared with the copies of this texture and with the renderers that show it
   Sampler sampler;
   bool srgb = true;  // texels are sRGB-encoded colours (decoded to linear when shading, if the scene is linear)
   bool has_alpha() const;  // any texel with alpha < 255 (computed on demand)
@@ -129,9 +130,9 @@ class Scene {
   bool remove_mesh(Id id);
   bool remove_light(Id id) { return drop(lights_, id); }
 
-  void set_camera(const Camera& c) { camera_ = c; camera_version_ = ++version_; }
-  void set_environment(const Environment& e) { env_ = e; env_version_ = ++version_; }
-  void set_resolution(int32_t w, int32_t h) { width_ = w; height_ = h; ++version_; }
+  void set_camera(const Camera& c) { camera_ = c; camera_version_ = bump(); }
+  void set_environment(const Environment& e) { env_ = e; env_version_ = bump(); }
+  void set_resolution(int32_t w, int32_t h) { width_ = w; height_ = h; bump(); }
 
   const std::map<Id, Entry<Buffer>>& buffers() const { return buffers_; }
   const std::map<Id, Entry<Texture>>& textures() const { return textures_; }
@@ -174,16 +175,22 @@ class Scene {
   uint64_t held_bytes() const { return held_bytes_; }
 
  private:
+  // Versions come from one counter for the whole process, not one per scene: an entry's version
+  // then names its content in every scene, so a renderer that syncs from another scene object
+  // (a worker's scene, made anew when its parent resets it, with the same ids) never mistakes
+  // a new entry for the one it holds.
+  static uint64_t next_version();
+  uint64_t bump() { return version_ = next_version(); }
   template <class T>
   void put(std::map<Id, Entry<T>>& map, Id id, T v) {
     auto& e = map[id];
     e.value = std::move(v);
-    e.version = ++version_;
+    e.version = bump();
   }
   template <class T>
   bool drop(std::map<Id, Entry<T>>& map, Id id) {
     if (map.erase(id) == 0) return false;
-    ++version_;
+    bump();
     return true;
   }
   template <class T>

@@ -9,7 +9,6 @@
 #include <tbb/combinable.h>
 #include <tbb/parallel_for.h>
 #include <cpuid.h>
-#include <sys/mman.h>
 #include <x86intrin.h>
 
 #include <algorithm>
@@ -89,31 +88,6 @@ double tsc_khz() {
   return khz;
 }
 
-namespace raytracer_detail {
-
-namespace {
-constexpr size_t kHugePage = size_t(2) << 20;
-constexpr size_t kLargeBytes = size_t(4) << 20;  // below this: operator new
-}  // namespace
-
-void* allocate_large(size_t bytes) {
-  if (bytes < kLargeBytes) return ::operator new(bytes);
-  const size_t rounded = (bytes + kHugePage - 1) / kHugePage * kHugePage;
-  void* p = std::aligned_alloc(kHugePage, rounded);
-  if (!p) throw std::bad_alloc();
-  madvise(p, rounded, MADV_HUGEPAGE);  // a hint: where the kernel has none, 4 KiB pages
-  return p;
-}
-
-void free_large(void* p, size_t bytes) noexcept {
-  if (bytes < kLargeBytes)
-    ::operator delete(p);
-  else
-    std::free(p);
-}
-
-}  // namespace raytracer_detail
-
 namespace {
 
 // ---------------------------------------------------------------------------------------
@@ -123,13 +97,13 @@ namespace {
 struct SrgbLut {
   std::array<float, 256> to_linear;
   // A texel channel (16 bits) for each 8-bit value: decoded from sRGB, or as it is (x 257).
-  std::array<uint64_t, 256> texel_linear, texel_plain;
+  std::array<uint32_t, 256> texel_linear, texel_plain;
   SrgbLut() {
     for (int i = 0; i < 256; ++i) {
       float c = i / 255.0f;
       to_linear[i] = c <= 0.04045f ? c / 12.92f : std::pow((c + 0.055f) / 1.055f, 2.4f);
-      texel_linear[size_t(i)] = uint64_t(std::lround(to_linear[size_t(i)] * 65535.0f));
-      texel_plain[size_t(i)] = uint64_t(i) * 257;
+      texel_linear[size_t(i)] = uint32_t(std::lround(to_linear[size_t(i)] * 65535.0f));
+      texel_plain[size_t(i)] = uint32_t(i) * 257;
     }
   }
 };
@@ -268,7 +242,7 @@ std::shared_ptr<SharedGeometry> RayTracer::Impl::build_geom(const Scene& scene, 
 void RayTracer::Impl::sync(const Scene& scene, std::vector<std::string>& warnings) {
   stats = {};
   env = scene.environment();
-  // Textures, converted once to what shading reads (Tex::texels).
+  // Textures: the scene's bytes, shared, and how a lookup reads them (Tex).
   for (auto it = textures.begin(); it != textures.end();)
     it = scene.textures().count(it->first) ? std::next(it) : textures.erase(it);
   for (auto& [id, e] : scene.textures()) {
@@ -289,21 +263,19 @@ void RayTracer::Impl::sync(const Scene& scene, std::vector<std::string>& warning
                              src.sampler.wrap_t == Sampler::Wrap::repeat, src.sampler.filter == Sampler::Filter::nearest);
     t.decoded = decode;
     t.version = e.version;
-    t.texels.resize(size_t(src.width) * size_t(src.height));  // not zeroed: every texel is written below
-    // In parallel: a scene's textures hold tens of millions of texels (the kitchen: 46 M; a
-    // San Miguel-sized scene 230 M), through a table per channel.
+    t.bytes = src.rgba;  // shared
+    t.texels = t.bytes.data();
+    t.lut = decode ? srgb_lut().texel_linear.data() : srgb_lut().texel_plain.data();
+    // Whether any texel lets light through, in parallel: a scene's textures hold tens of
+    // millions of texels (the kitchen: 46 M; a San Miguel-sized scene 230 M).
     std::atomic<bool> translucent{false};
-    const std::array<uint64_t, 256>& lut = decode ? srgb_lut().texel_linear : srgb_lut().texel_plain;
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, t.texels.size(), 1 << 16), [&](const tbb::blocked_range<size_t>& r) {
-      uint8_t min_alpha = 255;
-      const uint8_t* p = &src.rgba[r.begin() * 4];
-      uint64_t* out = t.texels.data();
-      for (size_t i = r.begin(); i < r.end(); ++i, p += 4) {
-        min_alpha = std::min(min_alpha, p[3]);
-        out[i] = lut[p[0]] | lut[p[1]] << 16 | lut[p[2]] << 32 | (uint64_t(p[3]) * 257) << 48;
-      }
-      if (min_alpha < 255) translucent.store(true, std::memory_order_relaxed);
-    });
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, size_t(src.width) * size_t(src.height), 1 << 16),
+                      [&](const tbb::blocked_range<size_t>& r) {
+                        const uint8_t* p = t.texels + r.begin() * 4;
+                        uint8_t min_alpha = 255;
+                        for (size_t i = 0; i < r.size(); ++i) min_alpha = std::min(min_alpha, p[i * 4 + 3]);
+                        if (min_alpha < 255) translucent.store(true, std::memory_order_relaxed);
+                      });
     t.translucent = translucent.load();
   }
   // Materials (rebuilt whole: they are small).
@@ -320,7 +292,7 @@ void RayTracer::Impl::sync(const Scene& scene, std::vector<std::string>& warning
   }
   auto tex_of = [&](Id id) -> const Tex* {
     auto it = textures.find(id);
-    return it != textures.end() && !it->second.texels.empty() ? &it->second : nullptr;  // empty: ignored
+    return it != textures.end() && it->second.texels ? &it->second : nullptr;  // none: ignored
   };
   mat_diffuse_tex.resize(materials.size());
   mat_specular_tex.resize(materials.size());

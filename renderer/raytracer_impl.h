@@ -13,6 +13,7 @@
 
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <map>
 #include <new>
 #include <memory>
@@ -24,35 +25,6 @@
 
 namespace tessera {
 namespace raytracer_detail {
-
-// Memory for large arrays that are written whole right after: on transparent huge pages
-// where the kernel offers them (a San Miguel-sized scene's texels are 1.8 GB; in 4 KiB pages
-// their page faults took about as long as converting them). Small sizes: operator new.
-void* allocate_large(size_t bytes);
-void free_large(void* p, size_t bytes) noexcept;
-
-// An allocator whose value-initialisation leaves the elements as they are: a vector of texels
-// resized with it is not zeroed first (a scene's textures are hundreds of megabytes, every
-// texel is written right after). Its memory comes from allocate_large.
-template <class T>
-struct UninitializedAllocator : std::allocator<T> {
-  template <class U>
-  struct rebind {
-    using other = UninitializedAllocator<U>;
-  };
-  UninitializedAllocator() = default;
-  template <class U>
-  UninitializedAllocator(const UninitializedAllocator<U>&) noexcept {}
-  T* allocate(size_t n) {
-    if (n > size_t(-1) / sizeof(T)) throw std::bad_array_new_length();
-    return static_cast<T*>(allocate_large(n * sizeof(T)));
-  }
-  void deallocate(T* p, size_t n) noexcept { free_large(p, n * sizeof(T)); }
-  template <class U>
-  void construct(U* p) noexcept { ::new (static_cast<void*>(p)) U; }
-  template <class U, class... Args>
-  void construct(U* p, Args&&... args) { ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...); }
-};
 
 // ---------------------------------------------------------------------------------------
 // Embree packet types by width
@@ -228,13 +200,24 @@ __attribute__((always_inline)) inline void texel_blend(const uint32_t (&lo)[4], 
   };
   for (int c = 0; c < 4; ++c) out[c] = w00 * ch(0, c) + w10 * ch(1, c) + w01 * ch(2, c) + w11 * ch(3, c);
 }
+// One stored texel (RGBA8 as the image has it, R in the low byte) as texel_blend's two halves:
+// the colour channels through the texture's table (16 bits each: decoded from sRGB, or x 257),
+// alpha x 257. Decoding here rather than when the texture is converted halves the texels'
+// memory (docs/results/load.md); the values are the ones a converted 16-bit texel held.
+static_assert(__BYTE_ORDER__ == __ORDER_LITTLE_ENDIAN__, "texels are RGBA8 bytes read as one little-endian word");
+__attribute__((always_inline)) inline void texel_halves(const uint32_t* lut, const uint8_t* texels, int i, uint32_t& lo,
+                                                      uint32_t& hi) {
+  uint32_t p;
+  std::memcpy(&p, texels + size_t(i) * 4, 4);
+  lo = lut[p & 0xFFu] | lut[(p >> 8) & 0xFFu] << 16;
+  hi = lut[(p >> 16) & 0xFFu] | (p >> 24) * 257u << 16;
+}
 template <class Tex>
 __attribute__((always_inline)) inline void sample_texture(const Tex& t, float u, float v, float out[4]) {
   const TexelCoords c = texel_coords(t.addr, u, v);
-  const uint64_t* texels = t.texels.data();
   const int idx[4] = {c.i00, c.i10, c.i01, c.i11};
   uint32_t lo[4], hi[4];
-  for (int k = 0; k < 4; ++k) { lo[k] = uint32_t(texels[idx[k]]); hi[k] = uint32_t(texels[idx[k]] >> 32); }
+  for (int k = 0; k < 4; ++k) texel_halves(t.lut, t.texels, idx[k], lo[k], hi[k]);
   texel_blend(lo, hi, c.fx, c.fy, out);
 }
 
@@ -251,9 +234,13 @@ bool cpu_avx2();
 
 struct RayTracer::Impl {
   struct Tex {
-    // RGBA, 16 bits a channel (low to high), colour already as shading uses it (decoded from
-    // sRGB for glTF scenes), so a lookup is one 64-bit load per texel and no table.
-    std::vector<uint64_t, raytracer_detail::UninitializedAllocator<uint64_t>> texels;
+    // RGBA8, the scene's own bytes (shared, not copied: the scene may change or drop its
+    // texture while this session still shows it, until the next sync); a lookup turns each of
+    // its four texels into 16 bits a channel through `lut` (texel_halves): decoded from sRGB
+    // for glTF scenes, else as they are.
+    SharedBytes bytes;
+    const uint8_t* texels = nullptr;  // bytes.data()
+    const uint32_t* lut = nullptr;    // 256 entries
     raytracer_detail::TexelAddressing addr;  // size, wrap modes and filter
     bool decoded = false;  // colour channels decoded from sRGB
     bool translucent = false;  // some texel's alpha is below 1: a material without an alpha mask lets light through there

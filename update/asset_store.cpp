@@ -323,7 +323,8 @@ void AssetStore::resolve(std::vector<ClientRecord>& records, const std::string& 
           out.id = t->id;
           out.texture.width = job.image->width;
           out.texture.height = job.image->height;
-          out.texture.rgba = job.image->rgba;
+          // The cached image's bytes, shared (not copied) for as long as the texture holds them.
+          out.texture.rgba = SharedBytes(std::shared_ptr<const std::vector<uint8_t>>(job.image, &job.image->rgba));
           out.texture.sampler = t->sampler;
           out.texture.srgb = t->srgb;
           payload += bytes;

@@ -4,6 +4,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <utility>
 
 #include "core/image.h"
 #include "tests/unit/temp_files.h"
@@ -195,11 +196,14 @@ TEST_CASE("Texture references decode once per content: the cache is keyed by has
   CHECK(int(t.texture.rgba[0]) == 200);
   CHECK(store.stats().misses == 1);
   CHECK(store.stats().entries == 1);
+  const SharedBytes first = t.texture.rgba;
 
-  // A second session's reference to the same file: from the cache.
+  // A second session's reference to the same file: from the cache, the very same bytes (the
+  // sessions share them with the cache instead of holding a copy each).
   r = tex_ref(8, kNode + "/scenes/a.png");
   REQUIRE(one(store, r).ok);
   CHECK(store.stats().hits == 1);
+  CHECK(std::get<SetTexture>(std::as_const(r)).texture.rgba.same(first));
   CHECK(int(std::get<SetTexture>(r).texture.rgba[0]) == 200);
 
   // The file changes under the same URL: its new content, decoded again (the key is the hash).

@@ -252,6 +252,35 @@ TEST_CASE("glTF emissiveTexture becomes the material's emissive texture, times e
   CHECK(warned);
 }
 
+TEST_CASE("glTF textures of one image share its decoded bytes", "[gltf]") {
+  TempDir dir;
+  dir.write("tri.bin", tri_bin());
+  Image img(2, 1);
+  const uint8_t texels[8] = {200, 30, 40, 255, 10, 220, 90, 128};
+  std::copy(texels, texels + 8, img.rgba.begin());
+  write_png(dir.path + "/one.png", img);
+  std::string j = tri_gltf();
+  j.pop_back();
+  j += R"(,"images":[{"uri":"one.png"}],"samplers":[{"wrapS":33071},{"magFilter":9728}],)"
+       R"("textures":[{"source":0,"sampler":0},{"source":0,"sampler":1},{"source":0}],)"
+       R"("materials":[{"pbrMetallicRoughness":{"baseColorTexture":{"index":0}},"emissiveTexture":{"index":1}}]})";
+  LoadedScene ls = load_gltf(dir.write("shared.gltf", j));
+  REQUIRE(ls.scene.textures().size() == 3);
+  for (const std::string& w : ls.warnings) CHECK(w.find("could not be decoded") == std::string::npos);
+  const Texture& first = ls.scene.textures().begin()->second.value;
+  CHECK(std::equal(texels, texels + 8, first.rgba.begin(), first.rgba.end()));
+  for (const auto& [id, e] : ls.scene.textures()) {
+    INFO("texture " << id);
+    CHECK(e.value.rgba.same(first.rgba));
+    CHECK(e.value.width == 2);
+  }
+  // Samplers stay per texture.
+  auto it = ls.scene.textures().begin();
+  CHECK(it->second.value.sampler.wrap_s == Sampler::Wrap::clamp);
+  ++it;
+  CHECK(it->second.value.sampler.filter == Sampler::Filter::nearest);
+}
+
 TEST_CASE("glTF COLOR_0 becomes the mesh's float3 colour buffer, used by its material", "[gltf]") {
   TempDir dir;
   dir.write("tri.bin", tri_bin());

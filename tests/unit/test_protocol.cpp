@@ -298,7 +298,7 @@ TEST_CASE("Textures round trip as PNG and JPEG bytes", "[protocol]") {
     CHECK(back.texture.height == 9);
     CHECK(compare(img, Image{17, 9}).psnr < compare(img, [&] {
             Image i(17, 9);
-            i.rgba = back.texture.rgba;
+            i.rgba.assign(back.texture.rgba.begin(), back.texture.rgba.end());
             return i;
           }()).psnr);
     t.texture.height = 10;

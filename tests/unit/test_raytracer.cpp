@@ -143,6 +143,51 @@ TEST_CASE("sphere and plane: silhouette, N.L shading, plane edges and shadow mat
 }
 
 // ---------------------------------------------------------------------------------------
+// Textures: the renderer shares the scene's bytes (core/shared_bytes.h) and keeps them.
+// ---------------------------------------------------------------------------------------
+TEST_CASE("a renderer shares a texture's bytes with the scene and keeps showing them after the scene changed or went",
+          "[raytracer][textures]") {
+  const int W = 16, H = 16;
+  auto make = [&](uint8_t r, uint8_t g) {
+    auto scene = std::make_unique<Scene>();
+    scene->set_resolution(W, H);
+    scene->set_environment(plain_env({0, 0, 0}));
+    Texture tex;
+    tex.width = tex.height = 1;
+    tex.rgba = {r, g, 0, 255};
+    scene->set_texture(1, tex);
+    Material m = matte({1, 1, 1});
+    m.diffuse_texture = 1;
+    scene->set_material(1, m);
+    Mesh q = add_geometry(*scene, 100, quad({-4, -4, 0}, {8, 0, 0}, {0, 8, 0}));
+    q.material = 1;
+    scene->set_mesh(10, q);
+    scene->set_camera(look({0, 0, 10}, {0, 0, 0}, 0.5f));
+    return scene;
+  };
+  std::unique_ptr<Scene> red = make(200, 0);
+  RayTracer rt;
+  Image img = render_full(rt, *red, no_ao());
+  CHECK(px(img, W / 2, H / 2).r > 20);
+  CHECK(px(img, W / 2, H / 2).g == 0);
+  // The scene's texture changes (its bytes copied on write: the renderer's stay), then the
+  // scene goes; until its next sync the renderer shows what it synced (under ASan this also
+  // proves it reads no freed memory).
+  Texture changed = red->textures().at(1).value;
+  changed.rgba[0] = 0;
+  red->set_texture(1, changed);
+  red.reset();
+  TaskResult r;
+  rt.render({0, 0, W, H}, no_ao(), r);
+  CHECK(std::memcmp(r.image.rgba.data(), img.rgba.data(), img.rgba.size()) == 0);
+  // A new scene: the next sync shows its texture.
+  std::unique_ptr<Scene> green = make(0, 200);
+  Image g = render_full(rt, *green, no_ao());
+  CHECK(px(g, W / 2, H / 2).r == 0);
+  CHECK(px(g, W / 2, H / 2).g > 20);
+}
+
+// ---------------------------------------------------------------------------------------
 // Instancing: two meshes share one buffer set (one BLAS), placed by their transforms.
 // ---------------------------------------------------------------------------------------
 TEST_CASE("instances of one geometry appear at their exact offsets; moving one only updates its instance", "[raytracer][instancing]") {

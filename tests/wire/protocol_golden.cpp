@@ -56,7 +56,8 @@ std::string hex(const uint8_t* p, size_t n) {
   return s;
 }
 std::string hex(const std::vector<uint8_t>& v) { return hex(v.data(), v.size()); }
-std::string bytes(const std::vector<uint8_t>& v) { return "{\"$hex\": \"" + hex(v) + "\"}"; }
+std::string bytes(const uint8_t* p, size_t n) { return "{\"$hex\": \"" + hex(p, n) + "\"}"; }
+std::string bytes(const std::vector<uint8_t>& v) { return bytes(v.data(), v.size()); }
 
 std::string num(float v) {
   if (std::isnan(v)) return "{\"$f\": \"NaN\"}";
@@ -160,7 +161,7 @@ struct ClientJs {
     return Obj{}.f("type", q("texture")).f("id", num(t.id)).f("format", q(name(t.format)))
         .f("wrapS", q(name(x.sampler.wrap_s))).f("wrapT", q(name(x.sampler.wrap_t))).f("filter", q(name(x.sampler.filter)))
         .f("srgb", boolean(x.srgb)).f("width", num(x.width)).f("height", num(x.height))
-        .f("bytes", bytes(t.format == TextureFormat::rgba8 ? x.rgba : t.encoded)).str();
+        .f("bytes", t.format == TextureFormat::rgba8 ? bytes(x.rgba.data(), x.rgba.size()) : bytes(t.encoded)).str();
   }
   std::string operator()(const SetMaterial& s) {
     const Material& m = s.material;
