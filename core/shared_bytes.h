@@ -50,8 +50,6 @@ class SharedBytes {
   const uint8_t& operator[](size_t i) const { return (*p_)[i]; }
   const_iterator begin() const { return p_ ? p_->begin() : empty_().begin(); }
   const_iterator end() const { return p_ ? p_->end() : empty_().end(); }
-  // The bytes as a shared pointer (null when empty), for a holder that outlives this object.
-  const std::shared_ptr<const Vec>& share() const { return p_; }
   // Whether both hold the very same bytes (not merely equal ones).
   bool same(const SharedBytes& o) const { return p_ == o.p_; }
 

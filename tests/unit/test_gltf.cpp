@@ -209,13 +209,18 @@ TEST_CASE("a minimal glTF loads, instancing one mesh through two nodes (one mirr
   CHECK_FALSE(ls.has_camera);
 }
 
-TEST_CASE("glTF emissiveTexture becomes the material's emissive texture, times emissiveFactor", "[gltf]") {
-  TempDir dir;
+// tri_gltf()'s buffer, and a 2x1 PNG of the given RGBA texels beside it.
+static void write_triangle_and_image(TempDir& dir, const std::string& png, const uint8_t (&texels)[8]) {
   dir.write("tri.bin", tri_bin());
   Image img(2, 1);
-  const uint8_t texels[8] = {200, 30, 40, 255, 10, 220, 90, 255};
   std::copy(texels, texels + 8, img.rgba.begin());
-  write_png(dir.path + "/glow.png", img);
+  write_png(dir.path + "/" + png, img);
+}
+
+TEST_CASE("glTF emissiveTexture becomes the material's emissive texture, times emissiveFactor", "[gltf]") {
+  TempDir dir;
+  const uint8_t texels[8] = {200, 30, 40, 255, 10, 220, 90, 255};
+  write_triangle_and_image(dir, "glow.png", texels);
   std::string j = tri_gltf();
   j.pop_back();  // reopen the top-level object
   j += R"(,"images":[{"uri":"glow.png"}],"textures":[{"source":0}],)"
@@ -254,11 +259,8 @@ TEST_CASE("glTF emissiveTexture becomes the material's emissive texture, times e
 
 TEST_CASE("glTF textures of one image share its decoded bytes", "[gltf]") {
   TempDir dir;
-  dir.write("tri.bin", tri_bin());
-  Image img(2, 1);
   const uint8_t texels[8] = {200, 30, 40, 255, 10, 220, 90, 128};
-  std::copy(texels, texels + 8, img.rgba.begin());
-  write_png(dir.path + "/one.png", img);
+  write_triangle_and_image(dir, "one.png", texels);
   std::string j = tri_gltf();
   j.pop_back();
   j += R"(,"images":[{"uri":"one.png"}],"samplers":[{"wrapS":33071},{"magFilter":9728}],)"
