@@ -4,7 +4,7 @@
 // A decoded image is hundreds of megabytes in a big scene (a San Miguel-sized one: 0.9 GB).
 // The node's texture cache, every session's scene model that uses the image and every
 // renderer that shows it hold the same bytes instead of a copy each (docs/results/load.md).
-// Reading never copies; a write through a non-const accessor (operator[], begin, mut, assign,
+// Reading never copies; a write through a non-const accessor (operator[], begin, assign,
 // resize, ...) first takes a private copy when anyone else holds the bytes, so a holder keeps
 // what it had: a renderer keeps showing a texture until its next sync, whatever the session
 // does to its scene meanwhile.
@@ -53,18 +53,12 @@ class SharedBytes {
   // Whether both hold the very same bytes (not merely equal ones).
   bool same(const SharedBytes& o) const { return p_ == o.p_; }
 
-  // Writers: the bytes become this object's own first.
-  Vec& mut() {
-    if (!mine_ || p_.use_count() > 1) own(p_ ? std::make_shared<Vec>(*p_) : std::make_shared<Vec>());
-    return *mine_;
-  }
+  // Writers: the bytes become this object's own first (mut()).
   uint8_t& operator[](size_t i) { return mut()[i]; }
   iterator begin() { return mut().begin(); }
   iterator end() { return mut().end(); }
   void clear() { *this = SharedBytes(); }
   void resize(size_t n) { mut().resize(n); }
-  void resize(size_t n, uint8_t v) { mut().resize(n, v); }
-  void reserve(size_t n) { mut().reserve(n); }
   void push_back(uint8_t v) { mut().push_back(v); }
   void assign(size_t n, uint8_t v) {
     if (mine_ && p_.use_count() == 1) mine_->assign(n, v);
@@ -90,6 +84,10 @@ class SharedBytes {
   friend bool operator==(const Vec& a, const SharedBytes& b) { return b == a; }
 
  private:
+  Vec& mut() {
+    if (!mine_ || p_.use_count() > 1) own(p_ ? std::make_shared<Vec>(*p_) : std::make_shared<Vec>());
+    return *mine_;
+  }
   static const Vec& empty_() {
     static const Vec e;
     return e;

@@ -13,7 +13,6 @@
 
 #include <algorithm>
 #include <array>
-#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -264,19 +263,8 @@ void RayTracer::Impl::sync(const Scene& scene, std::vector<std::string>& warning
     t.decoded = decode;
     t.version = e.version;
     t.bytes = src.rgba;  // shared
-    t.texels = t.bytes.data();
     t.lut = decode ? srgb_lut().texel_linear.data() : srgb_lut().texel_plain.data();
-    // Whether any texel lets light through, in parallel: a scene's textures hold tens of
-    // millions of texels (the kitchen: 46 M; a San Miguel-sized scene 230 M).
-    std::atomic<bool> translucent{false};
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, size_t(src.width) * size_t(src.height), 1 << 16),
-                      [&](const tbb::blocked_range<size_t>& r) {
-                        const uint8_t* p = t.texels + r.begin() * 4;
-                        uint8_t min_alpha = 255;
-                        for (size_t i = 0; i < r.size(); ++i) min_alpha = std::min(min_alpha, p[i * 4 + 3]);
-                        if (min_alpha < 255) translucent.store(true, std::memory_order_relaxed);
-                      });
-    t.translucent = translucent.load();
+    t.translucent = src.has_alpha();
   }
   // Materials (rebuilt whole: they are small).
   materials.assign(1, default_material());
@@ -292,7 +280,7 @@ void RayTracer::Impl::sync(const Scene& scene, std::vector<std::string>& warning
   }
   auto tex_of = [&](Id id) -> const Tex* {
     auto it = textures.find(id);
-    return it != textures.end() && it->second.texels ? &it->second : nullptr;  // none: ignored
+    return it != textures.end() && !it->second.bytes.empty() ? &it->second : nullptr;  // empty: ignored
   };
   mat_diffuse_tex.resize(materials.size());
   mat_specular_tex.resize(materials.size());

@@ -217,7 +217,7 @@ __attribute__((always_inline)) inline void sample_texture(const Tex& t, float u,
   const TexelCoords c = texel_coords(t.addr, u, v);
   const int idx[4] = {c.i00, c.i10, c.i01, c.i11};
   uint32_t lo[4], hi[4];
-  for (int k = 0; k < 4; ++k) texel_halves(t.lut, t.texels, idx[k], lo[k], hi[k]);
+  for (int k = 0; k < 4; ++k) texel_halves(t.lut, t.bytes.data(), idx[k], lo[k], hi[k]);
   texel_blend(lo, hi, c.fx, c.fy, out);
 }
 
@@ -239,8 +239,7 @@ struct RayTracer::Impl {
     // its four texels into 16 bits a channel through `lut` (texel_halves): decoded from sRGB
     // for glTF scenes, else as they are.
     SharedBytes bytes;
-    const uint8_t* texels = nullptr;  // bytes.data()
-    const uint32_t* lut = nullptr;    // 256 entries
+    const uint32_t* lut = nullptr;  // 256 entries
     raytracer_detail::TexelAddressing addr;  // size, wrap modes and filter
     bool decoded = false;  // colour channels decoded from sRGB
     bool translucent = false;  // some texel's alpha is below 1: a material without an alpha mask lets light through there
