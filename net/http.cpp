@@ -151,7 +151,12 @@ std::optional<std::string> redirect_host(const std::string& header) {
     h = h.substr(0, close + 1);
     in6_addr a6;
     if (!port.empty() && port.front() != ':') return std::nullopt;
-    if (inet_pton(AF_INET6, h.substr(1, h.size() - 2).c_str(), &a6) != 1) return std::nullopt;
+    // inet_pton reads up to a NUL: "[::1\0junk]" would pass it with the junk kept, so the
+    // literal's characters are checked first.
+    const std::string literal = h.substr(1, h.size() - 2);
+    for (char c : literal)
+      if (!(std::isxdigit(static_cast<unsigned char>(c)) || c == ':' || c == '.')) return std::nullopt;
+    if (inet_pton(AF_INET6, literal.c_str(), &a6) != 1) return std::nullopt;
   } else {
     const size_t colon = h.find(':');
     if (colon != std::string::npos) {

@@ -103,6 +103,10 @@ TEST_CASE("The redirect to HTTPS takes a Host header's host only when it is a ho
     CHECK_FALSE(redirect_host(hostile));
   }
   CHECK_FALSE(redirect_host(std::string(254, 'a')));
+  // A NUL inside an IPv6 literal: inet_pton stops reading there (found by fuzz_http).
+  CHECK_FALSE(redirect_host(std::string("[::1\0junk]:8080", 16)));
+  CHECK_FALSE(redirect_host(std::string("[::1\0]", 6)));
+  CHECK_FALSE(redirect_host(std::string("node\0.example", 13)));
 }
 
 TEST_CASE("The redirect's Location keeps the path and query and escapes what may not stand in a URL", "[unit]") {
