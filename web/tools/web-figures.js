@@ -42,6 +42,7 @@ const pct = (a, p) => { const s = [...a].sort((x, y) => x - y); return s.length 
 // In the page before anything else: frame, load and input times, and every protocol message sent.
 function instrument(noDeflate) {
   window.__drawn = []; window.__sends = []; window.__inputs = []; window.__load = null; window.__connected = null;
+  window.__answers = [];  // times of the messages that carry reference answers (0x85)
   if (noDeflate) { delete window.CompressionStream; }
   document.addEventListener('framedrawn', (e) => window.__drawn.push({ t: performance.now(), frame: e.detail.frame,
     rendering: e.detail.timings && e.detail.timings.rendering, pipeline: e.detail.timings && e.detail.timings.pipeline,
@@ -52,15 +53,25 @@ function instrument(noDeflate) {
   WebSocket.prototype.send = function (data) {
     const b = data instanceof ArrayBuffer ? new Uint8Array(data) : new Uint8Array(data.buffer, data.byteOffset, data.byteLength);
     const dv = new DataView(b.buffer, b.byteOffset, b.byteLength);
-    let camera = false, render = null, scene = false, o = 8;
+    let camera = false, render = null, scene = false, refs = false, o = 8;
     for (let i = 0, n = dv.getUint32(4, true); i < n && o + 8 <= b.length; i++) {
       if (b[o] === 0x04) camera = true;
+      if (b[o] === 0x15 || b[o] === 0x16) refs = true;
       if (b[o] >= 0x10 && b[o] <= 0x16) scene = true;  // buffer .. light, buffer_ref, texture_ref
       if (b[o] === 0x20) render = dv.getUint32(o + 8, true);
       o += 8 + dv.getUint32(o + 4, true);
     }
-    if (window.__connected === null) window.__connected = performance.now();  // the handshake, sent on open
-    window.__sends.push({ t: performance.now(), camera, render, scene, bytes: b.length });
+    if (window.__connected === null) {  // the handshake, sent on open
+      window.__connected = performance.now();
+      this.addEventListener('message', (e) => {
+        if (!(e.data instanceof ArrayBuffer) || e.data.byteLength < 9) return;
+        const m = new Uint8Array(e.data), mv = new DataView(e.data);
+        for (let i = 0, n = mv.getUint32(4, true), q = 8; i < n && q + 8 <= m.length; i++, q += 8 + mv.getUint32(q + 4, true)) {
+          if (m[q] === 0x85) { window.__answers.push(performance.now()); break; }
+        }
+      });
+    }
+    window.__sends.push({ t: performance.now(), camera, render, scene, refs, bytes: b.length });
     return send.call(this, data);
   };
 }
@@ -109,6 +120,8 @@ async function loadPage(node, name, { noDeflate = false, display = 'jpeg', query
     // the frame counted as complete, and every frame drawn until then (time, rendering ms).
     lastScene: window.__lastScene, completeRequest: window.__completeRequest, completeWidth: window.__completeWidth,
     completeFull: window.__completeFull,
+    refsSent: (window.__sends.find((s) => s.refs) || {}).t, refsLast: (window.__sends.filter((s) => s.refs).pop() || {}).t,
+    answered: window.__answers.length ? window.__answers[window.__answers.length - 1] : undefined,
     drawn: window.__drawn.filter((f) => f.t <= window.__complete).map((f) => [+f.t.toFixed(0), f.frame, f.rendering === undefined ? null : +(+f.rendering).toFixed(0)]) }));
   return { page, close, t, up };
 }
@@ -186,6 +199,11 @@ for (let k = 0; k < (REF_PAGES.length ? REPEAT : 0); k++) {
           refs: up.refs, wire_mb: +(up.wire / 1048576).toFixed(2),
           last_scene_ms: +(t.lastScene - t.connected).toFixed(0), complete_request_ms: +(t.completeRequest - t.connected).toFixed(0),
           complete_width: t.completeWidth, connect_to_full_ms: +(t.completeFull - t.connected).toFixed(0),
+          // The references' round trip: the first and last message of references sent, the last
+          // answer received (ms after connecting; absent without references).
+          refs_sent_ms: t.refsSent === undefined ? null : +(t.refsSent - t.connected).toFixed(0),
+          refs_last_ms: t.refsLast === undefined ? null : +(t.refsLast - t.connected).toFixed(0),
+          answered_ms: t.answered === undefined ? null : +(t.answered - t.connected).toFixed(0),
           drawn: t.drawn.map(([at, frame, rendering]) => [at - Math.round(t.connected), frame, rendering]) };
         emit(rec);
         ((rows.refs ||= {})[`${name} ${visitor}`] ||= []).push(rec);

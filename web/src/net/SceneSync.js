@@ -76,7 +76,7 @@ export class SceneSync {
   // of meshes before what they use, data before the meshes that reference it. Texture sets
   // come as {type: 'texture', desc} for the caller to load and encode. A buffer_ref or
   // texture_ref carries `upload`, the buffer or texture record to send when the node refuses it
-  // (the caller sends references first and waits for the node's answers).
+  // (the caller sends references first, and the rest after them without waiting for answers).
   diff(scene, { width, height, background = [0, 0, 0] }) {
     const out = [], s = this.sent;
     const removed = (map, cur, what) => {

@@ -11,7 +11,10 @@
 // a later request's), so counting frames would lose requests for good. Buffers and
 // textures the node can load from their URLs go as references (docs/protocol.md, "References";
 // off with the option `references: false`): in messages of their own, before the rest of the
-// scene change, which waits for the node's answers; a refused one is uploaded instead. On
+// scene change, which follows at once (the node applies it after its answers; a mesh whose
+// buffers are missing waits there for them); a refused one is uploaded when its answer comes,
+// unless a newer record for the same id went out meanwhile. While answers are outstanding, the
+// channel sends at most half of what the node holds back for it (max_message_bytes). On
 // connection loss it reconnects with back-off and re-sends the whole scene and the settings.
 import { encodeClient, decodeServer, clientRecordSize, ProtocolError } from './Protocol.js';
 import { SceneSync } from './SceneSync.js';
@@ -30,6 +33,13 @@ const MAX_OUTSTANDING_RENDERS = 2;
 const CLOSE_BAD_TOKEN = 4401;
 const REF_KIND = { buffer_ref: 'buffer', texture_ref: 'texture' };  // a reference record's `what` in the node's answer
 const isRef = (r) => r.type in REF_KIND;
+// The buffer or texture id a record sets, removes or references ('buffer:3'), or null.
+function recordKey(r) {
+  if (r.type === 'buffer' || r.type === 'buffer_ref') return `buffer:${r.id}`;
+  if (r.type === 'texture' || r.type === 'texture_ref') return `texture:${r.id}`;
+  if (r.type === 'remove' && (r.what === 'buffer' || r.what === 'texture')) return `${r.what}:${r.id}`;
+  return null;
+}
 const uploadBytes = (r) => (r.type === 'buffer' ? r.data.byteLength : TEXTURE_BYTES);
 // Refused references are uploaded, so the scene is complete all the same: one console warning
 // per page load says so, not one per reference.
@@ -50,8 +60,13 @@ export class SyncChannel {
     this.retry = 0;
     this.progress = { queued: 0, sent: 0 };
     this.closed = false;
-    this.session = 0;         // handshake replies so far: a wait for references belongs to one session
-    this.waiting = null;      // {refs: key -> record, answers: key -> reference, done}
+    this.session = 0;         // handshake replies so far
+    this.unanswered = new Map();  // 'buffer:3' -> {ref, seq, group}: references sent, not answered yet
+    this.groups = [];         // the messages of references not answered in full: {left, sentAt}, oldest first
+    this.sentBytes = 0;       // bytes sent in this session
+    this.latest = new Map();  // 'buffer:3' -> seq of the last record sent for that buffer or texture id
+    this.seq = 0;
+    this.answerWaiters = [];  // flushes waiting for room: resolved by any answer or the session's end
   }
 
   connect() {
@@ -87,7 +102,7 @@ export class SyncChannel {
 
   lost(reason) {
     this.ws = null;
-    this.endWait();
+    this.dropUnanswered();
     clearInterval(this.timer);
     this.timer = null;
     if (this.closed) return;
@@ -103,7 +118,7 @@ export class SyncChannel {
     if (this.closed) return;
     const ws = this.ws;
     this.ws = null;
-    this.endWait();
+    this.dropUnanswered();
     clearInterval(this.timer);
     this.timer = null;
     clearTimeout(this.reconnectTimer);
@@ -115,7 +130,7 @@ export class SyncChannel {
     this.closed = true;
     clearInterval(this.timer);
     clearTimeout(this.reconnectTimer);
-    this.endWait();
+    this.dropUnanswered();
     if (this.ws) { const ws = this.ws; this.ws = null; ws.close(); }
   }
 
@@ -162,13 +177,16 @@ export class SyncChannel {
       this.onServerError({ codeName: 'client', message: `bad message from the server: ${e instanceof ProtocolError ? e.message : e}` });
       return;
     }
+    const answers = [];  // the node answers a message's references in one message
     for (const r of records) {
       if (r.type === 'handshake_reply') {
         this.reply = r;
         this.retry = 0;
         if (r.maxMessageBytes) this.messageBytes = Math.min(this.messageBytes, r.maxMessageBytes);
         this.session++;
-        this.endWait();
+        this.dropUnanswered();
+        this.sentBytes = 0;
+        this.latest.clear();
         this.sync.reset();
         this.queue = [];
         this.answered = this.frameNumber;  // the old session's requests are gone with it
@@ -190,20 +208,36 @@ export class SyncChannel {
         if (this.renderWanted && this.outstanding < MAX_OUTSTANDING_RENDERS) this.requestRender();
       } else if (r.type === 'error') {
         if (r.fatal) this.fatal = `${r.codeName}: ${r.message}`;
-        // The node may have refused the references' message as a whole (it then answers none of
-        // them): stop waiting, and upload what is unanswered.
-        this.endWait();
+        // The node may have refused a message of references as a whole (it then answers none of
+        // them): what is unanswered is uploaded (an answer that still comes changes nothing).
+        this.refuseUnanswered();
         this.onServerError(r);
       } else if (r.type === 'stats') {
         this.onStats(r);
       } else if (r.type === 'reference') {
-        this.answer(r);
+        answers.push(r);
       }
     }
+    if (answers.length) this.answer(answers);
   }
 
   send(bytes) {
-    if (this.ws && this.ws.readyState === 1) this.ws.send(bytes);
+    if (this.ws && this.ws.readyState === 1) {
+      this.ws.send(bytes);
+      this.sentBytes += bytes.byteLength;
+    }
+  }
+
+  // Sends records and notes, for each buffer and texture among them, that this is now the
+  // latest record for its id (a refused reference's upload must not replace a newer one).
+  sendRecords(records) {
+    const bytes = encodeClient(records);
+    for (const r of records) {
+      const k = recordKey(r);
+      if (k) this.latest.set(k, ++this.seq);
+    }
+    this.send(bytes);
+    return bytes.byteLength;
   }
 
   // Prepares a record for the wire: buffers deflated, textures loaded and encoded.
@@ -278,9 +312,11 @@ export class SyncChannel {
     this.flushing = true;
     let sent = false;
     try {
+      const session = this.session;
       while (this.queue.length && this.ws && this.ws.bufferedAmount < this.highWater) {
         if (this.queue[0].refs) {
-          await this.resolveRefs(this.queue.shift());
+          if (!(await this.sendRefs(this.queue.shift(), session))) break;
+          sent = true;
           continue;
         }
         // Pack records into one message up to messageBytes (a larger record goes alone).
@@ -291,11 +327,16 @@ export class SyncChannel {
           const rec = await item.record;
           const size = rec ? clientRecordSize(rec) : 0;
           if (batch.length && bytes + size > this.messageBytes) break;
+          if (this.queue[0] !== item) break;  // a refused reference's upload went ahead meanwhile
           this.queue.shift();
           this.progress.sent += item.size;
           if (rec) { batch.push(rec); bytes += size; }
         }
-        if (batch.length) { this.send(encodeClient(batch)); sent = true; }
+        if (batch.length) {
+          if (!(await this.roomFor(bytes, session))) break;
+          this.sendRecords(batch);
+          sent = true;
+        }
         this.onProgress(this.progress.sent, this.progress.queued);
       }
       if (!this.queue.length) this.progress = { queued: 0, sent: 0 };
@@ -311,51 +352,103 @@ export class SyncChannel {
     }
   }
 
-  // Sends references in messages of their own and waits for the node's answers (one for each,
-  // matched by what and id); the uploads of the refused ones are queued ahead of the rest of the
-  // scene change, which may use them. A wait that ends unanswered (connection lost, new session)
-  // queues nothing: the next session sends the whole scene again.
-  async resolveRefs(item) {
-    const session = this.session, key = (r) => `${REF_KIND[r.type]}:${r.id}`;
-    const answers = new Map();
-    const answered = new Promise((done) => { this.waiting = { refs: new Map(item.refs.map((r) => [key(r), r])), answers, done }; });
+  // What the node holds back for this session while it loads references: half its limit, so
+  // a camera move or a render request always fits beside.
+  get holdBytes() { return ((this.reply && this.reply.maxMessageBytes) || this.messageBytes) / 2; }
+
+  // Waits until `bytes` more can be sent without the node holding more than holdBytes of
+  // messages behind references it has not answered (it refuses messages beyond its limit).
+  // False when the session ended meanwhile: the next one sends everything again.
+  async roomFor(bytes, session) {
+    while (this.groups.length && this.sentBytes - this.groups[0].sentAt + bytes > this.holdBytes) {
+      await new Promise((r) => this.answerWaiters.push(r));
+      if (session !== this.session || !this.ws) return false;
+    }
+    return session === this.session && !!this.ws;
+  }
+
+  // Sends references in messages of their own (each answered by the node in one message of
+  // `reference` records) without waiting for the answers: what follows goes out at once.
+  async sendRefs(item, session) {
     let batch = [], bytes = 8;
+    const flush = async () => {
+      if (!(await this.roomFor(bytes, session))) return false;
+      const group = { left: batch.length, sentAt: 0 };
+      const seq0 = this.seq;
+      this.sendRecords(batch);
+      group.sentAt = this.sentBytes;
+      batch.forEach((r, i) => this.unanswered.set(recordKey(r), { ref: r, seq: seq0 + i + 1, group }));
+      this.groups.push(group);
+      batch = [];
+      bytes = 8;
+      return true;
+    };
     for (const r of item.refs) {
       const size = clientRecordSize(r);
-      if (batch.length && bytes + size > this.messageBytes) { this.send(encodeClient(batch)); batch = []; bytes = 8; }
+      if (batch.length && bytes + size > this.messageBytes && !(await flush())) return false;
       batch.push(r);
       bytes += size;
     }
-    this.send(encodeClient(batch));
+    if (batch.length && !(await flush())) return false;
     this.onProgress(this.progress.sent, this.progress.queued);
-    await answered;
-    this.onReferencesAnswered();
-    if (session !== this.session || !this.ws) return;
-    const ok = (r) => !!(answers.get(key(r)) || {}).ok;  // unanswered (an error ended the wait): refused
-    const refused = item.refs.filter((r) => !ok(r));
-    for (const r of item.refs) if (ok(r)) this.progress.sent += uploadBytes(r.upload);
+    return true;
+  }
+
+  // Reference answers: ok, the id is set on the node; refused, its upload goes ahead of what
+  // is queued, unless a newer record for that id was sent since.
+  answer(answers) {
+    const refused = [], groups = [];
+    for (const r of answers) {
+      const k = `${r.what}:${r.id}`, u = this.unanswered.get(k);
+      if (!u) continue;  // not a reference waiting for its answer (or refused already after an error)
+      this.unanswered.delete(k);
+      if (r.ok) this.progress.sent += uploadBytes(u.ref.upload);
+      else refused.push({ ...u, message: r.message });
+      groups.push(u.group);
+    }
+    if (refused.length) this.uploadRefused(refused);
+    for (const g of groups) this.answered1(g);
+  }
+
+  // One reference of a group answered (or given up on): a group answered in full makes room.
+  answered1(group) {
+    if (--group.left > 0) return;
+    this.groups = this.groups.filter((g) => g !== group);
+    if (!this.groups.length) this.onReferencesAnswered();
+    const waiters = this.answerWaiters;
+    this.answerWaiters = [];
+    waiters.forEach((w) => w());
+  }
+
+  // Queues the uploads of refused references (those still the latest record for their id) ahead
+  // of the rest, and warns once per page load.
+  uploadRefused(refused) {
+    const due = refused.filter((u) => this.latest.get(recordKey(u.ref)) === u.seq);
     // An upload counts in the progress for the reference it replaces (already queued).
-    this.queue.unshift(...refused.map((r) => ({ ...this.prepare(r.upload), size: uploadBytes(r.upload) })));
+    this.queue.unshift(...due.map((u) => ({ ...this.prepare(u.ref.upload), size: uploadBytes(u.ref.upload) })));
     if (refused.length && !refusalsWarned) {
       refusalsWarned = true;
-      console.warn(`Tessera: the node refused ${refused.length} of ${item.refs.length} references, so they are uploaded ` +
-        `instead; the first: ${(answers.get(key(refused[0])) || { message: 'unanswered after a server error' }).message}`);
+      console.warn(`Tessera: the node refused ${refused.length} reference${refused.length > 1 ? 's' : ''}, so ` +
+        `${refused.length > 1 ? 'they are' : 'it is'} uploaded instead; the first: ${refused[0].message || 'unanswered after a server error'}`);
     }
-    this.onProgress(this.progress.sent, this.progress.queued);
+    if (due.length) this.flush();
   }
 
-  // A reference answer for the wait in progress; the last one ends it.
-  answer(r) {
-    const w = this.waiting, k = `${r.what}:${r.id}`;
-    if (!w || !w.refs.has(k) || w.answers.has(k)) return;  // not one of the references waited for
-    w.answers.set(k, r);
-    if (w.answers.size === w.refs.size) this.endWait();
+  // After an error record: every unanswered reference counts as refused.
+  refuseUnanswered() {
+    const all = [...this.unanswered.values()];
+    this.unanswered.clear();
+    if (all.length) this.uploadRefused(all);
+    for (const u of all) this.answered1(u.group);
   }
 
-  endWait() {
-    const w = this.waiting;
-    this.waiting = null;
-    if (w) w.done();
+  // The session ended: nothing more will be answered, and the next session sends everything.
+  dropUnanswered() {
+    this.unanswered.clear();
+    this.groups = [];
+    const waiters = this.answerWaiters;
+    this.answerWaiters = [];
+    waiters.forEach((w) => w());
   }
 
   // Render requests sent that no frame has answered yet.

@@ -399,6 +399,56 @@ test('a demo page whose glTF lies in the node\'s own /scenes/ sends references: 
     await upload.close();
   });
 
+test('references the node refuses are uploaded after the rest of the scene went out, and the picture equals the uploaded scene\'s',
+  { skip: !BIN && 'TESSERA_BIN not set (CTest passes the tessera binary)' }, async () => {
+    // The page's glTF names its buffer and first image under /scenes/pavilion/refused/, where
+    // the browser finds them (routed to the real files) and the node finds nothing: it refuses
+    // those references, and the client uploads them behind the materials and meshes it sent.
+    const openDemo = async (query, refuse) => {
+      const page = await env.context.newPage();
+      page.logs = [];
+      page.on('console', (m) => page.logs.push(`${m.type()}: ${m.text()}`));
+      if (refuse) {
+        await page.route('**/scenes/pavilion/scene.gltf', async (route) => {
+          const gltf = await (await route.fetch()).json();
+          gltf.buffers[0].uri = `refused/${gltf.buffers[0].uri}`;
+          gltf.images[0].uri = `refused/${gltf.images[0].uri}`;
+          await route.fulfill({ status: 200, contentType: 'model/gltf+json', body: JSON.stringify(gltf) });
+        });
+        await page.route('**/scenes/pavilion/refused/**', async (route) =>
+          route.fulfill({ response: await route.fetch({ url: route.request().url().replace('/refused/', '/') }) }));
+      }
+      await page.addInitScript(() => {
+        window.__load = false;
+        document.addEventListener('load', (e) => { if (e.target.localName === 'xml3d') window.__load = true; }, true);
+      });
+      await page.goto(`${node.base}/demo/pavilion.html?server=${node.host}:${node.port}&display=jpeg&ao-samples=0&refine-samples=1&frame-budget=0${query}`);
+      await page.waitForFunction(() => window.__load, null, { timeout: 60000, polling: 100 });
+      return page;
+    };
+    const events = () => node.log.filter((l) => l.includes('"references"')).map((l) => JSON.parse(l));
+    const before = events().length;
+    const refused = await openDemo('', true);
+    const total = (list) => list.reduce((n, e) => n + e.loaded + e.refused, 0);
+    for (const t0 = Date.now(); Date.now() - t0 < 60000 && total(events().slice(before)) < 366; ) await new Promise((r) => setTimeout(r, 200));
+    const answered = events().slice(before);
+    const nRefused = answered.reduce((n, e) => n + e.refused, 0);
+    assert.ok(nRefused > 100, `the buffer's references and the image's were refused: ${JSON.stringify(answered)}`);
+    assert.ok(answered.some((e) => /no file of this node's \/scenes\/ at \/scenes\/pavilion\/refused\//.test(e.first_refusal || '')),
+      JSON.stringify(answered));
+    assert.equal(refused.logs.filter((l) => /refused \d+ references?/.test(l)).length, 1, refused.logs.join('\n'));
+    const upload = await openDemo('&references=off', false);
+    let same = 0;
+    for (const t0 = Date.now(); Date.now() - t0 < 60000 && same < 40; await new Promise((r) => setTimeout(r, 250))) {
+      const [a, b] = [await shown(refused), await shown(upload)];
+      if (a && b) same = psnr(Buffer.from(a, 'base64'), Buffer.from(b, 'base64'));
+    }
+    assert.ok(same >= 40, `the scene with refused references looks as the uploaded one: ${same.toFixed(1)} dB`);
+    console.log(`# references: ${nRefused} refused and uploaded; against the upload ${same.toFixed(1)} dB`);
+    await refused.close();
+    await upload.close();
+  });
+
 test('the references go out before the browser has downloaded the glTF\'s buffers; XML3D\'s load event waits for them',
   { skip: !BIN && 'TESSERA_BIN not set (CTest passes the tessera binary)' }, async () => {
     const page = await env.context.newPage();

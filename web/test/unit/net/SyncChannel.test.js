@@ -3,6 +3,7 @@ import assert from 'node:assert/strict';
 import { page } from '../dom.js';
 import { readRenderSettings, refineStatus, sameSettings } from '../../../src/net/RenderSettings.js';
 import { SyncChannel } from '../../../src/net/SyncChannel.js';
+import { encodeClient } from '../../../src/net/Protocol.js';
 import { MarkupReader } from '../../../src/reader/MarkupReader.js';
 import { Resources } from '../../../src/reader/Resources.js';
 import { FakeSocket } from './fake_socket.js';
@@ -370,13 +371,13 @@ async function referencedScene({ deferBuffers = false, download = null } = {}) {
   return reader.read(doc.querySelector('xml3d'));
 }
 // A channel to a FakeSocket with that scene, after the handshake reply (the references are on their way).
-async function connectedTo(scene, options = {}) {
+async function connectedTo(scene, options = {}, reply = REPLY) {
   const ch = new SyncChannel({ url: 'ws://x/ws', rate: 100, handshake: HANDSHAKE, ...options });
   ch.setScene(scene, { width: 8, height: 8 });
   ch.connect();
   await until(() => FakeSocket.last && FakeSocket.last.sent.length === 1);
   const ws = FakeSocket.last;
-  ws.reply([REPLY]);
+  ws.reply([reply]);
   await until(() => ws.sent.length >= 2);
   return { ch, ws };
 }
@@ -396,7 +397,7 @@ async function withTextures(body) {
   try { await body(); } finally { Object.assign(globalThis, saved); }
 }
 
-test('references go first, alone; nothing is sent until the node answers them; an answer ok means no upload', () => withFakeSocket(async (opened) => {
+test('references go first, in a message of their own; the rest follows without waiting for the answers; an answer ok means no upload', () => withFakeSocket(async (opened) => {
   const scene = await referencedScene();
   let answeredCalls = 0;  // the remote backend opens the deferred glTF downloads then
   const { ch, ws } = await connectedTo(scene, { onReferencesAnswered: () => answeredCalls++ });
@@ -410,20 +411,24 @@ test('references go first, alone; nothing is sent until the node answers them; a
       url: 'http://localhost/m/scene.bin' },
     { type: 'texture_ref', id: texture, wrapS: 'repeat', wrapT: 'repeat', filter: 'linear', srgb: true, url: 'http://localhost/m/t.png' },
   ]);
-  await new Promise((r) => setTimeout(r, 60));
-  assert.equal(ws.sent.length, 2, 'nothing else (no material, mesh or render request) before the answers');
-  assert.equal(answeredCalls, 0);
-  answerRefs(ws);
+  // The node applies what follows after its answers, and holds a mesh whose buffers are missing.
   await until(() => ws.sent.flat().some((r) => r.type === 'render'));
-  const after = ws.sent.slice(2).flat();
-  assert.deepEqual(after.filter((r) => r.type === 'buffer').map((r) => r.id), [markupMesh.positions], 'only what has no source is uploaded');
-  assert.equal(after.filter((r) => r.type === 'texture' || isRef(r)).length, 0);
+  const early = ws.sent.slice(2).flat();
+  assert.deepEqual(early.filter((r) => r.type === 'mesh').map((r) => r.id).sort(), [gltfMesh.id, markupMesh.id].sort(), 'meshes before the answers');
+  assert.ok(early.some((r) => r.type === 'material'));
+  assert.deepEqual(early.filter((r) => r.type === 'buffer').map((r) => r.id), [markupMesh.positions], 'only what has no source is uploaded');
+  assert.equal(early.filter((r) => r.type === 'texture' || isRef(r)).length, 0);
+  assert.equal(answeredCalls, 0);
+  assert.equal(ch.unanswered.size, 3);
+  const before = ws.sent.length;
+  answerRefs(ws);
+  await new Promise((r) => setTimeout(r, 60));
   assert.equal(answeredCalls, 1);
-  assert.deepEqual(after.filter((r) => r.type === 'mesh').map((r) => r.id).sort(), [gltfMesh.id, markupMesh.id].sort());
-  assert.equal(ch.waiting, null);
+  assert.equal(ch.unanswered.size, 0);
+  assert.equal(ws.sent.slice(before).flat().filter((r) => r.type === 'buffer' || r.type === 'texture').length, 0, 'nothing uploaded after ok answers');
 }));
 
-test('a refused reference is uploaded before the materials and meshes; one console warning sums the refusals up', () => withFakeSocket((opened) => withTextures(async () => {
+test('a refused reference is uploaded when its answer comes; one console warning sums the refusals up', () => withFakeSocket((opened) => withTextures(async () => {
   const scene = await referencedScene();
   const warnings = [];
   const warn = console.warn;
@@ -433,20 +438,20 @@ test('a refused reference is uploaded before the materials and meshes; one conso
     opened.push(ch);
     const [gltfMesh] = [...scene.meshes.values()];
     const texture = scene.materials.get(gltfMesh.material).diffuseTexture;
-    answerRefs(ws, new Set([gltfMesh.positions, texture]));
     await until(() => ws.sent.flat().some((r) => r.type === 'render'));
-    const after = ws.sent.slice(2).flat(), at = (pred) => after.findIndex(pred);
+    const before = ws.sent.length;
+    answerRefs(ws, new Set([gltfMesh.positions, texture]));
+    await until(() => ws.sent.slice(before).flat().some((r) => r.type === 'texture'));
+    const after = ws.sent.slice(before).flat();
     const positions = after.filter((r) => r.type === 'buffer' && r.id === gltfMesh.positions);
     assert.equal(positions.length, 1, 'the refused buffer is uploaded');
     assert.deepEqual([...positions[0].data], [0, 0, -2, 1, 0, -2, 0, 1, -2]);
-    assert.equal(after.filter((r) => r.type === 'buffer' && r.id === gltfMesh.indices).length, 0, 'the loaded one is not');
+    assert.equal(ws.sent.flat().filter((r) => r.type === 'buffer' && r.id === gltfMesh.indices).length, 0, 'the loaded one is not');
     const tex = after.find((r) => r.type === 'texture');
     assert.deepEqual([tex.id, tex.format, tex.width, tex.height], [texture, 'png', 1, 1]);
-    const firstUse = Math.min(at((r) => r.type === 'material'), at((r) => r.type === 'mesh'));
-    assert.ok(at((r) => r.type === 'buffer' && r.id === gltfMesh.positions) < firstUse, 'the buffer before what uses it');
-    assert.ok(at((r) => r.type === 'texture') < firstUse, 'the texture before what uses it');
+    await until(() => ws.sent.slice(before).flat().some((r) => r.type === 'render'));  // the scene is complete now: a frame of it
     assert.equal(warnings.length, 1);
-    assert.match(warnings[0], /refused 2 of 3 references.*is not in tessera\.asset-origins/);
+    assert.match(warnings[0], /refused 2 references.*is not in tessera\.asset-origins/);
 
     // A new session sends the references again; refusing them again warns no more.
     ws.reply([REPLY]);
@@ -459,7 +464,7 @@ test('a refused reference is uploaded before the materials and meshes; one conso
   }
 })));
 
-test('an error record while waiting for reference answers ends the wait: the unanswered ones are uploaded', () => withFakeSocket((opened) => withTextures(async () => {
+test('an error record while reference answers are outstanding uploads the unanswered ones; a late answer changes nothing', () => withFakeSocket((opened) => withTextures(async () => {
   const scene = await referencedScene();
   const warn = console.warn;
   console.warn = () => {};
@@ -468,17 +473,58 @@ test('an error record while waiting for reference answers ends the wait: the una
     opened.push(ch);
     const refs = ws.sent[1];
     ws.reply([{ type: 'error', code: 8, codeName: 'bad_length', fatal: false, record: 0, message: 'record 0 (buffer_ref): body length' }]);
-    await until(() => ws.sent.flat().some((r) => r.type === 'render'));
-    const after = ws.sent.slice(2).flat();
-    for (const r of refs) {
-      const kind = r.type === 'buffer_ref' ? 'buffer' : 'texture';
-      assert.equal(after.filter((x) => x.type === kind && x.id === r.id).length, 1, `${kind} ${r.id} uploaded`);
-    }
-    assert.equal(ch.waiting, null);
+    const uploaded = (r) => ws.sent.flat().filter((x) => x.type === (r.type === 'buffer_ref' ? 'buffer' : 'texture') && x.id === r.id).length;
+    await until(() => refs.every((r) => uploaded(r) === 1));
+    assert.equal(ch.unanswered.size, 0);
+    answerRefs(ws, new Set([refs[0].id]));
+    await new Promise((r) => setTimeout(r, 60));
+    for (const r of refs) assert.equal(uploaded(r), 1, `${r.type} ${r.id} uploaded once`);
   } finally {
     console.warn = warn;
   }
 })));
+
+test('a refused reference is not uploaded when a newer record for its id went out before the answer', () => withFakeSocket((opened) => withTextures(async () => {
+  const scene = await referencedScene();
+  const warn = console.warn;
+  console.warn = () => {};
+  try {
+    const { ch, ws } = await connectedTo(scene);
+    opened.push(ch);
+    const [gltfMesh] = [...scene.meshes.values()];
+    await until(() => ws.sent.flat().some((r) => r.type === 'render'));
+    // The page drops the glTF mesh and its positions before the node has answered.
+    const without = { ...scene, meshes: new Map([...scene.meshes].filter(([id]) => id !== gltfMesh.id)),
+      buffers: new Map([...scene.buffers].filter(([id]) => id !== gltfMesh.positions)) };
+    ch.setScene(without, { width: 8, height: 8 });
+    await until(() => ws.sent.flat().some((r) => r.type === 'remove' && r.what === 'buffer' && r.id === gltfMesh.positions));
+    answerRefs(ws, new Set([gltfMesh.positions, gltfMesh.indices]));
+    await until(() => ws.sent.flat().some((r) => r.type === 'buffer' && r.id === gltfMesh.indices));
+    await new Promise((r) => setTimeout(r, 60));
+    assert.equal(ws.sent.flat().filter((r) => r.type === 'buffer' && r.id === gltfMesh.positions).length, 0,
+      'the removed buffer is not uploaded again');
+    assert.equal(ws.sent.flat().filter((r) => r.type === 'buffer' && r.id === gltfMesh.indices).length, 1, 'the one still in the scene is');
+  } finally {
+    console.warn = warn;
+  }
+})));
+
+test('while answers are outstanding the channel sends at most half of what the node holds back, then the rest after the answers', () => withFakeSocket(async (opened) => {
+  const scene = await referencedScene();
+  // A node that holds 512 bytes of messages behind references it loads: 256 of them for the client.
+  const { ch, ws } = await connectedTo(scene, {}, { ...REPLY, maxMessageBytes: 512 });
+  opened.push(ch);
+  await new Promise((r) => setTimeout(r, 60));
+  const held = ws.sent.slice(2);
+  const bytes = held.reduce((n, m) => n + encodeClient(m).byteLength, 0);
+  assert.ok(bytes <= 256, `${bytes} bytes sent behind the references`);
+  assert.ok(!held.flat().some((r) => r.type === 'render'), 'the scene change waits, and its render request with it');
+  answerRefs(ws);
+  await until(() => ws.sent.flat().filter((r) => r.type === 'mesh').length === 2 && ws.sent.flat().some((r) => r.type === 'render'));
+  const all = ws.sent.slice(2).reduce((n, m) => n + encodeClient(m).byteLength, 0);
+  assert.ok(all > 256, `the whole change (${all} bytes) is more than the node holds for the client`);
+  assert.equal(ch.groups.length, 0);
+}));
 
 test('references: false uploads every buffer and texture, as before', () => withFakeSocket((opened) => withTextures(async () => {
   const scene = await referencedScene();
@@ -492,17 +538,19 @@ test('references: false uploads every buffer and texture, as before', () => with
   assert.ok(all.findIndex((r) => r.type === 'texture') < all.findIndex((r) => r.type === 'material'));
 })));
 
-test('a connection lost while waiting for reference answers does not hang the channel: the next session sends everything', () => withFakeSocket(async (opened) => {
+test('a connection lost while reference answers are outstanding does not hang the channel: the next session sends everything', () => withFakeSocket(async (opened) => {
   const scene = await referencedScene();
   const { ch, ws } = await connectedTo(scene);
   opened.push(ch);
-  assert.ok(ch.waiting);
+  assert.equal(ch.unanswered.size, 3);
   ws.readyState = 3;
   ws.onclose({ code: 1006, reason: '' });
   assert.equal(ch.state, 'disconnected');
-  assert.equal(ch.waiting, null);
+  assert.equal(ch.unanswered.size, 0);
   await until(() => !ch.flushing);
-  assert.equal(ws.sent.length, 2, 'nothing more on the lost connection');
+  const sent = ws.sent.length;
+  await new Promise((r) => setTimeout(r, 60));
+  assert.equal(ws.sent.length, sent, 'nothing more on the lost connection');
   await until(() => FakeSocket.last !== ws && FakeSocket.last.sent.length === 1);  // reconnected
   const ws2 = FakeSocket.last;
   ws2.reply([REPLY]);
@@ -518,13 +566,14 @@ test('references beyond one message are spread over several, each of references 
   opened.push(ch);
   await until(() => ws.sent.length >= 4);
   await new Promise((r) => setTimeout(r, 30));
-  assert.deepEqual(ws.sent.slice(1).map((m) => m.map((r) => r.type)), [['buffer_ref'], ['buffer_ref'], ['texture_ref']]);
+  assert.deepEqual(ws.sent.slice(1, 4).map((m) => m.map((r) => r.type)), [['buffer_ref'], ['buffer_ref'], ['texture_ref']]);
+  assert.equal(ch.groups.length, 3, 'each message of references is answered on its own');
   answerRefs(ws);
   await until(() => ws.sent.flat().some((r) => r.type === 'render'));
   assert.equal(ws.sent.flat().filter((r) => r.type === 'mesh').length, 2);
 }));
 
-test('a refused reference of a deferred glTF is uploaded with its values once they are in; the materials and meshes wait for it', () => withFakeSocket((opened) => withTextures(async () => {
+test('a refused reference of a deferred glTF is uploaded with its values once they are in, after the mesh that uses it', () => withFakeSocket((opened) => withTextures(async () => {
   let arrive;
   const download = new Promise((r) => (arrive = r));
   const scene = await referencedScene({ deferBuffers: true, download });
@@ -535,18 +584,15 @@ test('a refused reference of a deferred glTF is uploaded with its values once th
     opened.push(ch);
     const [gltfMesh] = [...scene.meshes.values()];
     assert.deepEqual([...scene.buffers.get(gltfMesh.positions).data], [0, 0, 0, 0, 0, 0, 0, 0, 0], 'sent before the values are in');
+    await until(() => ws.sent.flat().some((r) => r.type === 'mesh' && r.id === gltfMesh.id));  // held by the node until its buffers come
     answerRefs(ws, new Set([gltfMesh.positions]));
     await new Promise((r) => setTimeout(r, 60));
-    const early = ws.sent.slice(2).flat();
-    assert.equal(early.filter((r) => r.type === 'buffer' && r.id === gltfMesh.positions).length, 0, 'no upload of zeros');
-    assert.equal(early.filter((r) => r.type === 'mesh' && r.id === gltfMesh.id).length, 0, 'nor the mesh that uses it');
+    assert.equal(ws.sent.flat().filter((r) => r.type === 'buffer' && r.id === gltfMesh.positions).length, 0, 'no upload of zeros');
     arrive();
-    await until(() => ws.sent.flat().some((r) => r.type === 'mesh' && r.id === gltfMesh.id));
-    const after = ws.sent.slice(2).flat(), at = (pred) => after.findIndex(pred);
-    const positions = after.filter((r) => r.type === 'buffer' && r.id === gltfMesh.positions);
+    await until(() => ws.sent.flat().some((r) => r.type === 'buffer' && r.id === gltfMesh.positions));
+    const positions = ws.sent.flat().filter((r) => r.type === 'buffer' && r.id === gltfMesh.positions);
     assert.equal(positions.length, 1);
     assert.deepEqual([...positions[0].data], [0, 0, -2, 1, 0, -2, 0, 1, -2], 'the file\'s values');
-    assert.ok(at((r) => r.type === 'buffer' && r.id === gltfMesh.positions) < at((r) => r.type === 'mesh'));
   } finally {
     console.warn = warn;
   }
