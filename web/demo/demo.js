@@ -4,7 +4,6 @@
 //   ?display=jpeg|s3tc|mjpeg|h264|auto&video-kbps=K&ao-samples=N&max-depth=D&refine-samples=R&frame-budget=MS
 //                      override the page's <xml3d> attributes
 import { lookAt, toAxisAngle } from '../src/math/Mat4.js';
-import '../src/xml3d.js';
 
 const xml3d = document.querySelector('xml3d');
 const view = xml3d.querySelector('view');
@@ -20,6 +19,10 @@ const params = new URLSearchParams(location.search);
 const defaultServer = params.get('server') || `${location.hostname}:${location.port || 80}`;
 for (const a of ['display', 'video-kbps', 'ao-samples', 'max-depth', 'refine-samples', 'frame-budget', 'references']) if (params.has(a)) xml3d.setAttribute(a, params.get(a));
 if (params.get('server')) xml3d.setAttribute('server', params.get('server'));
+// The client starts only now, so that it finds the page as the query made it, as it finds a page
+// written with these attributes: imported first, it would set up WebGL and load the whole glTF,
+// then build everything again for each attribute above (server, display) that changed.
+await import('../src/xml3d.js');
 
 // The switch: toggling the server attribute makes xml3d.js rebuild the backend.
 const bar = document.getElementById('controls');

@@ -8,8 +8,9 @@ export const WEB = path.resolve(path.dirname(fileURLToPath(import.meta.url)), '.
 export const SCENES = path.resolve(WEB, '../../shared/scenes');
 
 // Resolves {host, port, base, info, log, close()} once the node prints its listening line.
-export function startNode(bin, { args = [], threads = 0 } = {}) {
-  const argv = ['serve', '--host', '127.0.0.1', '--port', '0', '--web-root', WEB, '--scenes-root', SCENES, ...args];
+// webRoot: another copy of web/ to serve (web-figures compares two clients that way).
+export function startNode(bin, { args = [], threads = 0, webRoot = WEB } = {}) {
+  const argv = ['serve', '--host', '127.0.0.1', '--port', '0', '--web-root', webRoot, '--scenes-root', SCENES, ...args];
   if (threads) argv.push('--threads', String(threads));
   const proc = spawn(bin, argv, { stdio: ['ignore', 'pipe', 'pipe'] });
   const node = { proc, log: [] };

@@ -32,6 +32,8 @@ const PAGES = (opt('--pages', 'pavilion,kitchen,living-room')).split(',').filter
 const LATENCY_PAGES = (opt('--latency-pages', 'basic,pavilion')).split(',').filter(Boolean);
 const REF_PAGES = (opt('--ref-pages', 'kitchen,pavilion,living-room')).split(',').filter(Boolean);
 const MARKDOWN = argv.includes('--markdown');
+// --web-root DIR: serve another copy of web/ (an older client, say) to compare in one run.
+const WEB_ROOT = opt('--web-root', '') || undefined;
 if (!BIN || !fs.existsSync(BIN)) { console.error('usage: node web/tools/web-figures.js --tessera PATH/TO/tessera [--repeat N] [--steps N] [--markdown]'); process.exit(2); }
 if (!fs.existsSync(CHROMIUM)) { console.error(`${CHROMIUM} not found`); process.exit(2); }
 
@@ -160,7 +162,7 @@ async function latency(node, name, display) {
   return { out, size };
 }
 
-const node = await startNode(BIN, { threads: THREADS });
+const node = await startNode(BIN, { threads: THREADS, webRoot: WEB_ROOT });
 const rows = { load: {}, loadRaw: {}, upload: {}, latency: {} };
 try {
   for (const name of PAGES) {
@@ -188,12 +190,16 @@ try {
   await node.close();
 }
 for (let k = 0; k < (REF_PAGES.length ? REPEAT : 0); k++) {
-  const fresh = await startNode(BIN, { threads: THREADS });  // its texture cache cold
+  const fresh = await startNode(BIN, { threads: THREADS, webRoot: WEB_ROOT });  // its texture cache cold
   try {
     for (const name of REF_PAGES) {
       for (const visitor of ['first', 'second', 'upload']) {
+        const logFrom = fresh.log.length;
         const { close, t, up } = await loadPage(fresh, name, { query: visitor === 'upload' ? '&references=off' : '' });
         await close();
+        // The node's side of it: how long each message's references took to load, and each
+        // frame's width, kernel and rendering ms (rendering includes taking the scene's changes).
+        const nodeEvents = fresh.log.slice(logFrom).filter((l) => l.startsWith('{')).map((l) => { try { return JSON.parse(l); } catch { return null; } }).filter(Boolean);
         const rec = { references: `/demo/${name}.html`, visitor, run: k, connected_ms: +t.connected.toFixed(0),
           complete_frame_ms: +t.complete.toFixed(0), connect_to_complete_ms: +(t.complete - t.connected).toFixed(0),
           refs: up.refs, wire_mb: +(up.wire / 1048576).toFixed(2),
@@ -204,6 +210,8 @@ for (let k = 0; k < (REF_PAGES.length ? REPEAT : 0); k++) {
           refs_sent_ms: t.refsSent === undefined ? null : +(t.refsSent - t.connected).toFixed(0),
           refs_last_ms: t.refsLast === undefined ? null : +(t.refsLast - t.connected).toFixed(0),
           answered_ms: t.answered === undefined ? null : +(t.answered - t.connected).toFixed(0),
+          node_refs_ms: nodeEvents.filter((e) => 'references' in e && 'loaded' in e).map((e) => +(+e.ms).toFixed(0)),
+          node_frames: nodeEvents.filter((e) => 'frame' in e && 'rendering_ms' in e).slice(0, 8).map((e) => [e.width, +(+e.kernel_ms).toFixed(0), +(+e.rendering_ms).toFixed(0)]),
           drawn: t.drawn.map(([at, frame, rendering]) => [at - Math.round(t.connected), frame, rendering]) };
         emit(rec);
         ((rows.refs ||= {})[`${name} ${visitor}`] ||= []).push(rec);

@@ -81,7 +81,8 @@ function header(w, channel, count) {
 }
 
 // UTF-8 of `s`, cut to the field's longest encoding (as the C++ encoder cuts it).
-const utf8 = (s, max) => new TextEncoder().encode(s ?? '').slice(0, max);
+const textEncoder = new TextEncoder();
+const utf8 = (s, max) => textEncoder.encode(s ?? '').subarray(0, max);
 const maxLength = (record, field) => RECORDS[record].fields.find((f) => f.name === field).maxLength;
 // Bytes of one value of a buffer reference's source type (protocol.h source_size).
 export const sourceSize = (s) => (s === 'u16' ? 2 : s === 'u8' ? 1 : 4);

@@ -159,7 +159,8 @@ export async function loadGltf(body, url, fetchBinary, { defer = false } = {}) {
       const a = accessor(i);
       let out = a;
       if (!(a instanceof Uint32Array)) {
-        out = Uint32Array.from(a);
+        out = new Uint32Array(a.length);
+        if (!isLater(i)) out.set(a);  // widened natively (Uint32Array.from iterates); a later one is zeros until its fixup
         if (a instanceof Uint16Array || a instanceof Uint8Array) remember(out, i);  // widened, value for value
         if (isLater(i)) fixups.push(() => out.set(a));
       }

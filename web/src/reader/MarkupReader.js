@@ -5,6 +5,7 @@ import * as M from '../math/Mat4.js';
 import { parseCssTransform } from '../math/CssTransform.js';
 import { parseValueElement, isValueElement, localName, first, vec3 } from './Values.js';
 import { SceneDescription, MATERIAL_DEFAULTS, defaultMaterial } from './SceneDescription.js';
+import { pendingValues } from './GltfLoader.js';
 
 // Elements that are never scene nodes (skipped while walking the scene tree).
 const NON_SCENE = new Set(['defs', 'data', 'material', 'transform', 'asset', 'assetmesh', 'assetdata', 'dataflow',
@@ -50,6 +51,16 @@ export function projectiveFovY(entry) {
   return fov > 0 && fov < Math.PI ? fov : null;
 }
 
+const allFinite = (a) => {
+  for (let i = 0; i < a.length; i++) if (!Number.isFinite(a[i])) return false;
+  return true;
+};
+const maxValue = (a) => {
+  let m = -1;
+  for (let i = 0; i < a.length; i++) if (a[i] > m) m = a[i];
+  return m;
+};
+
 export class MarkupReader {
   // resources: a Resources (or anything with get(url) and urlOfDocument(doc)).
   // computedStyle(el): optional, e.g. window.getComputedStyle.
@@ -58,6 +69,10 @@ export class MarkupReader {
     this.computedStyle = computedStyle;
     this.ids = ids || new IdRegistry();
     this.derived = new WeakMap();  // converted arrays, kept across reads (stable buffer identity)
+    // What a scan of an array's values found (positions: all finite; indices: the largest), kept
+    // across reads: a read then costs nothing per vertex. Not for arrays whose values are still
+    // on their way (a deferred glTF): their zeros say nothing, and the node checks what it loads.
+    this.scans = new WeakMap();
   }
 
   read(xml3d) {
@@ -394,8 +409,7 @@ export class MarkupReader {
     positions = this.floats(positions);
     const nv = positions.length / 3;
     if (positions.length % 3) { this.error(el, `${what} position count is not a multiple of 3`); return; }
-    for (let i = 0; i < positions.length; i++)
-      if (!Number.isFinite(positions[i])) { this.error(el, `${what} positions hold NaN or Infinity`); return; }
+    if (!this.scanned(positions, allFinite)) { this.error(el, `${what} positions hold NaN or Infinity`); return; }
     const check = (arr, comps, name) => {
       arr = val(arr);
       if (!arr || arr.length === 0) return null;
@@ -410,8 +424,12 @@ export class MarkupReader {
     const colors = check(g.colors, 3, 'color');
     let indices = this.indices(val(g.indices), g.type === 'tristrips' || g.strip, val(g.vertexCount), nv);
     if (indices) {
-      for (let i = 0; i < indices.length; i++)
-        if (indices[i] >= nv) { this.error(el, `${what} index ${indices[i]} out of range (${nv} vertices)`); return; }
+      const largest = this.scanned(indices, maxValue, -1);
+      if (largest >= nv) {
+        const bad = indices.find((x) => x >= nv);
+        this.error(el, `${what} index ${bad} out of range (${nv} vertices)`);
+        return;
+      }
     } else if (nv % 3) {
       this.error(el, `${what} non-indexed triangles need a multiple of 3 vertices (has ${nv})`);
       return;
@@ -430,6 +448,14 @@ export class MarkupReader {
       visible,
     };
     s.meshes.set(mesh.id, mesh);
+  }
+
+  // scan(array) for `array`, remembered; `pending` while its values are not in yet.
+  scanned(array, scan, pending = true) {
+    if (pendingValues(array)) return pending;
+    let r = this.scans.get(array);
+    if (r === undefined) { r = scan(array); this.scans.set(array, r); }
+    return r;
   }
 
   floats(a) {

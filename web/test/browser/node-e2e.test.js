@@ -353,24 +353,28 @@ test('ao-samples / max-depth on <xml3d> reach the node: AO darkens the ambient-l
     await page.close();
   });
 
+// The pavilion demo page in server mode, once XML3D's load event came; its console lines in
+// page.logs. No AO (its noise is seeded per session) and no refinement: two sessions of the
+// same scene and view then give the same frame. `setup(page)` runs before it loads.
+async function openPavilion(query, setup = async () => {}) {
+  const page = await env.context.newPage();
+  page.logs = [];
+  page.on('console', (m) => page.logs.push(`${m.type()}: ${m.text()}`));
+  await setup(page);
+  await page.addInitScript(() => {
+    window.__frames = [];
+    document.addEventListener('framedrawn', (e) => window.__frames.push(e.detail.frame), true);
+    window.__load = false;
+    document.addEventListener('load', (e) => { if (e.target.localName === 'xml3d') window.__load = true; }, true);
+  });
+  await page.goto(`${node.base}/demo/pavilion.html?server=${node.host}:${node.port}&display=jpeg&ao-samples=0&refine-samples=1&frame-budget=0${query}`);
+  await page.waitForFunction(() => window.__load, null, { timeout: 60000, polling: 100 });
+  return page;
+}
+
 test('a demo page whose glTF lies in the node\'s own /scenes/ sends references: the node loads every one, and the picture equals the uploaded scene\'s',
   { skip: !BIN && 'TESSERA_BIN not set (CTest passes the tessera binary)' }, async () => {
-    // No AO (its noise is seeded per session) and no refinement: two sessions of the same scene
-    // and view then give the same frame.
-    const openDemo = async (query) => {
-      const page = await env.context.newPage();
-      page.logs = [];
-      page.on('console', (m) => page.logs.push(`${m.type()}: ${m.text()}`));
-      await page.addInitScript(() => {
-        window.__frames = [];
-        document.addEventListener('framedrawn', (e) => window.__frames.push(e.detail.frame), true);
-        window.__load = false;
-        document.addEventListener('load', (e) => { if (e.target.localName === 'xml3d') window.__load = true; }, true);
-      });
-      await page.goto(`${node.base}/demo/pavilion.html?server=${node.host}:${node.port}&display=jpeg&ao-samples=0&refine-samples=1&frame-budget=0${query}`);
-      await page.waitForFunction(() => window.__load, null, { timeout: 60000, polling: 100 });
-      return page;
-    };
+    const openDemo = (query) => openPavilion(query);
     const events = () => node.log.filter((l) => l.includes('"references"')).map((l) => JSON.parse(l));
     const before = events().length;
     const refs = await openDemo('');
@@ -404,10 +408,7 @@ test('references the node refuses are uploaded after the rest of the scene went 
     // The page's glTF names its buffer and first image under /scenes/pavilion/refused/, where
     // the browser finds them (routed to the real files) and the node finds nothing: it refuses
     // those references, and the client uploads them behind the materials and meshes it sent.
-    const openDemo = async (query, refuse) => {
-      const page = await env.context.newPage();
-      page.logs = [];
-      page.on('console', (m) => page.logs.push(`${m.type()}: ${m.text()}`));
+    const openDemo = (query, refuse) => openPavilion(query, async (page) => {
       if (refuse) {
         await page.route('**/scenes/pavilion/scene.gltf', async (route) => {
           const gltf = await (await route.fetch()).json();
@@ -418,14 +419,7 @@ test('references the node refuses are uploaded after the rest of the scene went 
         await page.route('**/scenes/pavilion/refused/**', async (route) =>
           route.fulfill({ response: await route.fetch({ url: route.request().url().replace('/refused/', '/') }) }));
       }
-      await page.addInitScript(() => {
-        window.__load = false;
-        document.addEventListener('load', (e) => { if (e.target.localName === 'xml3d') window.__load = true; }, true);
-      });
-      await page.goto(`${node.base}/demo/pavilion.html?server=${node.host}:${node.port}&display=jpeg&ao-samples=0&refine-samples=1&frame-budget=0${query}`);
-      await page.waitForFunction(() => window.__load, null, { timeout: 60000, polling: 100 });
-      return page;
-    };
+    });
     const events = () => node.log.filter((l) => l.includes('"references"')).map((l) => JSON.parse(l));
     const before = events().length;
     const refused = await openDemo('', true);

@@ -464,50 +464,46 @@ test('a refused reference is uploaded when its answer comes; one console warning
   }
 })));
 
-test('an error record while reference answers are outstanding uploads the unanswered ones; a late answer changes nothing', () => withFakeSocket((opened) => withTextures(async () => {
-  const scene = await referencedScene();
+// A channel connected to a FakeSocket with the referenced scene, the console's warnings silenced.
+async function quietlyReferenced(opened, body) {
   const warn = console.warn;
   console.warn = () => {};
   try {
+    const scene = await referencedScene();
     const { ch, ws } = await connectedTo(scene);
     opened.push(ch);
-    const refs = ws.sent[1];
-    ws.reply([{ type: 'error', code: 8, codeName: 'bad_length', fatal: false, record: 0, message: 'record 0 (buffer_ref): body length' }]);
-    const uploaded = (r) => ws.sent.flat().filter((x) => x.type === (r.type === 'buffer_ref' ? 'buffer' : 'texture') && x.id === r.id).length;
-    await until(() => refs.every((r) => uploaded(r) === 1));
-    assert.equal(ch.unanswered.size, 0);
-    answerRefs(ws, new Set([refs[0].id]));
-    await new Promise((r) => setTimeout(r, 60));
-    for (const r of refs) assert.equal(uploaded(r), 1, `${r.type} ${r.id} uploaded once`);
+    await body({ scene, ch, ws });
   } finally {
     console.warn = warn;
   }
-})));
+}
 
-test('a refused reference is not uploaded when a newer record for its id went out before the answer', () => withFakeSocket((opened) => withTextures(async () => {
-  const scene = await referencedScene();
-  const warn = console.warn;
-  console.warn = () => {};
-  try {
-    const { ch, ws } = await connectedTo(scene);
-    opened.push(ch);
-    const [gltfMesh] = [...scene.meshes.values()];
-    await until(() => ws.sent.flat().some((r) => r.type === 'render'));
-    // The page drops the glTF mesh and its positions before the node has answered.
-    const without = { ...scene, meshes: new Map([...scene.meshes].filter(([id]) => id !== gltfMesh.id)),
-      buffers: new Map([...scene.buffers].filter(([id]) => id !== gltfMesh.positions)) };
-    ch.setScene(without, { width: 8, height: 8 });
-    await until(() => ws.sent.flat().some((r) => r.type === 'remove' && r.what === 'buffer' && r.id === gltfMesh.positions));
-    answerRefs(ws, new Set([gltfMesh.positions, gltfMesh.indices]));
-    await until(() => ws.sent.flat().some((r) => r.type === 'buffer' && r.id === gltfMesh.indices));
-    await new Promise((r) => setTimeout(r, 60));
-    assert.equal(ws.sent.flat().filter((r) => r.type === 'buffer' && r.id === gltfMesh.positions).length, 0,
-      'the removed buffer is not uploaded again');
-    assert.equal(ws.sent.flat().filter((r) => r.type === 'buffer' && r.id === gltfMesh.indices).length, 1, 'the one still in the scene is');
-  } finally {
-    console.warn = warn;
-  }
-})));
+test('an error record while reference answers are outstanding uploads the unanswered ones; a late answer changes nothing', () => withFakeSocket((opened) => withTextures(() => quietlyReferenced(opened, async ({ ch, ws }) => {
+  const refs = ws.sent[1];
+  ws.reply([{ type: 'error', code: 8, codeName: 'bad_length', fatal: false, record: 0, message: 'record 0 (buffer_ref): body length' }]);
+  const uploaded = (r) => ws.sent.flat().filter((x) => x.type === (r.type === 'buffer_ref' ? 'buffer' : 'texture') && x.id === r.id).length;
+  await until(() => refs.every((r) => uploaded(r) === 1));
+  assert.equal(ch.unanswered.size, 0);
+  answerRefs(ws, new Set([refs[0].id]));
+  await new Promise((r) => setTimeout(r, 60));
+  for (const r of refs) assert.equal(uploaded(r), 1, `${r.type} ${r.id} uploaded once`);
+}))));
+
+test('a refused reference is not uploaded when a newer record for its id went out before the answer', () => withFakeSocket((opened) => withTextures(() => quietlyReferenced(opened, async ({ scene, ch, ws }) => {
+  const [gltfMesh] = [...scene.meshes.values()];
+  await until(() => ws.sent.flat().some((r) => r.type === 'render'));
+  // The page drops the glTF mesh and its positions before the node has answered.
+  const without = { ...scene, meshes: new Map([...scene.meshes].filter(([id]) => id !== gltfMesh.id)),
+    buffers: new Map([...scene.buffers].filter(([id]) => id !== gltfMesh.positions)) };
+  ch.setScene(without, { width: 8, height: 8 });
+  await until(() => ws.sent.flat().some((r) => r.type === 'remove' && r.what === 'buffer' && r.id === gltfMesh.positions));
+  answerRefs(ws, new Set([gltfMesh.positions, gltfMesh.indices]));
+  await until(() => ws.sent.flat().some((r) => r.type === 'buffer' && r.id === gltfMesh.indices));
+  await new Promise((r) => setTimeout(r, 60));
+  assert.equal(ws.sent.flat().filter((r) => r.type === 'buffer' && r.id === gltfMesh.positions).length, 0,
+    'the removed buffer is not uploaded again');
+  assert.equal(ws.sent.flat().filter((r) => r.type === 'buffer' && r.id === gltfMesh.indices).length, 1, 'the one still in the scene is');
+}))));
 
 test('while answers are outstanding the channel sends at most half of what the node holds back, then the rest after the answers', () => withFakeSocket(async (opened) => {
   const scene = await referencedScene();

@@ -117,6 +117,9 @@ function packedBin() {
   [2, 1, 0].forEach((v, i) => dv.setUint16(72 + 2 * i, v, true));
   return bin;
 }
+const until = async (cond, ms = 2000) => {
+  for (const t0 = Date.now(); !cond(); await new Promise((r) => setTimeout(r, 5))) if (Date.now() - t0 > ms) throw new Error('timed out');
+};
 const later = () => { let resolve; const p = new Promise((r) => (resolve = r)); return { p, resolve }; };
 
 test('a deferred load returns before its buffers are in: views of zeros with their sources, filled in place when the download is in', async () => {
@@ -210,4 +213,43 @@ test('deferred loads start their buffer downloads when the download gate opens; 
   const w = whole.get('http://localhost/m/other.gltf');
   await new Promise((r) => setTimeout(r, 20));
   assert.equal(w.state, 'loaded');
+});
+
+test('the reader checks a deferred glTF\'s values once they are in: zeros pass while pending, an index out of range then drops the mesh', async () => {
+  const download = later();
+  const bad = packedBin();
+  new DataView(bad).setUint16(72, 7, true);  // index 7 of 3 vertices
+  const fetch = async () => ({ ok: true, status: 200, json: async () => packed(), arrayBuffer: () => download.p });
+  let loads = 0;
+  const resources = new Resources({ fetch, deferBuffers: true, onLoad: () => loads++ });
+  const reader = new MarkupReader({ resources });
+  const doc = page('<xml3d><model src="http://localhost/m/bad-index.gltf"></model></xml3d>');
+  reader.read(doc.querySelector('xml3d'));
+  await until(() => loads === 1);
+  const pending = reader.read(doc.querySelector('xml3d'));
+  assert.equal(pending.meshes.size, 1, 'sent while its values are on their way (the node checks what it loads)');
+  assert.deepEqual(pending.errors, []);
+  download.resolve(bad);
+  await until(() => loads === 2);
+  const loaded = reader.read(doc.querySelector('xml3d'));
+  assert.equal(loaded.meshes.size, 0);
+  assert.match(loaded.errors.map((e) => e.message).join('\n'), /index 7 out of range \(3 vertices\)/);
+});
+
+test('the reader checks a deferred glTF\'s positions once they are in: NaN drops the mesh then', async () => {
+  const download = later();
+  const bad = packedBin();
+  new DataView(bad).setFloat32(4, NaN, true);
+  const fetch = async () => ({ ok: true, status: 200, json: async () => packed(), arrayBuffer: () => download.p });
+  let loads = 0;
+  const reader = new MarkupReader({ resources: new Resources({ fetch, deferBuffers: true, onLoad: () => loads++ }) });
+  const doc = page('<xml3d><model src="http://localhost/m/bad-positions.gltf"></model></xml3d>');
+  reader.read(doc.querySelector('xml3d'));
+  await until(() => loads === 1);
+  assert.equal(reader.read(doc.querySelector('xml3d')).meshes.size, 1);
+  download.resolve(bad);
+  await until(() => loads === 2);
+  const loaded = reader.read(doc.querySelector('xml3d'));
+  assert.equal(loaded.meshes.size, 0);
+  assert.match(loaded.errors.map((e) => e.message).join('\n'), /positions hold NaN or Infinity/);
 });
