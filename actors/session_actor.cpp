@@ -86,8 +86,12 @@ void start_frame(self_ptr self, uint32_t client_frame, bool refine) {
       if (now > 2 * was + kMinChange || 2 * now + kMinChange < was) st.budget->restart();
     }
     if (st.budget) st.frame_scale = st.budget->scale();
-    st.still.after_scaled = st.frame_scale < 1;
-    st.still.active = st.still.after_scaled || (st.still.target > 1 && can_refine);
+    // A scene without triangles (a page's frames before its scene has come) shows its uniform
+    // background, which one sample at any scale renders exactly: neither refined nor followed
+    // by a full-resolution still, so the renderer is free when the scene arrives.
+    const bool empty = st.frame_triangles == 0;
+    st.still.after_scaled = st.frame_scale < 1 && !empty;
+    st.still.active = st.still.after_scaled || (st.still.target > 1 && can_refine && !empty);
     st.still.client_frame = client_frame;
     st.still.seed = st.seq;
   } else if (st.still.after_scaled) {
@@ -100,7 +104,7 @@ void start_frame(self_ptr self, uint32_t client_frame, bool refine) {
     set_resolution(self, w, h);
     if (st.closed) return;
   }
-  fs.refine = st.frame_scale == 1 && st.still.target > 1 && can_refine;
+  fs.refine = st.frame_scale == 1 && st.still.target > 1 && can_refine && st.frame_triangles > 0;
   // Denoised while the plain average is noisy (renderer/denoise.h): only AO under a sky is
   // noise the filter knows.
   fs.denoise = fs.refine && st.settings->denoise_below_db > 0 && st.render.ao_samples > 0 &&

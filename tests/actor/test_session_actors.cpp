@@ -613,6 +613,23 @@ CAF_TEST(a still is averaged plainly once its estimate passes the threshold and 
   }
 }
 
+CAF_TEST(a still of a scene without triangles is its background and is not refined) {
+  settings->refine_samples = 8;
+  client({Remove{RecordType::mesh, 3}, SetCamera{camera_at(3)}, RenderRequest{1}});
+  run();
+  CAF_CHECK_EQUAL(status().frames_started, 1u);
+  CAF_CHECK_EQUAL(last_frame().samples, 1u);
+  CAF_CHECK(!last_frame().refined);
+  // The scene comes back: its still refines as before.
+  client(tiny_scene());
+  client({RenderRequest{2}});
+  run();
+  CAF_CHECK_EQUAL(last_frame().frame, 2u);
+  CAF_CHECK_EQUAL(last_frame().samples, 8u);
+  CAF_CHECK_EQUAL(status().frames_started, 9u);
+  CAF_CHECK_EQUAL(sink->all<ErrorReply>().size(), 0u);
+}
+
 CAF_TEST(a refine record from the client sets its target and 0 turns refinement off) {
   settings->refine_samples = 8;
   client({Refine{3}, SetCamera{camera_at(3)}, RenderRequest{1}});
