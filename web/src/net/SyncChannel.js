@@ -61,7 +61,9 @@ export class SyncChannel {
     this.progress = { queued: 0, sent: 0 };
     this.closed = false;
     this.session = 0;         // handshake replies so far
-    this.unanswered = new Map();  // 'buffer:3' -> {ref, seq, group}: references sent, not answered yet
+    // 'buffer:3' -> [{ref, seq, group}, ...]: references sent and not answered yet, oldest first
+    // (a page may reference one id again before the first answer; the node answers in order).
+    this.unanswered = new Map();
     this.groups = [];         // the messages of references not answered in full: {left, sentAt}, oldest first
     this.sentBytes = 0;       // bytes sent in this session
     this.latest = new Map();  // 'buffer:3' -> seq of the last record sent for that buffer or texture id
@@ -377,7 +379,11 @@ export class SyncChannel {
       const seq0 = this.seq;
       this.sendRecords(batch);
       group.sentAt = this.sentBytes;
-      batch.forEach((r, i) => this.unanswered.set(recordKey(r), { ref: r, seq: seq0 + i + 1, group }));
+      batch.forEach((r, i) => {
+        const k = recordKey(r);
+        if (!this.unanswered.has(k)) this.unanswered.set(k, []);
+        this.unanswered.get(k).push({ ref: r, seq: seq0 + i + 1, group });
+      });
       this.groups.push(group);
       batch = [];
       bytes = 8;
@@ -399,9 +405,10 @@ export class SyncChannel {
   answer(answers) {
     const refused = [], groups = [];
     for (const r of answers) {
-      const k = `${r.what}:${r.id}`, u = this.unanswered.get(k);
-      if (!u) continue;  // not a reference waiting for its answer (or refused already after an error)
-      this.unanswered.delete(k);
+      const k = `${r.what}:${r.id}`, waiting = this.unanswered.get(k);
+      if (!waiting) continue;  // not a reference waiting for its answer (or refused already after an error)
+      const u = waiting.shift();
+      if (!waiting.length) this.unanswered.delete(k);
       if (r.ok) this.progress.sent += uploadBytes(u.ref.upload);
       else refused.push({ ...u, message: r.message });
       groups.push(u.group);
@@ -436,7 +443,7 @@ export class SyncChannel {
 
   // After an error record: every unanswered reference counts as refused.
   refuseUnanswered() {
-    const all = [...this.unanswered.values()];
+    const all = [...this.unanswered.values()].flat();
     this.unanswered.clear();
     if (all.length) this.uploadRefused(all);
     for (const u of all) this.answered1(u.group);

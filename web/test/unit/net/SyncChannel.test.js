@@ -505,6 +505,34 @@ test('a refused reference is not uploaded when a newer record for its id went ou
   assert.equal(ws.sent.flat().filter((r) => r.type === 'buffer' && r.id === gltfMesh.indices).length, 1, 'the one still in the scene is');
 }))));
 
+test('one id referenced again before its first answer: the answers match in order, and only the latest reference may upload', () => withFakeSocket((opened) => withTextures(() => quietlyReferenced(opened, async ({ ch, ws }) => {
+  await until(() => ws.sent.flat().some((r) => r.type === 'render'));
+  answerRefs(ws);
+  await until(() => ch.groups.length === 0);
+  const ref = (k) => ({ type: 'buffer_ref', id: 77, bufferType: 'f32', components: 3, source: 'f32', values: 3, byteStride: 0,
+    byteOffset: 12 * k, url: 'http://localhost/m/scene.bin', upload: { type: 'buffer', id: 77, bufferType: 'f32', components: 3, data: new Float32Array([k, k, k]) } });
+  const uploads = () => ws.sent.flat().filter((r) => r.type === 'buffer' && r.id === 77).map((r) => r.data[0]);
+  const answer = (...ok) => ws.reply(ok.map((o) => ({ type: 'reference', what: 'buffer', ok: o, id: 77, bytes: o ? 36 : 0, message: o ? '' : 'refused' })));
+  // The older one refused, the newer one loaded: nothing to upload (the older is superseded).
+  await ch.sendRefs({ refs: [ref(1)] }, ch.session);
+  await ch.sendRefs({ refs: [ref(2)] }, ch.session);
+  assert.equal(ch.groups.length, 2);
+  answer(false);
+  answer(true);
+  await new Promise((r) => setTimeout(r, 30));
+  assert.deepEqual(uploads(), []);
+  assert.equal(ch.groups.length, 0, 'both messages answered: the room is given back');
+  assert.equal(ch.unanswered.size, 0);
+  // The older one loaded, the newer one refused: the newer one's values are uploaded.
+  await ch.sendRefs({ refs: [ref(3)] }, ch.session);
+  await ch.sendRefs({ refs: [ref(4)] }, ch.session);
+  answer(true);
+  answer(false);
+  await until(() => uploads().length === 1);
+  assert.deepEqual(uploads(), [4]);
+  assert.equal(ch.groups.length, 0);
+}))));
+
 test('while answers are outstanding the channel sends at most half of what the node holds back, then the rest after the answers', () => withFakeSocket(async (opened) => {
   const scene = await referencedScene();
   // A node that holds 512 bytes of messages behind references it loads: 256 of them for the client.
