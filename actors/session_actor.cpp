@@ -67,13 +67,17 @@ void start_frame(self_ptr self, uint32_t client_frame, bool refine) {
   FrameMeta& m = fs.meta;
   m.seq = st.seq;
   m.client_frame = client_frame;
-  const bool can_refine = st.hs.renderer == RendererKind::raytracer;
+  // Whether the still refines: the client wants more than one sample, the ray tracer renders
+  // it (the rasterizer has nothing to add), and the scene has triangles (a scene without any, a
+  // page's frames before its scene has come, is its uniform background, exact at one sample).
+  const auto refinable = [&] {
+    return st.still.target > 1 && st.hs.renderer == RendererKind::raytracer && st.frame_triangles > 0;
+  };
   st.frame_scale = 1;
   if (!refine) {
-    // A requested frame starts a new still; it refines when the client wants more than one
-    // sample and the ray tracer renders it (the rasterizer has nothing to add). Within a frame
-    // budget it is rendered at the scale that keeps it there, and the still follows it at full
-    // resolution unasked.
+    // A requested frame starts a new still, refined when refinable(). Within a frame budget it
+    // is rendered at the scale that keeps it there, and the still follows it at full resolution
+    // unasked (not for an empty scene: its background is the same at any scale).
     st.still = {};
     st.still.target = st.refine.value_or(st.settings->refine_samples);
     st.frame_triangles = st.scene->triangle_count();
@@ -86,12 +90,8 @@ void start_frame(self_ptr self, uint32_t client_frame, bool refine) {
       if (now > 2 * was + kMinChange || 2 * now + kMinChange < was) st.budget->restart();
     }
     if (st.budget) st.frame_scale = st.budget->scale();
-    // A scene without triangles (a page's frames before its scene has come) shows its uniform
-    // background, which one sample at any scale renders exactly: neither refined nor followed
-    // by a full-resolution still, so the renderer is free when the scene arrives.
-    const bool empty = st.frame_triangles == 0;
-    st.still.after_scaled = st.frame_scale < 1 && !empty;
-    st.still.active = st.still.after_scaled || (st.still.target > 1 && can_refine && !empty);
+    st.still.after_scaled = st.frame_scale < 1 && st.frame_triangles > 0;
+    st.still.active = st.still.after_scaled || refinable();
     st.still.client_frame = client_frame;
     st.still.seed = st.seq;
   } else if (st.still.after_scaled) {
@@ -104,7 +104,7 @@ void start_frame(self_ptr self, uint32_t client_frame, bool refine) {
     set_resolution(self, w, h);
     if (st.closed) return;
   }
-  fs.refine = st.frame_scale == 1 && st.still.target > 1 && can_refine && st.frame_triangles > 0;
+  fs.refine = st.frame_scale == 1 && refinable();
   // Denoised while the plain average is noisy (renderer/denoise.h): only AO under a sky is
   // noise the filter knows.
   fs.denoise = fs.refine && st.settings->denoise_below_db > 0 && st.render.ao_samples > 0 &&

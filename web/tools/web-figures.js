@@ -14,11 +14,15 @@
 //    That first frame may be a scaled one (the node's frame budget); the time to the same
 //    scene at the element's full width is reported beside it, and each record says where the
 //    time went (the last scene message sent, the frames drawn until then).
+//    --profile DIR: for each second visitor, the page's CPU profile (DevTools protocol) in
+//    DIR/<page>-second-<run>.cpuprofile and, with PERF=1, `perf record -g` of the node in
+//    DIR/<page>-second-<run>.perf.data. Both use CLOCK_MONOTONIC: perf's seconds and the
+//    profile's startTime (microseconds) line up.
 // Uses playwright-core with /usr/bin/chromium (headless, software GL) and a fresh `tessera serve`.
 import fs from 'node:fs';
 import os from 'node:os';
 import path from 'node:path';
-import { execFileSync } from 'node:child_process';
+import { execFileSync, spawn } from 'node:child_process';
 import { chromium } from 'playwright-core';
 import { startNode } from './tessera-node.js';
 import { decodeClient } from '../src/net/Protocol.js';
@@ -34,6 +38,8 @@ const REF_PAGES = (opt('--ref-pages', 'kitchen,pavilion,living-room')).split(','
 const MARKDOWN = argv.includes('--markdown');
 // --web-root DIR: serve another copy of web/ (an older client, say) to compare in one run.
 const WEB_ROOT = opt('--web-root', '') || undefined;
+const PROFILE = opt('--profile', '');
+if (PROFILE) fs.mkdirSync(PROFILE, { recursive: true });
 if (!BIN || !fs.existsSync(BIN)) { console.error('usage: node web/tools/web-figures.js --tessera PATH/TO/tessera [--repeat N] [--steps N] [--markdown]'); process.exit(2); }
 if (!fs.existsSync(CHROMIUM)) { console.error(`${CHROMIUM} not found`); process.exit(2); }
 
@@ -87,10 +93,19 @@ async function newContext() {
 }
 
 // Loads a demo page in server mode; resolves the timings and the upload byte breakdown.
-async function loadPage(node, name, { noDeflate = false, display = 'jpeg', query = '' } = {}) {
+// profile: a path prefix for the visit's CPU profile (and perf data with PERF=1), or ''.
+async function loadPage(node, name, { noDeflate = false, display = 'jpeg', query = '', profile = '' } = {}) {
   const { context, close } = await newContext();
   const page = await context.newPage();
   await page.addInitScript(instrument, noDeflate);
+  let cdp = null, perf = null;
+  if (profile) {
+    cdp = await context.newCDPSession(page);
+    await cdp.send('Profiler.enable');
+    await cdp.send('Profiler.setSamplingInterval', { interval: 200 });
+    await cdp.send('Profiler.start');
+    if (process.env.PERF) perf = spawn('perf', ['record', '-F', '999', '-g', '-p', String(node.proc.pid), '-o', `${profile}.perf.data`], { stdio: 'ignore' });
+  }
   const up = { messages: 0, wire: 0, bufferRaw: 0, bufferWire: 0, buffersDeflated: 0, buffers: 0, texture: 0, refs: 0 };
   let lastSend = Date.now();
   page.on('websocket', (ws) => ws.on('framesent', (f) => {
@@ -125,6 +140,8 @@ async function loadPage(node, name, { noDeflate = false, display = 'jpeg', query
     refsSent: (window.__sends.find((s) => s.refs) || {}).t, refsLast: (window.__sends.filter((s) => s.refs).pop() || {}).t,
     answered: window.__answers.length ? window.__answers[window.__answers.length - 1] : undefined,
     drawn: window.__drawn.filter((f) => f.t <= window.__complete).map((f) => [+f.t.toFixed(0), f.frame, f.rendering === undefined ? null : +(+f.rendering).toFixed(0)]) }));
+  if (cdp) fs.writeFileSync(`${profile}.cpuprofile`, JSON.stringify((await cdp.send('Profiler.stop')).profile));
+  if (perf) { perf.kill('SIGINT'); await new Promise((r) => perf.on('exit', r)); }
   return { page, close, t, up };
 }
 
@@ -195,7 +212,8 @@ for (let k = 0; k < (REF_PAGES.length ? REPEAT : 0); k++) {
     for (const name of REF_PAGES) {
       for (const visitor of ['first', 'second', 'upload']) {
         const logFrom = fresh.log.length;
-        const { close, t, up } = await loadPage(fresh, name, { query: visitor === 'upload' ? '&references=off' : '' });
+        const { close, t, up } = await loadPage(fresh, name, { query: visitor === 'upload' ? '&references=off' : '',
+          profile: PROFILE && visitor === 'second' ? path.join(PROFILE, `${name}-second-${k}`) : '' });
         await close();
         // The node's side of it: how long each message's references took to load, and each
         // frame's width, kernel and rendering ms (rendering includes taking the scene's changes).

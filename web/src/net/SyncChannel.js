@@ -239,7 +239,6 @@ export class SyncChannel {
       if (k) this.latest.set(k, ++this.seq);
     }
     this.send(bytes);
-    return bytes.byteLength;
   }
 
   // Prepares a record for the wire: buffers deflated, textures loaded and encoded.
