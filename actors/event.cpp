@@ -40,6 +40,7 @@ const char* event_name(Ev kind) {
     case Ev::heap_trimmed: return "heap_trimmed";
     case Ev::cluster_security: return "cluster_security";
     case Ev::converged: return "converged";
+    case Ev::abandoned: return "abandoned";
     case Ev::references: return "references";
     case Ev::tls_certificate: return "tls_certificate";
     case Ev::closed_slow_client: return "closed_slow_client";

@@ -37,6 +37,8 @@ enum class Ev : uint8_t {
   closed_slow_client, rejected, network_thread_error,
   // A session: its still reached its refine target and rendering stopped.
   converged,
+  // A session: a still's sample stopped early, its client having asked for a new frame.
+  abandoned,
   // A session: the references of a client message, loaded or refused (update/asset_store.h).
   references,
   // The server's TLS certificate (net/server.cpp): no scope; "loaded" at start, "reloaded" or

@@ -78,6 +78,7 @@ struct frame_state {
   // since its sample 0, composed here, where the tiles of all nodes meet.
   Accumulation acc;
   std::unique_ptr<Denoising> dn;  // FrameStart::denoise: the still's denoising (none: plain)
+  uint32_t cancelled = 0;       // the last frame the session abandoned (cancel)
   static inline const char* name = "tessera.frame";
 };
 using self_ptr = frame_actor::stateful_pointer<frame_state>;
@@ -299,12 +300,44 @@ void finish_frame(self_ptr self, std::vector<TileResult>&& tiles, std::vector<do
   deliver(self, std::move(shown), error);
 }
 
+// The frame in flight was abandoned (cancel): answered, and nothing of it averaged, shown or
+// given to the tiler (whose next tasks come from the last complete frame's SATs).
+void abandon(self_ptr self, const std::vector<TileResult>& tiles) {
+  auto& st = self->state;
+  size_t stopped = 0;
+  double rendering_ms = 0;
+  for (const TileResult& t : tiles) {
+    stopped += t.cancelled;
+    rendering_ms = std::max(rendering_ms, t.rendering_ms);
+  }
+  log(self, Event(Ev::abandoned, st.cur.meta.client_frame)
+                .with("sample", st.cur.sample)
+                .with("tiles_stopped", static_cast<long long>(stopped))
+                .with("rendering_ms", Json::number(rendering_ms)));
+  deliver(self, {}, {}, false);
+}
+
 // Tasks whose node failed (down, too late, impossible tiles) are rendered here, so the frame
 // still completes; the root subtree commits its list again before the next frame.
 void recover(self_ptr self, BatchReply&& r) {
   auto& st = self->state;
   const std::vector<Rect>& tasks = st.batch.tasks;
   if (r.changed) st.recommit = true;
+  // A tile that stopped early belongs to a frame its session abandoned, which ends here if any
+  // of its tiles stopped or failed (its lost tasks are not rendered again); one complete by then
+  // goes on as usual. In any other frame such a tile is a node's fault.
+  const bool abandoned = st.cancelled == st.cur.meta.seq;
+  bool incomplete = false;
+  for (TileResult& t : r.tiles) {
+    if (t.failed()) incomplete = true;
+    if (!t.cancelled || t.failed()) continue;
+    incomplete = true;
+    if (!abandoned) {
+      t.code = ErrorCode::bad_tile;
+      t.error = "a tile that stopped early in a frame nobody abandoned";
+    }
+  }
+  if (abandoned && incomplete) return abandon(self, r.tiles);
   std::vector<size_t> lost;
   for (size_t i = 0; i < r.tiles.size() && i < tasks.size(); ++i)
     if (r.tiles[i].failed() && !tasks[i].empty()) lost.push_back(i);
@@ -368,6 +401,7 @@ void render_batch(self_ptr self) {
   if (batch.hit_points && st.cur.scene.scene) req.camera = pack_camera(st.cur.scene.scene->camera());
   self->request(st.a.tiler, caf::infinite, tasks_atom::value, req).then([=](TaskList& tl) {
     auto& st = self->state;
+    if (st.cancelled == st.cur.meta.seq) return abandon(self, {});  // abandoned before it began
     st.cur.meta.tiling_ms = tl.tiling_ms;
     for (size_t k = 0; k < tl.tasks.size() && k < st.used.size(); ++k) st.batch.tasks[st.used[k]] = tl.tasks[k];
     tl.tasks.clear();  // copied into the batch; the rest says how they were made
@@ -410,6 +444,14 @@ frame_actor::behavior_type frame_impl(self_ptr self, std::shared_ptr<const NodeS
                 },
                 [=](caf::error& e) mutable { rp.deliver(std::move(e)); });
         return rp;
+      },
+      [=](cancel_atom, uint32_t seq) {
+        auto& st = self->state;
+        // Only the still's sample in flight: a requested frame is always answered with its
+        // picture, and a notice for a frame already answered changes nothing.
+        if (seq != st.cur.meta.seq || !st.cur.meta.refined || !st.done.pending() || st.cancelled == seq) return;
+        st.cancelled = seq;
+        self->send(st.a.subtree, cancel_atom::value, seq);
       },
       [=](render_atom, FrameStart& fs) -> caf::result<uint32_t> {
         auto& st = self->state;

@@ -14,6 +14,12 @@
 //                                  the tiles went to the display (the encoder then encodes this
 //                                  frame while the next one renders), or with a typed error
 //                                  (actors/errors.h) when the frame cannot be shown.
+//   cancel(seq)                    the session abandons frame `seq`, a still's sample in flight
+//                                  (its client asked for a new frame): the root subtree and its
+//                                  renderers are told, the tasks stop early, and the frame is
+//                                  answered without being averaged, shown or given to the tiler
+//                                  (a sample that was complete by then goes on as usual). Other
+//                                  frames are never abandoned.
 #include <cstdint>
 
 #include <caf/typed_actor.hpp>
@@ -51,7 +57,8 @@ typename Inspector::result_type inspect(Inspector& f, FrameStart& x) {
 }
 
 using frame_actor = caf::typed_actor<caf::replies_to<nodes_atom, uint32_t>::with<uint32_t>,
-                                     caf::replies_to<render_atom, FrameStart>::with<uint32_t>>;
+                                     caf::replies_to<render_atom, FrameStart>::with<uint32_t>,
+                                     caf::reacts_to<cancel_atom, uint32_t>>;
 
 // The actors a frame actor drives; the session spawns and links them all.
 struct FrameActors {

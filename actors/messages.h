@@ -43,6 +43,7 @@ using scene_atom = caf::atom_constant<caf::atom("scene")>;
 using snapshot_atom = caf::atom_constant<caf::atom("snapshot")>;
 using ping_atom = caf::atom_constant<caf::atom("ping")>;
 using deadline_atom = caf::atom_constant<caf::atom("deadline")>;
+using cancel_atom = caf::atom_constant<caf::atom("cancel")>;
 
 // --- Byte vectors from other processes ----------------------------------------------------
 //

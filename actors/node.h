@@ -123,7 +123,9 @@ bool trim_heap_if_regrown(int64_t regrow_bytes = int64_t(16) << 20);
 // message supplies goes into a log line through this, so no text can forge log lines.
 std::string json_quote(const std::string& s);
 
-renderer_actor spawn_renderer(caf::actor_system& sys, PacketLayout layout, bool detached);
+// cancel: the frames its owner abandons (CancelMark); none: every task runs to its end.
+renderer_actor spawn_renderer(caf::actor_system& sys, PacketLayout layout, bool detached,
+                              std::shared_ptr<const CancelMark> cancel = nullptr);
 tiler_actor spawn_tiler(caf::actor_system& sys, std::vector<double> coefficients);
 encoder_actor spawn_encoder(caf::actor_system& sys, bool detached);
 display_actor spawn_display(caf::actor_system& sys, std::shared_ptr<ClientSink> sink, encoder_actor encoder,
@@ -140,6 +142,7 @@ struct SubtreeSpec {
   caf::strong_actor_ptr parent;
   renderer_actor renderer;       // none: its own, when settings->render
   scene_source_actor source;     // a root's scene owner: the session's sync actor
+  std::shared_ptr<CancelMark> cancel;  // what `renderer` reads (none: its own renderer gets one)
 };
 subtree_actor spawn_subtree(caf::actor_system& sys, std::shared_ptr<const NodeSettings> settings, node_actor node,
                             SubtreeSpec spec);

@@ -30,7 +30,8 @@ double ms_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
 }
 
-renderer_actor::behavior_type renderer_impl(renderer_actor::stateful_pointer<renderer_state> self, PacketLayout layout) {
+renderer_actor::behavior_type renderer_impl(renderer_actor::stateful_pointer<renderer_state> self, PacketLayout layout,
+                                            std::shared_ptr<const CancelMark> cancel) {
   // Its scene copy, BVH and buffers are the bulk of a session's memory, and they are freed when
   // this actor ends, which on a busy node can be well after its session ended: trim after it.
   self->attach_functor([] { schedule_heap_trim(); });
@@ -72,8 +73,13 @@ renderer_actor::behavior_type renderer_impl(renderer_actor::stateful_pointer<ren
           s.guides = task.guides != kNoGuides;
           s.cost_map = true;
           s.hit_points = task.hit_points && task.renderer == 0;
+          if (cancel) {
+            s.cancel_through = &cancel->through;
+            s.cancel_frame = task.frame;
+          }
           TaskResult r;
           renderer->render(task.pixels, s, r);
+          out.cancelled = r.cancelled;
           out.pixels = r.pixels;
           out.kernel_ms = r.kernel_ms;
           out.rendering_ms = r.rendering_ms;
@@ -110,9 +116,10 @@ renderer_actor::behavior_type renderer_impl(renderer_actor::stateful_pointer<ren
 
 }  // namespace
 
-renderer_actor spawn_renderer(caf::actor_system& sys, PacketLayout layout, bool detached) {
-  if (detached) return sys.spawn<caf::detached>(renderer_impl, layout);
-  return sys.spawn(renderer_impl, layout);
+renderer_actor spawn_renderer(caf::actor_system& sys, PacketLayout layout, bool detached,
+                              std::shared_ptr<const CancelMark> cancel) {
+  if (detached) return sys.spawn<caf::detached>(renderer_impl, layout, std::move(cancel));
+  return sys.spawn(renderer_impl, layout, std::move(cancel));
 }
 
 }  // namespace tessera

@@ -5,6 +5,9 @@
 //
 // Rendering blocks for tens of milliseconds and runs TBB inside, so the actor is spawned
 // detached (its own thread) and CAF's scheduler is capped (configs/*.ini).
+#include <atomic>
+#include <cstdint>
+
 #include <caf/typed_actor.hpp>
 #include <caf/replies_to.hpp>
 
@@ -64,14 +67,29 @@ struct TileResult {
   uint64_t rays = 0;
   protocol::ErrorCode code = protocol::ErrorCode::ok;  // not ok: the task failed (pixels are not valid)
   std::string error;                                   // why, when it failed
+  // The frame was abandoned while this task rendered (CancelMark): part of it is not rendered,
+  // and only a frame its master cancelled may end so (frame_actor.cpp).
+  bool cancelled = false;
   bool failed() const { return code != protocol::ErrorCode::ok; }
 };
 template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, TileResult& x) {
   return f(caf::meta::type_name("tessera::tile_result"), x.frame, x.pixels, BytesField{x.rgba}, BytesField{x.sat},
            BytesField{x.radiance}, BytesField{x.depth}, BytesField{x.guides}, x.kernel_ms,
-           x.rendering_ms, x.sat_ms, x.rays, x.code, x.error);
+           x.rendering_ms, x.sat_ms, x.rays, x.code, x.error, x.cancelled);
 }
+
+// The frames of one session a renderer abandons: a task of frame f stops early once `through`
+// >= f (RenderSettings::cancel_through). Frame numbers only grow, so one number says it; the
+// subtree that owns the renderer raises it (subtree_protocol.h, cancel) while the renderer's
+// thread reads it between blocks of packets.
+struct CancelMark {
+  std::atomic<uint32_t> through{0};
+  void raise(uint32_t frame) {
+    uint32_t was = through.load();
+    while (was < frame && !through.compare_exchange_weak(was, frame)) {}
+  }
+};
 
 using renderer_actor = caf::typed_actor<caf::replies_to<render_atom, SceneSnapshot, RenderTask>::with<TileResult>>;
 

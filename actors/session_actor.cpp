@@ -236,7 +236,8 @@ session_actor::behavior_type session_impl(self_ptr self, std::shared_ptr<ClientS
   auto& sys = self->system();
   auto node = caf::actor_cast<node_actor>(st.settings->node.lock());
   st.cluster = bool(node);
-  if (st.settings->render) st.renderer = spawn_renderer(sys, st.layout, st.settings->detached);
+  auto cancel = std::make_shared<CancelMark>();  // the root subtree raises it (frame_protocol.h, cancel)
+  if (st.settings->render) st.renderer = spawn_renderer(sys, st.layout, st.settings->detached, cancel);
   st.tiler = spawn_tiler(sys, {st.settings->coefficient.renderer()});
   st.encoder = spawn_encoder(sys, st.settings->detached);
   st.display = spawn_display(sys, st.sink, st.encoder, st.settings, id);
@@ -247,6 +248,7 @@ session_actor::behavior_type session_impl(self_ptr self, std::shared_ptr<ClientS
   root.parent = caf::actor_cast<caf::strong_actor_ptr>(self);
   root.renderer = st.renderer;
   root.source = caf::actor_cast<scene_source_actor>(self);
+  root.cancel = std::move(cancel);
   st.subtree = spawn_subtree(sys, st.settings, node, std::move(root));
   st.frame = spawn_frame(sys, st.settings, id, st.layout, FrameActors{st.subtree, st.renderer, st.tiler, st.display});
   // Linked actors end with the session (it always quits with a non-normal reason).

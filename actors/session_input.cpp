@@ -305,6 +305,10 @@ static void apply_records(self_ptr self, std::vector<ClientRecord>& recs, const 
       } else {
         if (st.pending) st.dropped++;  // the older request is merged into this one
         st.pending = rr->frame;
+        // A still's sample nobody asked for would hold this frame back by a whole sample (a
+        // full-resolution one after a scaled frame): it is abandoned, and this frame starts as
+        // soon as its tasks have stopped.
+        if (!st.frame_requested) self->send(st.frame, cancel_atom::value, st.seq);
       }
     } else if (st.in_flight) {
       // Waiting updates count against the client's byte limit now: one that would exceed it

@@ -152,6 +152,7 @@ subtree_actor::behavior_type subtree_impl(subtree_ptr self, std::shared_ptr<cons
   st.req = spec.req;
   st.source = spec.source;
   st.renderer = spec.renderer;
+  st.cancel = spec.cancel;
   if (is_root(st)) {
     st.scope = {{"session", st.req.session}};
   } else {
@@ -162,7 +163,8 @@ subtree_actor::behavior_type subtree_impl(subtree_ptr self, std::shared_ptr<cons
   if (st.settings->render) {
     st.self_node = st.settings->info();
     if (!st.renderer) {
-      st.renderer = spawn_renderer(self->system(), {st.req.packet_w, st.req.packet_h}, st.settings->detached);
+      st.cancel = std::make_shared<CancelMark>();
+      st.renderer = spawn_renderer(self->system(), {st.req.packet_w, st.req.packet_h}, st.settings->detached, st.cancel);
       self->link_to(st.renderer);
     }
   }
@@ -246,6 +248,19 @@ subtree_actor::behavior_type subtree_impl(subtree_ptr self, std::shared_ptr<cons
           return;
         }
         subtree_log(self, Event(Ev::update_failed, "a scene message from a peer (a worker's scene comes from its parent's updates)"));
+      },
+      // The session abandons frame `frame` (a still's sample its client no longer wants): the
+      // own renderer stops its task early and the children are told. From the parent only (a
+      // worker), or from this node (a root: the session's frame actor); older frames stay
+      // abandoned, so a late or repeated notice changes nothing.
+      [=](cancel_atom, uint32_t frame) {
+        auto& st = self->state;
+        const caf::strong_actor_ptr& from = self->current_sender();
+        if (!from || (is_root(st) ? from->node() != self->node() : from->address() != st.parent)) return;
+        if (!is_root(st)) heard(self);
+        if (st.cancel) st.cancel->raise(frame);
+        for (auto& c : st.children)
+          if (c.alive) self->send(c.actor, cancel_atom::value, frame);
       },
       [=](tick_atom) { on_tick(self); },
       // A parent asks whether this subtree, late with a batch, is still there: the batches in

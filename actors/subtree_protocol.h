@@ -28,6 +28,11 @@
 //   scene(SceneSnapshot)                 a root only: the scene its own renderer renders from
 //                                        now on, which belongs to the session's sync actor
 //                                        (session_protocol.h); a worker refuses it.
+//   cancel(frame)                        the master abandons frame `frame` (a still's sample
+//                                        its client no longer wants): its own task stops early
+//                                        (TileResult::cancelled) and the children are told. A
+//                                        worker takes it from its parent only, a root from its
+//                                        own node only.
 //   tick                                 its own periodic work: keep-alives to the children,
 //                                        joins of children that (re)connected, and for a
 //                                        worker the orphan and parent-silence checks. A tick
@@ -93,6 +98,7 @@ using subtree_actor = caf::typed_actor<caf::reacts_to<update_atom, Payload, bool
                                        caf::replies_to<render_atom, RenderBatch>::with<BatchReply>,
                                        caf::replies_to<nodes_atom>::with<std::vector<NodeInfo>>,
                                        caf::reacts_to<scene_atom, SceneSnapshot>,
+                                       caf::reacts_to<cancel_atom, uint32_t>,
                                        caf::reacts_to<tick_atom>,
                                        caf::replies_to<ping_atom>::with<uint64_t>,
                                        caf::reacts_to<deadline_atom, uint64_t, uint64_t>>;

@@ -93,6 +93,7 @@ struct subtree_state {
   bool rendering = false;       // the own task is being rendered: updates wait
   std::string broken;           // an update this node could not apply: its tiles would be wrong
   renderer_actor renderer;
+  std::shared_ptr<CancelMark> cancel;  // the frames `renderer` abandons (cancel)
   std::optional<NodeInfo> self_node;  // set when this node renders
   // --- Liveness of a worker (tick) ---
   bool adopted = false;         // the parent's adoption notice (an empty update) arrived

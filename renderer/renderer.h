@@ -1,6 +1,7 @@
 #pragma once
 // The renderer API that every renderer implements (paper section 5.1): sync with the
 // scene model, render any rectangle of the image into RGBA, report its cost data.
+#include <atomic>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -40,6 +41,12 @@ struct RenderSettings {
   // Also write what each pixel's primary ray saw to TaskResult::guides (the denoiser's
   // guides, renderer/denoise.h).
   bool guides = false;
+  // Stopping early: once *cancel_through >= cancel_frame, the blocks of packets not yet begun
+  // are skipped and TaskResult::cancelled says so (their pixels, radiance, guides and costs are
+  // left as zeros). A session abandons a still's sample this way when its client asks for a new
+  // frame (docs/renderer.md). None: the task always runs to its end. The ray tracer only.
+  const std::atomic<uint32_t>* cancel_through = nullptr;
+  uint32_t cancel_frame = 0;
 };
 
 constexpr int kGuideFloats = 8;  // TaskResult::guides: nx, ny, nz, distance, ambient r, g, b, open
@@ -74,6 +81,7 @@ struct TaskResult {
   // stall found (wall - CPU time summed over the disturbed sub-blocks), in ns.
   uint32_t disturbed_packets = 0;
   uint64_t disturbed_ns = 0;
+  bool cancelled = false;  // RenderSettings::cancel_through: stopped early, part of it not rendered
 };
 
 class Renderer {

@@ -35,7 +35,8 @@ constexpr int kSize = 16;
 
 // What a fake child does with its tasks.
 // late: holds its batches until the test releases them, and answers pings meanwhile.
-enum class Mode { liar, hang, straggler, bad_info, slow_acks, late };
+// stops: every tile says it stopped early (TileResult::cancelled), asked or not.
+enum class Mode { liar, hang, straggler, bad_info, slow_acks, late, stops };
 
 struct FakeLog {
   std::vector<RenderBatch> batches;
@@ -50,16 +51,19 @@ struct FakeLog {
   std::vector<std::pair<caf::typed_response_promise<BatchReply>, RenderBatch>> held_batches;  // late
   std::vector<caf::typed_response_promise<uint64_t>> held_acks;  // slow_acks: not yet acknowledged
   std::vector<uint64_t> held_ack_sizes;  // hang: never answered
+  std::vector<uint32_t> cancels;         // the frames its parent abandoned (cancel)
 };
 
 // Tiles for every task of `b`: valid pixels, and a cost map that says every packet costs 1 ms
 // (a node on a CPU shared with something else); a liar's have the wrong size.
-BatchReply reply_for(const RenderBatch& b, Mode mode) {
+BatchReply reply_for(const RenderBatch& b, Mode mode, bool stopped = false) {
   BatchReply r;
   for (const Rect& task : b.tasks) {
     TileResult t;
     t.frame = b.frame;
     t.pixels = task;
+    t.cancelled = stopped || mode == Mode::stops;
+    if (b.radiance) t.radiance.assign(size_t(task.area()) * 12, 0);
     if (mode == Mode::liar) {
       t.rgba.assign(7, 0);  // not width x height x 4
     } else {
@@ -125,10 +129,14 @@ subtree_actor::behavior_type fake_worker(subtree_actor::pointer self, Mode mode,
         return uint64_t(0);
       },
       [=](deadline_atom, uint64_t, uint64_t) {},
+      [=](cancel_atom, uint32_t frame) { log->cancels.push_back(frame); },
       [=](tick_atom) {
-        auto batches = std::move(log->held_batches);  // late: its batches answered now
-        log->held_batches.clear();
-        for (auto& [promise, b] : batches) promise.deliver(reply_for(b, Mode::straggler));
+        auto batches = std::move(log->held_batches);  // late: its batches answered now (stopped
+        log->held_batches.clear();                    // early where their frame was abandoned)
+        for (auto& [promise, b] : batches) {
+          const bool stopped = std::find(log->cancels.begin(), log->cancels.end(), b.frame) != log->cancels.end();
+          promise.deliver(reply_for(b, Mode::straggler, stopped));
+        }
         auto acks = std::move(log->held_acks);
         auto sizes = std::move(log->held_ack_sizes);
         log->held_acks.clear();
@@ -434,6 +442,57 @@ CAF_TEST(a late child that still answers is kept: its tiles are rendered here un
   CAF_CHECK_EQUAL(count(Ev::joined, "late:1"), 1u);
 }
 
+CAF_TEST(a render request during a still sample abandons it: the children are told and the sample is neither averaged nor shown) {
+  settings->refine_samples = 8;
+  auto log = std::make_shared<FakeLog>();
+  auto last = std::make_shared<subtree_actor>();
+  add_child("late:1", caf::actor_cast<caf::actor>(sys.spawn(fake_node, Mode::late, log, last)));
+  start();
+  request_frame(1);
+  sched.run();
+  CAF_REQUIRE_EQUAL(log->batches.size(), 1u);
+  self->send(*last, tick_atom::value);  // the child answers: frame 1 is shown
+  sched.run();
+  CAF_CHECK_EQUAL(frames_sent(), std::vector<uint32_t>{1});
+  // The still's next sample is on its way: its batch waits at the child.
+  CAF_REQUIRE_EQUAL(log->batches.size(), 2u);
+  CAF_CHECK_EQUAL(log->batches[1].sample, 1u);
+  CAF_CHECK(log->batches[1].radiance);
+  CAF_CHECK(log->cancels.empty());
+  request_frame(2);
+  sched.run();
+  CAF_CHECK_EQUAL(log->cancels, std::vector<uint32_t>{log->batches[1].frame});
+  self->send(*last, tick_atom::value);  // its tiles come back stopped early
+  sched.run();
+  CAF_CHECK_EQUAL(count(Ev::abandoned, 1), 1u);
+  CAF_CHECK_EQUAL(count(Ev::abandoned, [](const Event& e) { const Json* n = e.field("tiles_stopped"); return n && *n == Json(1); }), 1u);
+  // Frame 2 started at once, and renders where frame 1 did: nothing was recovered here.
+  CAF_REQUIRE_EQUAL(log->batches.size(), 3u);
+  CAF_CHECK_EQUAL(log->batches[2].sample, 0u);
+  self->send(*last, tick_atom::value);
+  sched.run();
+  CAF_CHECK_EQUAL(frames_sent(), (std::vector<uint32_t>{1, 2}));
+  for (const Frame& f : sink->all<Frame>()) CAF_CHECK(!f.refined);  // the sample of frame 1 was never shown
+  CAF_CHECK_EQUAL(count(Ev::recovering), 0u);
+  CAF_CHECK_EQUAL(sink->all<ErrorReply>().size(), 0u);
+  // Frame 2's own still goes on: its sample 1 is asked of the child, and nothing cancels it.
+  CAF_REQUIRE_EQUAL(log->batches.size(), 4u);
+  CAF_CHECK_EQUAL(log->batches[3].sample, 1u);
+  CAF_CHECK_EQUAL(log->cancels.size(), 1u);
+}
+
+CAF_TEST(a tile that stopped early in a frame nobody abandoned is the node fault and its task is rendered here) {
+  auto log = std::make_shared<FakeLog>();
+  auto last = std::make_shared<subtree_actor>();
+  add_child("stops:1", caf::actor_cast<caf::actor>(sys.spawn(fake_node, Mode::stops, log, last)));
+  start();
+  request_frame(1);
+  sched.run();
+  CAF_CHECK_EQUAL(frames_sent(), std::vector<uint32_t>{1});
+  CAF_CHECK_EQUAL(count(Ev::recovering, 1), 1u);
+  CAF_CHECK_EQUAL(count(Ev::abandoned), 0u);
+}
+
 CAF_TEST(the cost maps of a straggler shift its share away in the next frame) {
   auto log = std::make_shared<FakeLog>();
   auto last = std::make_shared<subtree_actor>();
@@ -720,6 +779,44 @@ CAF_TEST(a worker refuses a scene message from a peer and renders the scene its 
   CAF_REQUIRE_EQUAL(replies->back().tiles.size(), 1u);
   CAF_CHECK(!replies->back().tiles[0].failed());
   CAF_CHECK_EQUAL(replies->back().tiles[0].rgba.size(), size_t(kSize * kSize * 4));
+  self->send_exit(asker, caf::exit_reason::user_shutdown);
+  self->send_exit(w, caf::exit_reason::user_shutdown);
+  sched.run();
+}
+
+CAF_TEST(a worker abandons a frame when its parent says so and not when anyone else does) {
+  OpenRequest req = good_open(3);
+  auto w = spawn_worker(sys, settings, node_actor{}, req, caf::actor_cast<caf::strong_actor_ptr>(self));
+  self->send(w, update_atom::value, Payload{encode(tiny_scene())}, true);
+  sched.run();
+  auto replies = std::make_shared<std::vector<BatchReply>>();
+  auto asker = sys.spawn([=](caf::event_based_actor* a) -> caf::behavior {
+    return {[=](RenderBatch& b) {
+              a->request(w, caf::infinite, render_atom::value, std::move(b)).then([=](BatchReply& r) { replies->push_back(r); });
+            },
+            [=](cancel_atom, uint32_t frame) { a->send(w, cancel_atom::value, frame); }};
+  });
+  RenderBatch b = good_batch();
+  b.frame = 5;
+  self->send(asker, cancel_atom::value, uint32_t(5));  // a stranger: ignored
+  sched.run();
+  self->send(asker, b);
+  sched.run();
+  CAF_REQUIRE_EQUAL(replies->size(), 1u);
+  CAF_REQUIRE_EQUAL(replies->back().tiles.size(), 1u);
+  CAF_CHECK(!replies->back().tiles[0].failed());
+  CAF_CHECK(!replies->back().tiles[0].cancelled);
+  self->send(w, cancel_atom::value, uint32_t(6));  // its parent abandons frame 6
+  sched.run();
+  b.frame = 6;
+  self->send(asker, b);
+  b.frame = 7;  // a later frame renders whole
+  self->send(asker, b);
+  sched.run();
+  CAF_REQUIRE_EQUAL(replies->size(), 3u);
+  CAF_CHECK(replies->at(1).tiles[0].cancelled);
+  CAF_CHECK(!replies->at(2).tiles[0].cancelled);
+  CAF_CHECK(!replies->at(2).tiles[0].failed());
   self->send_exit(asker, caf::exit_reason::user_shutdown);
   self->send_exit(w, caf::exit_reason::user_shutdown);
   sched.run();

@@ -444,6 +444,51 @@ TEST_CASE("Within a frame budget, interactive frames shrink and the still after 
   CHECK_FALSE(c.next<protocol::Frame>(500));  // converged: nothing more
 }
 
+TEST_CASE("A render request during a still's sample abandons the sample, and the requested frame comes next",
+          "[e2e][refine]") {
+  // 640x360 with 8 AO rays a hit: a sample of the pavilion takes far longer than the step from
+  // one sample to the next, so a request sent when a refined frame arrives lands inside the
+  // sample after it (tried up to 5 times, each with a new still).
+  TestNode node;
+  ProtoClient c;
+  REQUIRE(c.connect(node.port()));
+  REQUIRE(c.handshake(DisplayKind::jpeg, 640, 360, 80));
+  REQUIRE(c.upload(pavilion().scene));
+  REQUIRE(c.send({protocol::Settings{8, 4}, protocol::Refine{256}}));
+  uint32_t frame = 1;
+  REQUIRE(c.render(pavilion_loop().camera(0), frame));
+  size_t abandoned = 0;
+  for (int attempt = 0; attempt < 5 && abandoned == 0; ++attempt) {
+    auto refined = c.next<protocol::Frame>();  // a sample of the still: the next one renders
+    REQUIRE(refined);
+    CHECK(refined->refined);
+    CHECK(refined->frame == frame);
+    ++frame;
+    REQUIRE(c.send({protocol::SetCamera{pavilion_loop().camera(frame)}, protocol::RenderRequest{frame}}));
+    // A refined frame of the old still already on its way may come first; then the requested one.
+    std::optional<protocol::Frame> f;
+    do {
+      f = c.next<protocol::Frame>();
+      REQUIRE(f);
+    } while (f->frame != frame);
+    CHECK_FALSE(f->refined);
+    CHECK(f->samples == 1);
+    abandoned = node.count(Ev::abandoned);
+  }
+  REQUIRE(abandoned == 1);
+  const Event e = node.events(Ev::abandoned).at(0);
+  CHECK(e.value == Json(static_cast<long long>(frame - 1)));  // the still it belonged to
+  const Json* stopped = e.field("tiles_stopped");
+  REQUIRE(stopped);
+  CHECK(*stopped == Json(1));  // this node's one task
+  // The new still refines as usual.
+  auto next = c.next<protocol::Frame>();
+  REQUIRE(next);
+  CHECK(next->frame == frame);
+  CHECK(next->refined);
+  CHECK(c.next<protocol::ErrorReply>(200) == std::nullopt);
+}
+
 TEST_CASE("Within a frame budget, the first frame after a page's scene arrives starts from the smallest scale, "
           "not from the empty scene's cost", "[e2e][budget]") {
   // A budget every frame here meets at full resolution (5 s): frames of the empty scene come at

@@ -7,11 +7,16 @@
 #include <catch2/catch.hpp>
 
 #include <algorithm>
+#include <atomic>
+#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <stdexcept>
+#include <thread>
 #include <tuple>
 #include <utility>
+
+#include <tbb/task_arena.h>
 
 #include "app/bench_kernels.h"
 #include "renderer/raytracer.h"
@@ -1019,6 +1024,57 @@ TEST_CASE("the cost map covers exactly the task's packets and sums to the kernel
 // The bench's split of the kernel time (tessera bench --compare bare, bench::
 // render_timing_intersections): the time inside Embree's primary-ray intersections is part of
 // the packets' time, and the bare loop times its own calls the same way.
+TEST_CASE("an abandoned task stops early: at once when its frame is cancelled before it starts, mid-render when the "
+          "mark rises during it, and not at all for a mark below its frame", "[raytracer][cancel]") {
+  const int W = 96, H = 64;
+  Scene scene = busy_scene(W, H);
+  RayTracer rt(PacketLayout{4, 2});
+  std::vector<std::string> warnings;
+  rt.sync(scene, warnings);
+  REQUIRE(warnings.empty());
+  RenderSettings s = busy_settings();
+  s.radiance = true;
+  TaskResult full;
+  rt.render({0, 0, W, H}, s, full);
+  REQUIRE_FALSE(full.cancelled);
+  REQUIRE(full.rays.total() > 0);
+
+  std::atomic<uint32_t> mark{6};
+  s.cancel_through = &mark;
+  s.cancel_frame = 7;  // a later frame: not abandoned, the same bytes
+  TaskResult later;
+  rt.render({0, 0, W, H}, s, later);
+  CHECK_FALSE(later.cancelled);
+  CHECK(later.image.rgba == full.image.rgba);
+  CHECK(later.radiance == full.radiance);
+  CHECK(later.rays.total() == full.rays.total());
+
+  s.cancel_frame = 6;  // abandoned before it began: no ray at all
+  TaskResult before;
+  rt.render({0, 0, W, H}, s, before);
+  CHECK(before.cancelled);
+  CHECK(before.rays.total() == 0);
+  CHECK(before.pixels == full.pixels);  // the task's size, as a complete one
+  CHECK(before.radiance.size() == full.radiance.size());
+
+  // Raised while packet (0, 0) stalls (the test hook) on one thread, which renders that block
+  // first: the blocks after it are skipped.
+  mark = 0;
+  s.stall_us = 1500000;
+  s.stall_px = s.stall_py = 0;
+  TaskResult during;
+  std::thread raise([&] {
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    mark = 6;
+  });
+  tbb::task_arena one(1);
+  one.execute([&] { rt.render({0, 0, W, H}, s, during); });
+  raise.join();
+  CHECK(during.cancelled);
+  CHECK(during.rays.total() > 0);
+  CHECK(during.rays.total() < full.rays.total() / 2);
+}
+
 TEST_CASE("timed primary intersections are a part of the kernel time, in render() and in the bare loop",
           "[raytracer][cost]") {
   const int W = 61, H = 37;
