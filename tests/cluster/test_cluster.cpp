@@ -7,6 +7,7 @@
 #include <signal.h>
 
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -125,6 +126,49 @@ TEST_CASE("Within a frame budget a tree renders small interactive frames and ref
   }
   CHECK(m.p->err_count("\"error\"") == 0);
   CHECK(m.p->err_count("\"node_lost\"") == 0);
+}
+
+TEST_CASE("A render request during a still's sample stops the workers' tasks of that sample", "[cluster][refine]") {
+  // 640x360 with 8 AO rays, half a frame per worker on one thread each: a sample takes far
+  // longer than the step to the next one, so a request sent when a refined frame arrives lands
+  // inside a sample (tried up to 5 times). Both workers get the master's cancel and stop.
+  Node w1 = worker("w1"), w2 = worker("w2");
+  Node m({"--port", "0", "--no-render", "--tessera.log-frames=false", "--children", w1.addr() + "," + w2.addr()});
+  REQUIRE(wait_for([&] { return m.p->err_count("\"child_connected\"") == 2; }, 20000));
+  ProtoClient c;
+  REQUIRE(c.connect(m.http));
+  auto hs = c.handshake(DisplayKind::jpeg, 640, 360, 80);
+  REQUIRE(hs);
+  REQUIRE(hs->nodes == 2);
+  REQUIRE(c.upload(pavilion().scene));
+  REQUIRE(c.send({protocol::Settings{8, 4}, protocol::Refine{256}}));
+  INFO("master stderr tail: " << m.p->err().substr(m.p->err().size() > 3000 ? m.p->err().size() - 3000 : 0));
+  uint32_t frame = 1;
+  REQUIRE(c.render(pavilion_loop().camera(0), frame, 90000));  // the workers build the scene first
+  bool both = false;
+  for (int attempt = 0; attempt < 5 && !both; ++attempt) {
+    auto refined = c.next<protocol::Frame>();
+    REQUIRE(refined);
+    REQUIRE(refined->frame == frame);
+    ++frame;
+    REQUIRE(c.send({protocol::SetCamera{pavilion_loop().camera(frame)}, protocol::RenderRequest{frame}}));
+    std::optional<protocol::Frame> f;
+    do {
+      f = c.next<protocol::Frame>();
+      REQUIRE(f);
+    } while (f->frame != frame);
+    CHECK_FALSE(f->refined);
+    both = wait_for([&] { return m.p->err_count("\"tiles_stopped\": 2") >= 1; }, 500);
+  }
+  CHECK(both);
+  CHECK(m.p->err_count("\"recovering\"") == 0);  // stopped tiles are not failures
+  CHECK(m.p->err_count("\"node_lost\"") == 0);
+  CHECK(m.p->err_count("\"error\"") == 0);
+  // The next still refines on both workers as usual.
+  auto next = c.next<protocol::Frame>();
+  REQUIRE(next);
+  CHECK(next->frame == frame);
+  CHECK(next->refined);
 }
 
 TEST_CASE("A hub relays a sub-tree; when it dies its sub-tree leaves and the rest keeps rendering", "[cluster][fault]") {
