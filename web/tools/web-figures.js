@@ -39,6 +39,8 @@ const MARKDOWN = argv.includes('--markdown');
 // --web-root DIR: serve another copy of web/ (an older client, say) to compare in one run.
 const WEB_ROOT = opt('--web-root', '') || undefined;
 const PROFILE = opt('--profile', '');
+// --node-args "A B": more arguments for `tessera serve` (--tessera.denoise-below-db=0, say).
+const NODE_ARGS = opt('--node-args', '').split(' ').filter(Boolean);
 if (PROFILE) fs.mkdirSync(PROFILE, { recursive: true });
 if (!BIN || !fs.existsSync(BIN)) { console.error('usage: node web/tools/web-figures.js --tessera PATH/TO/tessera [--repeat N] [--steps N] [--markdown]'); process.exit(2); }
 if (!fs.existsSync(CHROMIUM)) { console.error(`${CHROMIUM} not found`); process.exit(2); }
@@ -179,7 +181,7 @@ async function latency(node, name, display) {
   return { out, size };
 }
 
-const node = await startNode(BIN, { threads: THREADS, webRoot: WEB_ROOT });
+const node = await startNode(BIN, { threads: THREADS, webRoot: WEB_ROOT, args: NODE_ARGS });
 const rows = { load: {}, loadRaw: {}, upload: {}, latency: {} };
 try {
   for (const name of PAGES) {
@@ -207,7 +209,7 @@ try {
   await node.close();
 }
 for (let k = 0; k < (REF_PAGES.length ? REPEAT : 0); k++) {
-  const fresh = await startNode(BIN, { threads: THREADS, webRoot: WEB_ROOT });  // its texture cache cold
+  const fresh = await startNode(BIN, { threads: THREADS, webRoot: WEB_ROOT, args: NODE_ARGS });  // its texture cache cold
   try {
     for (const name of REF_PAGES) {
       for (const visitor of ['first', 'second', 'upload']) {
