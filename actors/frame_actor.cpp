@@ -302,7 +302,9 @@ void finish_frame(self_ptr self, std::vector<TileResult>&& tiles, std::vector<do
 
 // The frame in flight was abandoned (cancel): answered, and nothing of it averaged, shown or
 // given to the tiler (whose next tasks come from the last complete frame's SATs).
-void abandon(self_ptr self, const std::vector<TileResult>& tiles) {
+// `stage`: where the frame was when it was abandoned (tiling or rendering; a sample being
+// denoised is shown: 0 of 47 abandoned samples were, docs/results/web.md).
+void abandon(self_ptr self, const std::vector<TileResult>& tiles, const char* stage) {
   auto& st = self->state;
   size_t stopped = 0;
   double rendering_ms = 0;
@@ -312,6 +314,7 @@ void abandon(self_ptr self, const std::vector<TileResult>& tiles) {
   }
   log(self, Event(Ev::abandoned, st.cur.meta.client_frame)
                 .with("sample", st.cur.sample)
+                .with("stage", stage)
                 .with("tiles_stopped", static_cast<long long>(stopped))
                 .with("rendering_ms", Json::number(rendering_ms)));
   deliver(self, {}, {}, false);
@@ -337,7 +340,7 @@ void recover(self_ptr self, BatchReply&& r) {
       t.error = "a tile that stopped early in a frame nobody abandoned";
     }
   }
-  if (abandoned && incomplete) return abandon(self, r.tiles);
+  if (abandoned && incomplete) return abandon(self, r.tiles, "rendering");
   std::vector<size_t> lost;
   for (size_t i = 0; i < r.tiles.size() && i < tasks.size(); ++i)
     if (r.tiles[i].failed() && !tasks[i].empty()) lost.push_back(i);
@@ -401,7 +404,7 @@ void render_batch(self_ptr self) {
   if (batch.hit_points && st.cur.scene.scene) req.camera = pack_camera(st.cur.scene.scene->camera());
   self->request(st.a.tiler, caf::infinite, tasks_atom::value, req).then([=](TaskList& tl) {
     auto& st = self->state;
-    if (st.cancelled == st.cur.meta.seq) return abandon(self, {});  // abandoned before it began
+    if (st.cancelled == st.cur.meta.seq) return abandon(self, {}, "tiling");  // before it began
     st.cur.meta.tiling_ms = tl.tiling_ms;
     for (size_t k = 0; k < tl.tasks.size() && k < st.used.size(); ++k) st.batch.tasks[st.used[k]] = tl.tasks[k];
     tl.tasks.clear();  // copied into the batch; the rest says how they were made

@@ -41,6 +41,8 @@ const WEB_ROOT = opt('--web-root', '') || undefined;
 const PROFILE = opt('--profile', '');
 // --node-args "A B": more arguments for `tessera serve` (--tessera.denoise-below-db=0, say).
 const NODE_ARGS = opt('--node-args', '').split(' ').filter(Boolean);
+// --node-log FILE: the node's log lines of sections 1-3 (its events: frames, abandoned samples).
+const NODE_LOG = opt('--node-log', '');
 if (PROFILE) fs.mkdirSync(PROFILE, { recursive: true });
 if (!BIN || !fs.existsSync(BIN)) { console.error('usage: node web/tools/web-figures.js --tessera PATH/TO/tessera [--repeat N] [--steps N] [--markdown]'); process.exit(2); }
 if (!fs.existsSync(CHROMIUM)) { console.error(`${CHROMIUM} not found`); process.exit(2); }
@@ -207,6 +209,7 @@ try {
   }
 } finally {
   await node.close();
+  if (NODE_LOG) fs.writeFileSync(NODE_LOG, node.log.join('\n') + '\n');
 }
 for (let k = 0; k < (REF_PAGES.length ? REPEAT : 0); k++) {
   const fresh = await startNode(BIN, { threads: THREADS, webRoot: WEB_ROOT, args: NODE_ARGS });  // its texture cache cold
