@@ -79,6 +79,7 @@ struct frame_state {
   Accumulation acc;
   std::unique_ptr<Denoising> dn;  // FrameStart::denoise: the still's denoising (none: plain)
   uint32_t cancelled = 0;       // the last frame the session abandoned (cancel)
+  int64_t cancelled_ns = 0;     // when its notice came (steady_ns)
   static inline const char* name = "tessera.frame";
 };
 using self_ptr = frame_actor::stateful_pointer<frame_state>;
@@ -316,7 +317,8 @@ void abandon(self_ptr self, const std::vector<TileResult>& tiles, const char* st
                 .with("sample", st.cur.sample)
                 .with("stage", stage)
                 .with("tiles_stopped", static_cast<long long>(stopped))
-                .with("rendering_ms", Json::number(rendering_ms)));
+                .with("rendering_ms", Json::number(rendering_ms))
+                .with("stop_ms", Json::number(double(steady_ns() - st.cancelled_ns) / 1e6)));
   deliver(self, {}, {}, false);
 }
 
@@ -454,6 +456,7 @@ frame_actor::behavior_type frame_impl(self_ptr self, std::shared_ptr<const NodeS
         // picture, and a notice for a frame already answered changes nothing.
         if (seq != st.cur.meta.seq || !st.cur.meta.refined || !st.done.pending() || st.cancelled == seq) return;
         st.cancelled = seq;
+        st.cancelled_ns = steady_ns();
         self->send(st.a.subtree, cancel_atom::value, seq);
       },
       [=](render_atom, FrameStart& fs) -> caf::result<uint32_t> {
