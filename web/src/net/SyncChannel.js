@@ -69,6 +69,8 @@ export class SyncChannel {
     this.latest = new Map();  // 'buffer:3' -> seq of the last record sent for that buffer or texture id
     this.seq = 0;
     this.answerWaiters = [];  // flushes waiting for room: resolved by any answer or the session's end
+    this.lastChange = -Infinity;  // performance.now() of the last iteration that found a change
+    this.soon = false;        // an iteration is scheduled for a change (tickSoon)
   }
 
   connect() {
@@ -141,6 +143,20 @@ export class SyncChannel {
     this.scene = scene;
     this.view = view;
     this.dirty = true;
+    this.tickSoon();
+  }
+
+  // A change a period or more after the last one goes out at once instead of at the run
+  // loop's next iteration (up to a period later: 33 ms at 30 Hz, the first step of a drag
+  // waited that long). Within a period of the last change it waits for the next iteration, so
+  // the rate still bounds how often the client sends.
+  tickSoon() {
+    if (this.state !== 'ready' || this.soon || performance.now() - this.lastChange < 1000 / this.rate) return;
+    this.soon = true;
+    queueMicrotask(() => {
+      this.soon = false;
+      this.tick();
+    });
   }
 
   // New render settings {aoSamples, maxDepth, refineSamples, frameBudget}; the next run-loop
@@ -199,7 +215,9 @@ export class SyncChannel {
         this.budgetDirty = !!this.settings && this.settings.frameBudget !== undefined;
         this.videoDirty = this.videoKbps > 0;
         clearInterval(this.timer);
-        this.timer = setInterval(() => this.tick(), 1000 / this.rate);
+        // An iteration a period; one within half a period of a change sent early (tickSoon)
+        // waits for the next, so changes go out at most twice a period.
+        this.timer = setInterval(() => { if (performance.now() - this.lastChange >= 500 / this.rate) this.tick(); }, 1000 / this.rate);
         this.tick();
       } else if (r.type === 'frame') {
         // A frame answers its request and every earlier one, whether it is the requested frame
@@ -303,7 +321,10 @@ export class SyncChannel {
         this.queue.push(p);
         this.progress.queued += p.size;
       }
-      if (records.length) this.changed = true;
+      if (records.length) {
+        this.changed = true;
+        this.lastChange = performance.now();
+      }
     }
     this.flush();
   }

@@ -621,3 +621,26 @@ test('a refused reference of a deferred glTF is uploaded with its values once th
     console.warn = warn;
   }
 })));
+
+test('a change a period after the last one goes out at once, not at the next run-loop iteration; the next one within a period waits for it',
+  () => withFakeSocket(async (opened) => {
+    const { ch, ws, all } = await connected({ rate: 2 });  // a period of 500 ms
+    opened.push(ch);
+    ws.reply([frameRecord(1)]);
+    const moved = (x) => {
+      const doc = page(`<xml3d><mesh><float3 name="position">${x} 0 -2 1 0 -2 0 1 -2</float3></mesh></xml3d>`);
+      ch.setScene(new MarkupReader().read(doc.querySelector('xml3d')), { width: 8, height: 8 });
+    };
+    await new Promise((r) => setTimeout(r, 600));  // no change for more than a period
+    const n = all().length;
+    moved(0.5);
+    await new Promise((r) => setTimeout(r, 0));
+    assert.ok(all().slice(n).some((r) => r.type === 'buffer'), 'sent at once');
+    assert.ok(all().slice(n).some((r) => r.type === 'render'));
+    const m = all().length;
+    moved(0.25);  // within a period of the last change: the run loop sends it
+    await new Promise((r) => setTimeout(r, 0));
+    assert.equal(all().length, m);
+    for (const t0 = Date.now(); Date.now() - t0 < 2000 && !all().slice(m).some((r) => r.type === 'buffer');) await new Promise((r) => setTimeout(r, 10));
+    assert.ok(all().slice(m).some((r) => r.type === 'buffer'), 'sent by the run loop');
+  }));
