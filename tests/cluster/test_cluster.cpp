@@ -129,20 +129,20 @@ TEST_CASE("Within a frame budget a tree renders small interactive frames and ref
 }
 
 TEST_CASE("A render request during a still's sample stops the workers' tasks of that sample", "[cluster][refine]") {
-  // 640x360 with 8 AO rays, half a frame per worker on one thread each: a sample takes far
+  // 320x180 with 8 AO rays, half a frame per worker on one thread each: a sample takes far
   // longer than the step to the next one, so a request sent when a refined frame arrives lands
-  // inside a sample (tried up to 5 times). Both workers get the master's cancel and stop.
+  // inside a sample (tried up to 5 times), and well under the task timeout in a sanitizer
+  // build. Both workers get the master's cancel and stop.
   Node w1 = worker("w1"), w2 = worker("w2");
   Node m({"--port", "0", "--no-render", "--tessera.log-frames=false", "--children", w1.addr() + "," + w2.addr()});
   REQUIRE(wait_for([&] { return m.p->err_count("\"child_connected\"") == 2; }, 20000));
   ProtoClient c;
   REQUIRE(c.connect(m.http));
-  auto hs = c.handshake(DisplayKind::jpeg, 640, 360, 80);
+  auto hs = c.handshake(DisplayKind::jpeg, 320, 180, 80);
   REQUIRE(hs);
   REQUIRE(hs->nodes == 2);
   REQUIRE(c.upload(pavilion().scene));
   REQUIRE(c.send({protocol::Settings{8, 4}, protocol::Refine{256}}));
-  INFO("master stderr tail: " << m.p->err().substr(m.p->err().size() > 3000 ? m.p->err().size() - 3000 : 0));
   uint32_t frame = 1;
   REQUIRE(c.render(pavilion_loop().camera(0), frame, 90000));  // the workers build the scene first
   bool both = false;
@@ -160,8 +160,9 @@ TEST_CASE("A render request during a still's sample stops the workers' tasks of 
     CHECK_FALSE(f->refined);
     both = wait_for([&] { return m.p->err_count("\"tiles_stopped\": 2") >= 1; }, 500);
   }
+  INFO("master stderr tail: " << m.p->err().substr(m.p->err().size() > 3000 ? m.p->err().size() - 3000 : 0));
   CHECK(both);
-  CHECK(m.p->err_count("\"recovering\"") == 0);  // stopped tiles are not failures
+  CHECK(m.p->err_count("stopped early") == 0);  // stopped tiles of an abandoned frame are no node's fault
   CHECK(m.p->err_count("\"node_lost\"") == 0);
   CHECK(m.p->err_count("\"error\"") == 0);
   // The next still refines on both workers as usual.
