@@ -41,8 +41,8 @@ struct RenderSettings {
   // Also write what each pixel's primary ray saw to TaskResult::guides (the denoiser's
   // guides, renderer/denoise.h).
   bool guides = false;
-  // Stopping early: once *cancel_through >= cancel_frame, the blocks of packets not yet begun
-  // are skipped and TaskResult::cancelled says so (their pixels, radiance, guides and costs are
+  // Stopping early: once *cancel_through >= cancel_frame, the packets not yet begun are
+  // skipped and TaskResult::cancelled says so (their pixels, radiance, guides and costs are
   // left as zeros). A session abandons a still's sample this way when its client asks for a new
   // frame (docs/renderer.md). None: the task always runs to its end. The ray tracer only.
   const std::atomic<uint32_t>* cancel_through = nullptr;

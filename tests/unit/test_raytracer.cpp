@@ -1058,7 +1058,7 @@ TEST_CASE("an abandoned task stops early: at once when its frame is cancelled be
   CHECK(before.radiance.size() == full.radiance.size());
 
   // Raised while packet (0, 0) stalls (the test hook) on one thread, which renders that block
-  // first: the blocks after it are skipped.
+  // first: the packets after it are skipped.
   mark = 0;
   s.stall_us = 1500000;
   s.stall_px = s.stall_py = 0;
