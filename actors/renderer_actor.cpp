@@ -83,6 +83,8 @@ renderer_actor::behavior_type renderer_impl(renderer_actor::stateful_pointer<ren
           out.pixels = r.pixels;
           out.kernel_ms = r.kernel_ms;
           out.rendering_ms = r.rendering_ms;
+          // Stopped early: nobody reads its pixels, so none are copied or sent (check_tile).
+          if (r.cancelled) return out;
           out.rays = r.rays.total();
           out.rgba = std::move(r.image.rgba);
           if (task.radiance) {

@@ -67,8 +67,9 @@ struct TileResult {
   uint64_t rays = 0;
   protocol::ErrorCode code = protocol::ErrorCode::ok;  // not ok: the task failed (pixels are not valid)
   std::string error;                                   // why, when it failed
-  // The frame was abandoned while this task rendered (CancelMark): part of it is not rendered,
-  // and only a frame its master cancelled may end so (frame_actor.cpp).
+  // The frame was abandoned while this task rendered (CancelMark): the tile carries no pixels,
+  // radiance, guides, SAT or depths (check_tile), and only a frame its master cancelled may end
+  // so (frame_actor.cpp).
   bool cancelled = false;
   bool failed() const { return code != protocol::ErrorCode::ok; }
 };

@@ -63,6 +63,10 @@ BatchReply reply_for(const RenderBatch& b, Mode mode, bool stopped = false) {
     t.frame = b.frame;
     t.pixels = task;
     t.cancelled = stopped || mode == Mode::stops;
+    if (t.cancelled) {  // its figures alone (check_tile)
+      r.tiles.push_back(std::move(t));
+      continue;
+    }
     if (b.radiance) t.radiance.assign(size_t(task.area()) * 12, 0);
     if (mode == Mode::liar) {
       t.rgba.assign(7, 0);  // not width x height x 4
@@ -929,6 +933,17 @@ CAF_TEST(check_tile and check_nodes reject impossible tiles and node lists) {
     other.cost.assign(9, 1);
     Sat::from_cost_map(other).serialize_into(t.sat);  // a SAT of other packets
   }));
+  // A tile that stopped early carries its figures and nothing else.
+  TileResult stopped;
+  stopped.frame = 7;
+  stopped.pixels = task;
+  stopped.cancelled = true;
+  CAF_CHECK_EQUAL(check_tile(stopped, 7, task, pl, kSize, kSize, true, kAllGuides), "");
+  TileResult stopped_with_pixels = ok;
+  stopped_with_pixels.cancelled = true;
+  CAF_CHECK_NOT_EQUAL(check_tile(stopped_with_pixels, 7, task, pl, kSize, kSize), "");
+  stopped.rendering_ms = -1;
+  CAF_CHECK_NOT_EQUAL(check_tile(stopped, 7, task, pl, kSize, kSize), "");
   // Depths for the balancer's reprojection: none, or 4 bytes for each of the task's packets.
   TileResult deep = ok;
   deep.depth.assign(size_t(cm.packets.area()) * 4, 0xff);  // any float (here NaN) is taken

@@ -44,8 +44,11 @@ bool read(const uint8_t* data, size_t size, T& x) {
 
 void check(const TileResult& t, size_t i, PacketLayout layout) {
   std::string bad = check_tile(t, kFrame, kTasks[i % 2], layout, kWidth, kHeight);
-  if (bad.empty() && t.rgba.size() != size_t(kTasks[i % 2].area()) * 4) {
-    std::fprintf(stderr, "check_tile passed a tile with %zu bytes of pixels\n", t.rgba.size());
+  // An accepted tile has its pixels, or stopped early (TileResult::cancelled) with none at all.
+  const size_t want = t.cancelled ? 0 : size_t(kTasks[i % 2].area()) * 4;
+  if (bad.empty() && (t.rgba.size() != want || (t.cancelled && (!t.sat.empty() || !t.depth.empty() || !t.radiance.empty())))) {
+    std::fprintf(stderr, "check_tile passed a tile with %zu bytes of pixels (stopped early: %d)\n", t.rgba.size(),
+                 int(t.cancelled));
     std::abort();
   }
   // What the master's tiler does with an accepted tile's SAT and depths: decode the depths and
