@@ -708,21 +708,42 @@ RenderBatch good_batch() {
   return b;
 }
 
+// A worker opened by the test (its parent) on the tiny scene, and an actor that is not its parent:
+// it asks the worker for the batches the test sends it (the replies in order) and passes cancel
+// notices on.
+struct TestWorker {
+  subtree_actor w;
+  caf::actor asker;
+  std::shared_ptr<std::vector<BatchReply>> replies = std::make_shared<std::vector<BatchReply>>();
+};
+TestWorker open_worker(fixture& f) {
+  TestWorker t;
+  t.w = spawn_worker(f.sys, f.settings, node_actor{}, good_open(3), caf::actor_cast<caf::strong_actor_ptr>(f.self));
+  f.self->send(t.w, update_atom::value, Payload{encode(tiny_scene())}, true);
+  f.sched.run();
+  auto w = t.w;
+  auto replies = t.replies;
+  t.asker = f.sys.spawn([=](caf::event_based_actor* a) -> caf::behavior {
+    return {[=](RenderBatch& b) {
+              a->request(w, caf::infinite, render_atom::value, std::move(b)).then([=](BatchReply& r) { replies->push_back(r); });
+            },
+            [=](cancel_atom, uint32_t frame) { a->send(w, cancel_atom::value, frame); }};
+  });
+  return t;
+}
+void close_worker(fixture& f, TestWorker& t) {
+  f.self->send_exit(t.asker, caf::exit_reason::user_shutdown);
+  f.self->send_exit(t.w, caf::exit_reason::user_shutdown);
+  f.sched.run();
+}
+
 CAF_TEST(a worker fails every tile of a batch outside the node limits and serves on) {
   settings->limits.max_width = 64;
   settings->limits.max_height = 64;
   settings->limits.max_ao_samples = 8;
   settings->limits.max_depth = 4;
-  OpenRequest req = good_open(3);
-  auto w = spawn_worker(sys, settings, node_actor{}, req, caf::actor_cast<caf::strong_actor_ptr>(self));
-  self->send(w, update_atom::value, Payload{encode(tiny_scene())}, true);
-  sched.run();
-  auto replies = std::make_shared<std::vector<BatchReply>>();
-  auto asker = sys.spawn([=](caf::event_based_actor* a) -> caf::behavior {
-    return {[=](RenderBatch& b) {
-      a->request(w, caf::infinite, render_atom::value, std::move(b)).then([=](BatchReply& r) { replies->push_back(r); });
-    }};
-  });
+  TestWorker t = open_worker(*this);
+  auto& [w, asker, replies] = t;
   std::vector<std::function<void(RenderBatch&)>> bad = {
       [](RenderBatch& b) { b.width = 100000; },
       [](RenderBatch& b) { b.height = 0; },
@@ -757,49 +778,28 @@ CAF_TEST(a worker fails every tile of a batch outside the node limits and serves
   CAF_REQUIRE_EQUAL(ok.tiles.size(), 1u);
   CAF_CHECK(!ok.tiles[0].failed());
   CAF_CHECK_EQUAL(ok.tiles[0].rgba.size(), size_t(kSize * kSize * 4));
-  self->send_exit(asker, caf::exit_reason::user_shutdown);
-  self->send_exit(w, caf::exit_reason::user_shutdown);
-  sched.run();
+  close_worker(*this, t);
 }
 
 CAF_TEST(a worker refuses a scene message from a peer and renders the scene its parent sent) {
-  OpenRequest req = good_open(3);
-  auto w = spawn_worker(sys, settings, node_actor{}, req, caf::actor_cast<caf::strong_actor_ptr>(self));
-  self->send(w, update_atom::value, Payload{encode(tiny_scene())}, true);
-  sched.run();
+  TestWorker t = open_worker(*this);
+  auto& [w, asker, replies] = t;
   // Someone hands the worker another scene (an empty one) as a root's frame actor would.
   self->send(w, scene_atom::value, SceneSnapshot{std::make_shared<const Scene>()});
   sched.run();
   CAF_CHECK_EQUAL(count(Ev::update_failed), 1u);
-  auto replies = std::make_shared<std::vector<BatchReply>>();
-  auto asker = sys.spawn([=](caf::event_based_actor* a) -> caf::behavior {
-    return {[=](RenderBatch& b) {
-      a->request(w, caf::infinite, render_atom::value, std::move(b)).then([=](BatchReply& r) { replies->push_back(r); });
-    }};
-  });
   self->send(asker, good_batch());
   sched.run();
   CAF_REQUIRE_EQUAL(replies->size(), 1u);
   CAF_REQUIRE_EQUAL(replies->back().tiles.size(), 1u);
   CAF_CHECK(!replies->back().tiles[0].failed());
   CAF_CHECK_EQUAL(replies->back().tiles[0].rgba.size(), size_t(kSize * kSize * 4));
-  self->send_exit(asker, caf::exit_reason::user_shutdown);
-  self->send_exit(w, caf::exit_reason::user_shutdown);
-  sched.run();
+  close_worker(*this, t);
 }
 
 CAF_TEST(a worker abandons a frame when its parent says so and not when anyone else does) {
-  OpenRequest req = good_open(3);
-  auto w = spawn_worker(sys, settings, node_actor{}, req, caf::actor_cast<caf::strong_actor_ptr>(self));
-  self->send(w, update_atom::value, Payload{encode(tiny_scene())}, true);
-  sched.run();
-  auto replies = std::make_shared<std::vector<BatchReply>>();
-  auto asker = sys.spawn([=](caf::event_based_actor* a) -> caf::behavior {
-    return {[=](RenderBatch& b) {
-              a->request(w, caf::infinite, render_atom::value, std::move(b)).then([=](BatchReply& r) { replies->push_back(r); });
-            },
-            [=](cancel_atom, uint32_t frame) { a->send(w, cancel_atom::value, frame); }};
-  });
+  TestWorker t = open_worker(*this);
+  auto& [w, asker, replies] = t;
   RenderBatch b = good_batch();
   b.frame = 5;
   self->send(asker, cancel_atom::value, uint32_t(5));  // a stranger: ignored
@@ -821,9 +821,7 @@ CAF_TEST(a worker abandons a frame when its parent says so and not when anyone e
   CAF_CHECK(replies->at(1).tiles[0].cancelled);
   CAF_CHECK(!replies->at(2).tiles[0].cancelled);
   CAF_CHECK(!replies->at(2).tiles[0].failed());
-  self->send_exit(asker, caf::exit_reason::user_shutdown);
-  self->send_exit(w, caf::exit_reason::user_shutdown);
-  sched.run();
+  close_worker(*this, t);
 }
 
 CAF_TEST(a worker refuses an update whose chunks add up to more than max_update_bytes and recovers on a reset) {

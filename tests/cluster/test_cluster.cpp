@@ -151,12 +151,8 @@ TEST_CASE("A render request during a still's sample stops the workers' tasks of 
     REQUIRE(refined);
     REQUIRE(refined->frame == frame);
     ++frame;
-    REQUIRE(c.send({protocol::SetCamera{pavilion_loop().camera(frame)}, protocol::RenderRequest{frame}}));
-    std::optional<protocol::Frame> f;
-    do {
-      f = c.next<protocol::Frame>();
-      REQUIRE(f);
-    } while (f->frame != frame);
+    auto f = c.render_past_still(pavilion_loop().camera(frame), frame);
+    REQUIRE(f);
     CHECK_FALSE(f->refined);
     both = wait_for([&] { return m.p->err_count("\"tiles_stopped\": 2") >= 1; }, 500);
   }

@@ -144,6 +144,15 @@ struct ProtoClient {
     if (!send({protocol::SetCamera{cam}, protocol::RenderRequest{frame}})) return std::nullopt;
     return next<protocol::Frame>(timeout_ms);
   }
+  // The same while a still refines: the frames of earlier numbers still on their way (its
+  // refinements) are skipped, and the first frame numbered `frame` is returned.
+  std::optional<protocol::Frame> render_past_still(const Camera& cam, uint32_t frame, int timeout_ms = 20000) {
+    if (!send({protocol::SetCamera{cam}, protocol::RenderRequest{frame}})) return std::nullopt;
+    for (;;) {
+      auto f = next<protocol::Frame>(timeout_ms);
+      if (!f || f->frame == frame) return f;
+    }
+  }
 };
 
 inline const LoadedScene& pavilion() {

@@ -464,13 +464,8 @@ TEST_CASE("A render request during a still's sample abandons the sample, and the
     CHECK(refined->refined);
     CHECK(refined->frame == frame);
     ++frame;
-    REQUIRE(c.send({protocol::SetCamera{pavilion_loop().camera(frame)}, protocol::RenderRequest{frame}}));
-    // A refined frame of the old still already on its way may come first; then the requested one.
-    std::optional<protocol::Frame> f;
-    do {
-      f = c.next<protocol::Frame>();
-      REQUIRE(f);
-    } while (f->frame != frame);
+    auto f = c.render_past_still(pavilion_loop().camera(frame), frame);
+    REQUIRE(f);
     CHECK_FALSE(f->refined);
     CHECK(f->samples == 1);
     abandoned = node.count(Ev::abandoned);
