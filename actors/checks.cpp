@@ -36,12 +36,12 @@ std::string check_tile(const TileResult& t, uint32_t frame, const Rect& expected
   };
   if (t.frame != frame) return "tile of frame " + std::to_string(t.frame) + " in frame " + std::to_string(frame);
   if (!(t.pixels == expected)) return "tile " + str(t.pixels) + " for task " + str(expected);
+  if (!std::isfinite(t.kernel_ms) || t.kernel_ms < 0 || !std::isfinite(t.rendering_ms) || t.rendering_ms < 0 ||
+      !std::isfinite(t.sat_ms) || t.sat_ms < 0)
+    return "impossible timings";
   if (t.cancelled) {  // stopped early (TileResult::cancelled): its figures, and nothing else
     if (!t.rgba.empty() || !t.radiance.empty() || !t.guides.empty() || !t.sat.empty() || !t.depth.empty())
       return "tile " + str(expected) + " that stopped early and still carries pixels";
-    if (!std::isfinite(t.kernel_ms) || t.kernel_ms < 0 || !std::isfinite(t.rendering_ms) || t.rendering_ms < 0 ||
-        !std::isfinite(t.sat_ms) || t.sat_ms < 0)
-      return "impossible timings";
     return {};
   }
   if (t.rgba.size() != size_t(expected.area()) * 4)
@@ -74,9 +74,6 @@ std::string check_tile(const TileResult& t, uint32_t frame, const Rect& expected
     }
     if (!ok) return "tile " + str(expected) + " with guides out of range";
   }
-  if (!std::isfinite(t.kernel_ms) || t.kernel_ms < 0 || !std::isfinite(t.rendering_ms) || t.rendering_ms < 0 ||
-      !std::isfinite(t.sat_ms) || t.sat_ms < 0)
-    return "impossible timings";
   // The packets the task covers (its pixel rectangle, rounded out to packets).
   const Rect want = pixels_to_packets(expected, layout);
   if (!t.sat.empty()) {

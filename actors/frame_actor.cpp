@@ -334,10 +334,8 @@ void recover(self_ptr self, BatchReply&& r) {
   const bool abandoned = st.cancelled == st.cur.meta.seq;
   bool incomplete = false;
   for (TileResult& t : r.tiles) {
-    if (t.failed()) incomplete = true;
-    if (!t.cancelled || t.failed()) continue;
-    incomplete = true;
-    if (!abandoned) {
+    incomplete = incomplete || t.failed() || t.cancelled;
+    if (t.cancelled && !t.failed() && !abandoned) {
       t.code = ErrorCode::bad_tile;
       t.error = "a tile that stopped early in a frame nobody abandoned";
     }

@@ -82,13 +82,12 @@ typename Inspector::result_type inspect(Inspector& f, TileResult& x) {
 
 // The frames of one session a renderer abandons: a task of frame f stops early once `through`
 // >= f (RenderSettings::cancel_through). Frame numbers only grow, so one number says it; the
-// subtree that owns the renderer raises it (subtree_protocol.h, cancel) while the renderer's
-// thread reads it between blocks of packets.
+// subtree that owns the renderer, its one writer, raises it (subtree_protocol.h, cancel) while
+// the renderer's thread reads it before each packet.
 struct CancelMark {
   std::atomic<uint32_t> through{0};
   void raise(uint32_t frame) {
-    uint32_t was = through.load();
-    while (was < frame && !through.compare_exchange_weak(was, frame)) {}
+    if (frame > through.load(std::memory_order_relaxed)) through.store(frame, std::memory_order_relaxed);
   }
 };
 
