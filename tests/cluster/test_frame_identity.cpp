@@ -318,7 +318,7 @@ TEST_CASE("The direct renders hash as recorded for this ISA and compiler", "[ide
       if (i == 0 && max_component(s.scene.scene.environment().ambient) > 0)
         CHECK(got != hex64(fnv1a(direct(s, k, seq + 1).rgba)));
       if (auto it = want.find(id); it != want.end()) {
-        INFO(key << ": " << name << " camera " << k << " frame " << seq);
+        INFO(key << ": " << name << " camera " << k << " frame " << seq << " hashes to " << got);
         CHECK(it->second.count(got) == 1);
         ++compared;
       }
