@@ -166,7 +166,7 @@ void send_encoded(display_state& st, EncodedFrame& ef) {
   e.with("kernel_ms", Json::number(m.kernel_ms)).with("rendering_ms", Json::number(m.rendering_ms));
   e.with("sat_ms", Json::number(m.sat_ms)).with("tiling_ms", Json::number(m.tiling_ms));
   e.with("encode_ms", Json::number(ef.encode_ms)).with("pipeline_ms", Json::number(f.timings.pipeline_ms));
-  e.with("bytes", bytes);
+  e.with("bytes", bytes).with("ao", m.ao_samples).with("depth", m.max_depth);
   if (m.samples > 1 || m.refined) e.with("samples", m.samples).with("refined", m.refined);
   if (m.estimated_db > 0)
     e.with("estimated_db", Json::number(m.estimated_db)).with("denoised", m.denoised).with("denoise_ms", Json::number(m.denoise_ms));

@@ -146,13 +146,16 @@ struct FrameMeta {
   // not a flag, so that a frame replaced before encoding does not lose the request).
   uint32_t video_kbps = 0;
   uint32_t keyframe_requests = 0;
+  // The AO rays per hit and depth it was rendered with (an interactive frame's may be below the
+  // page's: FrameBudget's levels).
+  uint32_t ao_samples = 0, max_depth = 0;
 };
 template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, FrameMeta& x) {
   return f(caf::meta::type_name("tessera::frame_meta"), x.seq, x.client_frame, x.width, x.height, x.display,
            x.quality, x.kernel_ms, x.rendering_ms, x.sat_ms, x.tiling_ms, x.render_start_ns, x.render_end_ns, x.nodes,
            x.dropped, x.scene_bytes, x.triangles, x.samples, x.refined, x.estimated_db, x.denoised, x.denoise_ms, x.video_kbps,
-           x.keyframe_requests);
+           x.keyframe_requests, x.ao_samples, x.max_depth);
 }
 
 }  // namespace tessera

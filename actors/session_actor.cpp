@@ -74,6 +74,7 @@ void start_frame(self_ptr self, uint32_t client_frame, bool refine) {
     return st.still.target > 1 && st.hs.renderer == RendererKind::raytracer && st.frame_triangles > 0;
   };
   st.frame_scale = 1;
+  st.frame_level = 0;
   if (!refine) {
     // A requested frame starts a new still, refined when refinable(). Within a frame budget it
     // is rendered at the scale that keeps it there, and the still follows it at full resolution
@@ -89,8 +90,17 @@ void start_frame(self_ptr self, uint32_t client_frame, bool refine) {
       const uint64_t was = *st.budget_triangles, now = st.frame_triangles;
       if (now > 2 * was + kMinChange || 2 * now + kMinChange < was) st.budget->restart();
     }
-    if (st.budget) st.frame_scale = st.budget->scale();
-    st.still.after_scaled = st.frame_scale < 1 && st.frame_triangles > 0;
+    if (st.budget) {
+      std::vector<InteractiveSamples> ladder = interactive_levels(st.render.ao_samples, st.render.max_depth);
+      if (ladder != st.ladder) {  // the page's settings changed: a new ladder, from their level
+        st.ladder = std::move(ladder);
+        st.budget->set_levels(int(st.ladder.size()));
+      }
+      st.frame_scale = st.budget->scale();
+      st.frame_level = st.budget->level();
+    }
+    // A frame below the page's samples is never the still's sample 0, even at full resolution.
+    st.still.after_scaled = (st.frame_scale < 1 || st.frame_level > 0) && st.frame_triangles > 0;
     st.still.active = st.still.after_scaled || refinable();
     st.still.client_frame = client_frame;
     st.still.seed = st.seq;
@@ -104,7 +114,7 @@ void start_frame(self_ptr self, uint32_t client_frame, bool refine) {
     set_resolution(self, w, h);
     if (st.closed) return;
   }
-  fs.refine = st.frame_scale == 1 && refinable();
+  fs.refine = st.frame_scale == 1 && st.frame_level == 0 && refinable();
   // Denoised while the plain average is noisy (renderer/denoise.h): only AO under a sky is
   // noise the filter knows.
   fs.denoise = fs.refine && st.settings->denoise_below_db > 0 && st.render.ao_samples > 0 &&
@@ -154,16 +164,23 @@ void start_frame(self_ptr self, uint32_t client_frame, bool refine) {
   }
   if (st.closed) return;
   fs.scene = SceneSnapshot{st.scene};  // read-only until the frame actor answers: updates are cached meanwhile
-  fs.ao_samples = int32_t(st.render.ao_samples);
-  fs.max_depth = int32_t(st.render.max_depth);
+  // An interactive frame below the page's samples (FrameBudget's levels); every other frame, the
+  // still's samples included, renders the page's settings.
+  const InteractiveSamples samples = st.frame_level > 0 && size_t(st.frame_level) < st.ladder.size()
+                                         ? st.ladder[size_t(st.frame_level)]
+                                         : InteractiveSamples{st.render.ao_samples, st.render.max_depth};
+  fs.ao_samples = int32_t(samples.ao_samples);
+  fs.max_depth = int32_t(samples.max_depth);
+  m.ao_samples = samples.ao_samples;
+  m.max_depth = samples.max_depth;
   fs.renderer = uint8_t(st.hs.renderer);
   self->request(st.frame, caf::infinite, render_atom::value, std::move(fs))
       .then(
           [self](uint32_t) {
             auto& st = self->state;
-            if (st.frame_scale == 1) st.still.samples++;  // a sample of the still, not a scaled frame
+            if (st.frame_scale == 1 && st.frame_level == 0) st.still.samples++;  // a sample of the still, not an interactive frame
             if (st.budget && st.frame_requested) {  // an interactive frame: its time steers the next scale
-              st.budget->observe(st.frame_scale, double(steady_ns() - st.frame_t0_ns) / 1e6);
+              st.budget->observe(st.frame_scale, double(steady_ns() - st.frame_t0_ns) / 1e6, st.frame_level);
               st.budget_triangles = st.frame_triangles;
             }
             frame_done(self);

@@ -444,6 +444,56 @@ TEST_CASE("Within a frame budget, interactive frames shrink and the still after 
   CHECK_FALSE(c.next<protocol::Frame>(500));  // converged: nothing more
 }
 
+TEST_CASE("Within a frame budget the smallest scale cannot meet, interactive frames drop AO rays and then depth, "
+          "and the still after them renders the page's settings", "[e2e][budget]") {
+  // A 1 ms budget no pavilion frame meets, with 4 AO rays a hit and depth 4: every second
+  // interactive frame steps down a level (lb/frame_budget.h: two frames in a row over the budget;
+  // the first frame, at full resolution, counts), to 2 AO rays, 1, then depth 2, and the lowest
+  // level holds. The frame events say what each frame was rendered with.
+  TestNode node(8, [](NodeSettings& s, ServerOptions&) { s.frame_budget_ms = 1; });
+  ProtoClient c;
+  REQUIRE(c.connect(node.port()));
+  REQUIRE(c.handshake(protocol::DisplayKind::jpeg, 320, 180, 80));
+  REQUIRE(c.upload(pavilion().scene));
+  REQUIRE(c.send({protocol::Settings{4, 4}}));
+  REQUIRE(c.render(pavilion_loop().camera(0), 1));
+  const std::vector<std::pair<long long, long long>> want{{4, 4}, {2, 4}, {2, 4}, {1, 4},
+                                                          {1, 4}, {1, 2}, {1, 2}, {1, 2}};
+  for (uint32_t f = 2; f <= 9; ++f) {
+    auto small = c.render(pavilion_loop().camera(f), f);
+    REQUIRE(small);
+    CHECK(small->width == 80);
+    auto still = c.next<protocol::Frame>();
+    REQUIRE(still);
+    CHECK(still->refined);
+    CHECK(still->width == 320);
+  }
+  // The display logs a frame's event after sending it: wait for all 17.
+  for (int i = 0; i < 100 && node.count(Ev::frame) < 17; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  const std::vector<Event> events = node.events(Ev::frame);
+  REQUIRE(events.size() == 17);
+  auto num = [](const Event& e, const char* key) {
+    const Json* v = e.field(key);
+    return v ? v->as_int() : -1;
+  };
+  size_t interactive = 0;
+  for (const Event& e : events) {
+    const Json* refined = e.field("refined");
+    if (num(e, "width") == 320) {  // the first frame and the stills: the page's settings
+      CHECK(num(e, "ao") == 4);
+      CHECK(num(e, "depth") == 4);
+      continue;
+    }
+    INFO("interactive frame " << interactive);
+    CHECK(refined == nullptr);
+    REQUIRE(interactive < want.size());
+    CHECK(num(e, "ao") == want[interactive].first);
+    CHECK(num(e, "depth") == want[interactive].second);
+    ++interactive;
+  }
+  CHECK(interactive == want.size());
+}
+
 TEST_CASE("A render request during a still's sample abandons the sample, and the requested frame comes next",
           "[e2e][refine]") {
   // 640x360 with 8 AO rays a hit: a sample of the pavilion takes far longer than the step from
