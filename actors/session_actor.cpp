@@ -92,7 +92,9 @@ void start_frame(self_ptr self, uint32_t client_frame, bool refine) {
     }
     if (st.budget) {
       std::vector<InteractiveSamples> ladder = interactive_levels(st.render.ao_samples, st.render.max_depth);
-      if (ladder != st.ladder) {  // the page's settings changed: a new ladder, from their level
+      // The page's settings changed, or a budget record replaced the controller: a new ladder,
+      // from the settings' own level.
+      if (ladder != st.ladder || st.budget->levels() != int(ladder.size())) {
         st.ladder = std::move(ladder);
         st.budget->set_levels(int(st.ladder.size()));
       }

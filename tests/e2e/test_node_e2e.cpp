@@ -7,6 +7,7 @@
 
 #include <atomic>
 #include <future>
+#include <map>
 
 #include "codecs/dxt1.h"
 #include "codecs/jpeg.h"
@@ -457,41 +458,58 @@ TEST_CASE("Within a frame budget the smallest scale cannot meet, interactive fra
   REQUIRE(c.upload(pavilion().scene));
   REQUIRE(c.send({protocol::Settings{4, 4}}));
   REQUIRE(c.render(pavilion_loop().camera(0), 1));
-  const std::vector<std::pair<long long, long long>> want{{4, 4}, {2, 4}, {2, 4}, {1, 4},
-                                                          {1, 4}, {1, 2}, {1, 2}, {1, 2}};
-  for (uint32_t f = 2; f <= 9; ++f) {
-    auto small = c.render(pavilion_loop().camera(f), f);
-    REQUIRE(small);
-    CHECK(small->width == 80);
-    auto still = c.next<protocol::Frame>();
-    REQUIRE(still);
-    CHECK(still->refined);
-    CHECK(still->width == 320);
-  }
-  // The display logs a frame's event after sending it: wait for all 17.
-  for (int i = 0; i < 100 && node.count(Ev::frame) < 17; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  // Frame number -> the AO rays and depth its interactive frame must have.
+  std::map<long long, std::pair<long long, long long>> want{{2, {4, 4}}, {3, {2, 4}}, {4, {2, 4}}, {5, {1, 4}},
+                                                           {6, {1, 4}}, {7, {1, 2}}, {8, {1, 2}}, {9, {1, 2}}};
+  auto drag = [&](uint32_t from, uint32_t to) {
+    for (uint32_t f = from; f <= to; ++f) {
+      auto small = c.render(pavilion_loop().camera(f), f);
+      REQUIRE(small);
+      CHECK(small->width == 80);
+      auto still = c.next<protocol::Frame>();
+      REQUIRE(still);
+      CHECK(still->refined);
+      CHECK(still->width == 320);
+    }
+  };
+  drag(2, 9);
+  // The page sends a budget of its own (the web client always does): a new controller, which
+  // knows nothing yet (its first frame at full resolution) and gets the ladder again.
+  REQUIRE(c.send({protocol::Budget{1}}));
+  auto full = c.render(pavilion_loop().camera(10), 10);
+  REQUIRE(full);
+  CHECK(full->width == 320);
+  want[10] = {4, 4};
+  want[11] = {4, 4};
+  want[12] = {2, 4};
+  want[13] = {2, 4};
+  drag(11, 13);
+  // The display logs a frame's event after sending it: wait for all 1 + 8 x 2 + 1 + 3 x 2.
+  const size_t events_expected = 24;
+  for (int i = 0; i < 100 && node.count(Ev::frame) < events_expected; ++i)
+    std::this_thread::sleep_for(std::chrono::milliseconds(20));
   const std::vector<Event> events = node.events(Ev::frame);
-  REQUIRE(events.size() == 17);
+  REQUIRE(events.size() == events_expected);
   auto num = [](const Event& e, const char* key) {
     const Json* v = e.field(key);
     return v ? v->as_int() : -1;
   };
-  size_t interactive = 0;
+  size_t checked = 0;
   for (const Event& e : events) {
-    const Json* refined = e.field("refined");
-    if (num(e, "width") == 320) {  // the first frame and the stills: the page's settings
+    const long long frame = e.value.as_int();
+    if (e.field("refined") || frame == 1) {  // the first frame and the stills: the page's settings
+      CHECK(num(e, "width") == 320);
       CHECK(num(e, "ao") == 4);
       CHECK(num(e, "depth") == 4);
       continue;
     }
-    INFO("interactive frame " << interactive);
-    CHECK(refined == nullptr);
-    REQUIRE(interactive < want.size());
-    CHECK(num(e, "ao") == want[interactive].first);
-    CHECK(num(e, "depth") == want[interactive].second);
-    ++interactive;
+    INFO("frame " << frame);
+    REQUIRE(want.count(frame) == 1);
+    CHECK(num(e, "ao") == want[frame].first);
+    CHECK(num(e, "depth") == want[frame].second);
+    ++checked;
   }
-  CHECK(interactive == want.size());
+  CHECK(checked == want.size());
 }
 
 TEST_CASE("A render request during a still's sample abandons the sample, and the requested frame comes next",
