@@ -199,6 +199,17 @@ void flush_logger(caf::actor_system& sys, const logger_actor& logger) {
   self->request(logger, std::chrono::seconds(5), flush_atom::value).receive([](bool) {}, [](caf::error&) {});
 }
 
+void stop_logger(caf::actor_system& sys, logger_actor& logger) {
+  if (!logger) return;
+  {
+    caf::scoped_actor self{sys};
+    self->monitor(logger);
+    self->send_exit(logger, caf::exit_reason::user_shutdown);
+    self->receive([](const caf::down_msg&) {}, caf::after(std::chrono::seconds(5)) >> [] {});
+  }
+  logger = nullptr;
+}
+
 void node_log(const NodeSettings& settings, Event e) {
   if (auto logger = settings.logger.lock()) {
     caf::anon_send(caf::actor_cast<logger_actor>(logger), log_atom::value, std::move(e));

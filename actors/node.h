@@ -106,6 +106,10 @@ void node_log(const NodeSettings& settings, Event e);
 logger_actor spawn_logger(caf::actor_system& sys, EventSink sink);
 // Waits until the logger has written every event sent to it before (at a node's shutdown).
 void flush_logger(caf::actor_system& sys, const logger_actor& logger);
+// Ends the logger and waits (up to 5 s) until it has: its sink goes with it, before the actor
+// system does. Dropping the last handle alone leaves the hidden actor to be cleaned up by a
+// scheduler that may already be stopping, and LeakSanitizer then reports its sink.
+void stop_logger(caf::actor_system& sys, logger_actor& logger);
 
 // Hands the heap that ended sessions and workers freed back to the OS (glibc keeps freed
 // memory in its arenas: without this an idle node's RSS stays at its peak). Debounced: one

@@ -242,6 +242,7 @@ int run(const std::vector<std::string>& argv) {
   if (node) caf::anon_send_exit(node, caf::exit_reason::user_shutdown);
   sys.await_all_actors_done();
   flush_logger(sys, logger);
+  stop_logger(sys, logger);
   return 0;
 }
 

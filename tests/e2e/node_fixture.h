@@ -75,6 +75,7 @@ struct TestNode {
     server->stop();
     sys.await_all_actors_done();
     flush_logger(sys, logger);
+    stop_logger(sys, logger);
   }
   uint16_t port() const { return server->port(); }
   // The events the node reported so far (every event sent to the logger before the call).
