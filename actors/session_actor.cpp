@@ -91,7 +91,11 @@ void start_frame(self_ptr self, uint32_t client_frame, bool refine) {
       if (now > 2 * was + kMinChange || 2 * now + kMinChange < was) st.budget->restart();
     }
     if (st.budget) {
-      std::vector<InteractiveSamples> ladder = interactive_levels(st.render.ao_samples, st.render.max_depth);
+      // The ray tracer's samples only: the rasterizer takes neither AO rays nor a depth.
+      std::vector<InteractiveSamples> ladder =
+          st.hs.renderer == RendererKind::raytracer
+              ? interactive_levels(st.render.ao_samples, st.render.max_depth)
+              : std::vector<InteractiveSamples>{{st.render.ao_samples, st.render.max_depth}};
       // The page's settings changed, or a budget record replaced the controller: a new ladder,
       // from the settings' own level.
       if (ladder != st.ladder || st.budget->levels() != int(ladder.size())) {

@@ -512,6 +512,42 @@ TEST_CASE("Within a frame budget the smallest scale cannot meet, interactive fra
   CHECK(checked == want.size());
 }
 
+TEST_CASE("Within a frame budget a rasterizer session keeps its settings: it has no samples to drop",
+          "[e2e][budget]") {
+  std::string why;
+  if (!rasterizer_available(&why)) {
+    WARN("skipped: " << why);
+    return;
+  }
+  TestNode node(8, [](NodeSettings& s, ServerOptions&) { s.frame_budget_ms = 1; });
+  ProtoClient c;
+  REQUIRE(c.connect(node.port()));
+  REQUIRE(c.handshake(protocol::DisplayKind::jpeg, 320, 180, 80, protocol::RendererKind::rasterizer));
+  REQUIRE(c.upload(pavilion().scene));
+  REQUIRE(c.send({protocol::Settings{4, 4}}));
+  for (uint32_t f = 1; f <= 6; ++f) REQUIRE(c.render(pavilion_loop().camera(f), f));
+  // The display logs a frame's event after sending it (the stills after the scaled frames are
+  // logged too): wait for the six requested ones.
+  auto requested_events = [&] {
+    std::vector<Event> out;
+    for (const Event& e : node.events(Ev::frame))
+      if (!e.field("refined")) out.push_back(e);
+    return out;
+  };
+  for (int i = 0; i < 100 && requested_events().size() < 6; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  size_t requested = 0;
+  for (const Event& e : requested_events()) {
+    ++requested;
+    const Json* ao = e.field("ao");
+    const Json* depth = e.field("depth");
+    REQUIRE(ao);
+    REQUIRE(depth);
+    CHECK(ao->as_int() == 4);
+    CHECK(depth->as_int() == 4);
+  }
+  CHECK(requested == 6);
+}
+
 TEST_CASE("A render request during a still's sample abandons the sample, and the requested frame comes next",
           "[e2e][refine]") {
   // 640x360 with 8 AO rays a hit: a sample of the pavilion takes far longer than the step from
