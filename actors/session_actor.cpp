@@ -92,16 +92,11 @@ void start_frame(self_ptr self, uint32_t client_frame, bool refine) {
     }
     if (st.budget) {
       // The ray tracer's samples only: the rasterizer takes neither AO rays nor a depth.
-      std::vector<InteractiveSamples> ladder =
-          st.hs.renderer == RendererKind::raytracer
-              ? interactive_levels(st.render.ao_samples, st.render.max_depth)
-              : std::vector<InteractiveSamples>{{st.render.ao_samples, st.render.max_depth}};
-      // The page's settings changed, or a budget record replaced the controller: a new ladder,
-      // from the settings' own level.
-      if (ladder != st.ladder || st.budget->levels() != int(ladder.size())) {
-        st.ladder = std::move(ladder);
-        st.budget->set_levels(int(st.ladder.size()));
-      }
+      // A new ladder (the page's settings changed, or a budget record replaced the controller)
+      // starts from the settings' own level.
+      st.budget->set_ladder(st.hs.renderer == RendererKind::raytracer
+                                ? interactive_levels(st.render.ao_samples, st.render.max_depth)
+                                : std::vector<InteractiveSamples>{{st.render.ao_samples, st.render.max_depth}});
       st.frame_scale = st.budget->scale();
       st.frame_level = st.budget->level();
     }
@@ -172,9 +167,8 @@ void start_frame(self_ptr self, uint32_t client_frame, bool refine) {
   fs.scene = SceneSnapshot{st.scene};  // read-only until the frame actor answers: updates are cached meanwhile
   // An interactive frame below the page's samples (FrameBudget's levels); every other frame, the
   // still's samples included, renders the page's settings.
-  const InteractiveSamples samples = st.frame_level > 0 && size_t(st.frame_level) < st.ladder.size()
-                                         ? st.ladder[size_t(st.frame_level)]
-                                         : InteractiveSamples{st.render.ao_samples, st.render.max_depth};
+  const InteractiveSamples samples = st.frame_level > 0 ? st.budget->samples()
+                                                        : InteractiveSamples{st.render.ao_samples, st.render.max_depth};
   fs.ao_samples = int32_t(samples.ao_samples);
   fs.max_depth = int32_t(samples.max_depth);
   m.ao_samples = samples.ao_samples;

@@ -74,10 +74,7 @@ struct session_state {
   std::optional<uint64_t> budget_triangles;     // the scene's when the budget last observed a frame
   int32_t full_w = 0, full_h = 0;
   double frame_scale = 1;            // of the frame in flight (1: it is a sample of the still)
-  // The budget's levels for the page's settings (interactive_levels), and the level of the frame
-  // in flight (0: the page's AO rays and depth).
-  std::vector<InteractiveSamples> ladder;
-  int frame_level = 0;
+  int frame_level = 0;               // of the frame in flight (FrameBudget::level; 0: the page's samples)
   bool frame_requested = false;      // the frame in flight answers a render request
   int64_t frame_t0_ns = 0;
   // The still's average in the frame actor (Accumulation::bytes), counted in `share`.

@@ -40,10 +40,11 @@ FrameBudget::FrameBudget(double budget_ms, double min_scale) : budget_ms_(budget
   if (!(min_scale > 0) || min_scale > 1) throw std::invalid_argument("FrameBudget: min_scale must be in (0, 1]");
 }
 
-void FrameBudget::set_levels(int n) {
-  n = std::clamp(n, 1, kMaxLevels);
+void FrameBudget::set_ladder(std::vector<InteractiveSamples> ladder) {
+  if (ladder.size() > size_t(kMaxLevels)) ladder.resize(size_t(kMaxLevels));
+  if (ladder == ladder_) return;
+  ladder_ = std::move(ladder);
   for (int l = 1; l < kMaxLevels; ++l) cost_[size_t(l)] = ratio_[size_t(l)] = 0;
-  levels_ = n;
   level_ = 0;
   from_ = -1;
   over_ = 0;
@@ -58,7 +59,7 @@ void FrameBudget::move_to(int level, double cost) {
 
 void FrameBudget::observe(double scale, double ms, int level) {
   if (!(scale > 0) || !std::isfinite(scale) || !(ms >= 0) || !std::isfinite(ms)) return;  // nothing to learn
-  if (level < 0 || level >= levels_) return;  // a frame of a ladder that is gone
+  if (level < 0 || level >= levels()) return;  // a frame of a ladder that is gone
   const double cost = ms / (scale * scale);
   double& c = cost_[size_t(level)];
   if (c <= 0 || cost > kJump * c || cost < c / kJump)
@@ -95,7 +96,7 @@ void FrameBudget::observe(double scale, double ms, int level) {
   const double predicted = c * scale_ * scale_;
   if (std::abs(predicted - budget_ms_) <= kHysteresis * budget_ms_) return;
   // Down a level when even the smallest scale is well over the budget, for the second frame.
-  if (over_ >= 2 && c * min2 > (1 + kHysteresis) * budget_ms_ && level_ + 1 < levels_) {
+  if (over_ >= 2 && c * min2 > (1 + kHysteresis) * budget_ms_ && level_ + 1 < levels()) {
     const double r = ratio_[size_t(level_ + 1)] > 0 ? ratio_[size_t(level_ + 1)] : kLevelGuess;
     move_to(level_ + 1, c * r);
     return;

@@ -50,11 +50,14 @@ class FrameBudget {
   double scale() const { return scale_; }
   // Its level (0: the page's settings), below levels().
   int level() const { return level_; }
-  int levels() const { return levels_; }
-  // How many levels there are (1..kMaxLevels; interactive_levels().size()). A new ladder (the
-  // page changed its settings) starts again from level 0 at the current scale; the costs of the
-  // lower levels and their ratios are forgotten.
-  void set_levels(int n);
+  int levels() const { return ladder_.empty() ? 1 : int(ladder_.size()); }
+  // The samples of the next interactive frame: its level's step of the ladder.
+  InteractiveSamples samples() const { return ladder_.at(size_t(level_)); }
+  // The levels (interactive_levels(); at most kMaxLevels are kept). The same ladder again changes
+  // nothing; a new one (the page changed its settings, or this controller is new) starts again
+  // from level 0 at the current scale, and the costs of the lower levels and their ratios are
+  // forgotten.
+  void set_ladder(std::vector<InteractiveSamples> ladder);
   // A frame rendered at `scale` and `level` took `ms` (its time from start to its pixels being
   // in). The two-argument form: at the current level.
   void observe(double scale, double ms, int level);
@@ -73,7 +76,8 @@ class FrameBudget {
   void move_to(int level, double cost);
   double budget_ms_, min_scale_;
   double scale_ = 1.0;
-  int levels_ = 1, level_ = 0;
+  std::vector<InteractiveSamples> ladder_;  // empty: one level, the page's settings
+  int level_ = 0;
   int from_ = -1;  // the level left by the last step, until the first frame at the new one
   int over_ = 0;   // frames in a row at this level over the budget even at the smallest scale
   std::array<double, kMaxLevels> cost_{};   // ms of a frame at scale 1, per level

@@ -162,7 +162,7 @@ std::vector<double> run_levels(FrameBudget& b, LevelModel& m, int n, std::vector
 TEST_CASE("A scene too heavy for the smallest scale drops samples to meet the budget, and takes them back", "[budget]") {
   const double budget = 33;
   FrameBudget b(budget, 0.25);
-  b.set_levels(4);
+  b.set_ladder(interactive_levels(4, 4));  // 4 levels
   LevelModel m{1000};  // level 0 at the smallest scale: 64 ms, twice the budget
   std::vector<int> levels;
   auto t = run_levels(b, m, 40, &levels);
@@ -199,10 +199,10 @@ TEST_CASE("One level is the old behaviour; a new ladder or a restart starts from
   run_levels(b, m, 10);
   CHECK(b.level() == 0);  // no ladder: the smallest scale, over budget
   CHECK(b.scale() == 0.25);
-  b.set_levels(4);
+  b.set_ladder(interactive_levels(4, 4));  // 4 levels
   run_levels(b, m, 10);
   CHECK(b.level() == 2);
-  b.set_levels(2);  // the page lowered its AO rays: a new ladder, from its top
+  b.set_ladder(interactive_levels(2, 2));  // the page lowered its AO rays: a new ladder (2 levels), from its top
   CHECK(b.level() == 0);
   run_levels(b, m, 10);
   CHECK(b.level() == 1);  // the lowest there is
@@ -219,7 +219,7 @@ TEST_CASE("One level is the old behaviour; a new ladder or a restart starts from
 TEST_CASE("One slow frame does not cost a level", "[budget]") {
   const double budget = 33;
   FrameBudget b(budget, 0.25);
-  b.set_levels(4);
+  b.set_ladder(interactive_levels(4, 4));  // 4 levels
   LevelModel m{500};  // level 0 fits at a scale above the smallest (500 x 0.0625 + 2 = 33 ms)
   run_levels(b, m, 20);
   REQUIRE(b.level() == 0);
