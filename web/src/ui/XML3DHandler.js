@@ -4,10 +4,13 @@
 import { MarkupReader, IdRegistry } from '../reader/MarkupReader.js';
 import { Resources } from '../reader/Resources.js';
 import { setScriptValue, isValueElement } from '../reader/Values.js';
-import { generateRay, pick } from '../scene/Picker.js';
+import { generateRay, pick, unbuiltPickTrees } from '../scene/Picker.js';
 import { CameraController } from './CameraController.js';
 import { Vec3, Ray } from '../api/MathTypes.js';
 import { installElementApi, ensureElementApi } from '../api/ElementApi.js';
+
+// Above this many triangles a mousemove is not picked (clicks and the API still are).
+const MOUSEMOVE_PICK_LIMIT = 300000;
 
 const STYLE_ID = 'tessera-xml3d-style';
 const CSS = `
@@ -139,6 +142,25 @@ export class XML3DHandler {
     this.backend.update(scene);
     const detail = this.backend.draw(scene, this.width, this.height);
     if (detail) this.frameDrawn({ ...detail, timeStart: t0 });
+    this.preparePicking(scene);
+  }
+
+  // Every mousemove over a scene below MOUSEMOVE_PICK_LIMIT is picked (for the events on its
+  // elements) before the camera controller sees it. The picking trees (scene/PickBvh.js) are
+  // built in idle time once the scene has loaded, so that the first move does not wait for
+  // them (the pavilion's: about 200 ms for all, 48 ms for those along one ray).
+  preparePicking(scene) {
+    this.pickScene = scene;
+    const win = this.xml3d.ownerDocument.defaultView;
+    if (this.pickPrep || scene.pending || !win.requestIdleCallback || scene.triangleCount() >= MOUSEMOVE_PICK_LIMIT) return;
+    const step = (deadline) => {
+      this.pickPrep = null;
+      if (this.disposed) return;
+      const left = unbuiltPickTrees(this.pickScene);
+      while (left.length && deadline.timeRemaining() > 0) left.pop().build();
+      if (left.length) this.pickPrep = win.requestIdleCallback(step);
+    };
+    this.pickPrep = win.requestIdleCallback(step);
   }
 
   // Called by backends when a frame is on screen.
@@ -259,12 +281,13 @@ export class XML3DHandler {
     };
     for (const type of ['click', 'dblclick', 'mousedown', 'mouseup']) el.addEventListener(type, handle);
     el.addEventListener('mousemove', (e) => {
-      if (this.scene && this.scene.triangleCount() < 300000) handle(e);
+      if (this.scene && this.scene.triangleCount() < MOUSEMOVE_PICK_LIMIT) handle(e);
     });
   }
 
   dispose() {
     this.disposed = true;
+    if (this.pickPrep) this.xml3d.ownerDocument.defaultView.cancelIdleCallback(this.pickPrep);
     this.observer.disconnect();
     if (this.controller) this.controller.detach();
     this.xml3d.ownerDocument.defaultView.removeEventListener('resize', this.onResize);

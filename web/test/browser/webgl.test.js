@@ -41,6 +41,28 @@ test('picking returns the mesh under the point, with position and normal', async
   await page.close();
 });
 
+test('picking trees are built in idle time, and a mesh whose positions change is picked where it is now', async () => {
+  const page = await open(env, '/test/browser/pages/picking.html');
+  // Before any pick: the client builds them once the scene has loaded (XML3DHandler.preparePicking).
+  await page.evaluate(async () => { window.picker = await import('/src/scene/Picker.js'); });
+  await page.waitForFunction(() => {
+    const x = document.getElementById('x');
+    return x.tessera.scene && x.tessera.scene.meshes.size === 3 && window.picker.unbuiltPickTrees(x.tessera.scene).length === 0;
+  }, null, { timeout: 10000, polling: 100 });
+  const at = (px, py) => page.evaluate(([px, py]) => {
+    const x = document.getElementById('x'), r = x.tessera.container.getBoundingClientRect();
+    const el = x.getElementByPoint(r.left + px, r.top + py);
+    return el && el.id;
+  }, [px, py]);
+  assert.equal(await at(60, 75), 'a');
+  assert.equal(await at(100, 140), null);
+  // The quad's positions moved down by 1.4 (a new array): the old tree must not answer.
+  await page.evaluate(() => { document.querySelector('#quad float3').textContent = '-1 -2.4 0 1 -2.4 0 1 -0.4 0 -1 -0.4 0'; });
+  assert.equal(await at(60, 40), null);
+  assert.equal(await at(60, 110), 'a');
+  await page.close();
+});
+
 test('clicks are re-dispatched on the picked mesh and bubble through its group', async () => {
   const page = await open(env, '/test/browser/pages/picking.html');
   await page.evaluate(() => {
