@@ -1,7 +1,7 @@
 // Shared code of the demo pages: places the view from data-eye / data-target / data-fov on
 // the <view>, and switches between local WebGL and server rendering.
 //   ?server=host:port   render on that Tessera node (default: local WebGL)
-//   ?display=jpeg|s3tc|mjpeg|h264|auto&video-kbps=K&ao-samples=N&max-depth=D&refine-samples=R&frame-budget=MS
+//   ?display=jpeg|s3tc|mjpeg|h264|auto&video-kbps=K&ao-samples=N&max-depth=D&refine-samples=R&frame-budget=MS&sync-rate=HZ
 //                      override the page's <xml3d> attributes
 import { lookAt, toAxisAngle } from '../src/math/Mat4.js';
 
@@ -17,7 +17,7 @@ if (view && view.dataset.eye) {
 
 const params = new URLSearchParams(location.search);
 const defaultServer = params.get('server') || `${location.hostname}:${location.port || 80}`;
-for (const a of ['display', 'video-kbps', 'ao-samples', 'max-depth', 'refine-samples', 'frame-budget', 'references']) if (params.has(a)) xml3d.setAttribute(a, params.get(a));
+for (const a of ['display', 'video-kbps', 'ao-samples', 'max-depth', 'refine-samples', 'frame-budget', 'references', 'sync-rate']) if (params.has(a)) xml3d.setAttribute(a, params.get(a));
 if (params.get('server')) xml3d.setAttribute('server', params.get('server'));
 // The client starts only now, so that it finds the page as the query made it, as it finds a page
 // written with these attributes: imported first, it would set up WebGL and load the whole glTF,

@@ -14,6 +14,13 @@
 //    That first frame may be a scaled one (the node's frame budget); the time to the same
 //    scene at the element's full width is reported beside it, and each record says where the
 //    time went (the last scene message sent, the frames drawn until then).
+// 5. a drag and the still after it (issue 18's interactive targets), per --drag-pages page
+//    (default pavilion; JPEG display; the page refines to --drag-refine samples, default 256):
+//    the mouse held and moved 2 px right every 16 ms for --drag-ms (3000) ms, then released. Frames
+//    shown per second while it moved (from 500 ms after it started), and after the release each
+//    full-size frame's PSNR (RGB) against the last refined one, the node's converged still (an
+//    n-sample frame against an N-sample average that contains it reads -10 log10(1 - n/N) dB
+//    high: 0.28 dB at 16 of 256), with the time from the last mousemove to the first at 35 dB.
 //    --profile DIR: for each second visitor, the page's CPU profile (DevTools protocol) in
 //    DIR/<page>-second-<run>.cpuprofile and, with PERF=1, `perf record -g` of the node in
 //    DIR/<page>-second-<run>.perf.data. Both use CLOCK_MONOTONIC: perf's seconds and the
@@ -35,6 +42,8 @@ const CHROMIUM = process.env.CHROMIUM || '/usr/bin/chromium';
 const PAGES = (opt('--pages', 'pavilion,kitchen,living-room')).split(',').filter(Boolean);
 const LATENCY_PAGES = (opt('--latency-pages', 'basic,pavilion')).split(',').filter(Boolean);
 const REF_PAGES = (opt('--ref-pages', 'kitchen,pavilion,living-room')).split(',').filter(Boolean);
+const DRAG_PAGES = (opt('--drag-pages', 'pavilion')).split(',').filter(Boolean);
+const DRAG_REFINE = Number(opt('--drag-refine', 256)), DRAG_MS = Number(opt('--drag-ms', 3000)), DRAG_QUERY = opt('--drag-query', '');
 const MARKDOWN = argv.includes('--markdown');
 // --web-root DIR: serve another copy of web/ (an older client, say) to compare in one run.
 const WEB_ROOT = opt('--web-root', '') || undefined;
@@ -183,8 +192,81 @@ async function latency(node, name, display) {
   return { out, size };
 }
 
+// Section 5: one drag over the page's centre, then the still converging.
+async function drag(node, name) {
+  const { page, close } = await loadPage(node, name, { query: `&refine-samples=${DRAG_REFINE}${DRAG_QUERY}` });
+  await page.evaluate(() => {
+    // Every frame shown: when, its size and samples; the JPEG bytes of those shown after the
+    // release (window.__keepFrom), decoded at the end.
+    window.__shown = [];
+    window.__keepFrom = Infinity;
+    const view = document.querySelector('xml3d').tessera.backend.frameView;
+    const show = view.show.bind(view);
+    view.show = async (f) => {
+      const ok = await show(f);
+      const t = performance.now();
+      if (ok) window.__shown.push({ t, frame: f.frame, width: f.width, samples: f.samples ?? 1, refined: !!f.refined, payload: t >= window.__keepFrom ? f.payload.slice() : null });
+      return ok;
+    };
+  });
+  await new Promise((r) => setTimeout(r, 1000));
+  const box = await page.evaluate(() => { const r = document.querySelector('.tessera-xml3d').getBoundingClientRect(); return [r.left + r.width / 2, r.top + r.height / 2]; });
+  // A fixed path (2 px right a move, one move per 16 ms), so every run ends at the same view.
+  const moves = Math.max(1, Math.round(DRAG_MS / 16));
+  await page.mouse.move(box[0] - moves, box[1]);
+  await page.mouse.down();
+  const t0 = Date.now();
+  for (let i = 1; i <= moves; i++) {
+    await page.mouse.move(box[0] - moves + 2 * i, box[1] + (i % 2));
+    await new Promise((r) => setTimeout(r, Math.max(0, t0 + 16 * i - Date.now())));
+  }
+  await page.evaluate(() => { window.__keepFrom = window.__inputs[window.__inputs.length - 1]; });
+  await page.mouse.up();
+  // Until the still is converged (a frame at the target), or nothing new for 5 s, or 120 s.
+  const until = Date.now() + 120000;
+  let last = -1, since = Date.now();
+  for (;;) {
+    const [n, done] = await page.evaluate((target) => [window.__shown.length, window.__shown.some((f) => f.t >= window.__keepFrom && f.samples >= target)], DRAG_REFINE);
+    if (n !== last) { last = n; since = Date.now(); }
+    if (done || Date.now() - since > 5000 || Date.now() > until) break;
+    await new Promise((r) => setTimeout(r, 250));
+  }
+  const r = await page.evaluate(async (ms) => {
+    const x = document.querySelector('xml3d'), full = x.tessera.width;
+    const down = window.__inputs.find((t) => t >= window.__keepFrom - ms - 1000);
+    const stop = window.__keepFrom;
+    const during = window.__shown.filter((f) => f.t >= down + 500 && f.t <= stop);
+    const after = window.__shown.filter((f) => f.t >= stop && f.payload && f.width === full);
+    const pixels = async (payload) => {
+      const b = await createImageBitmap(new Blob([payload], { type: 'image/jpeg' }));
+      const c = new OffscreenCanvas(b.width, b.height), g = c.getContext('2d');
+      g.drawImage(b, 0, 0);
+      return g.getImageData(0, 0, b.width, b.height).data;
+    };
+    const out = { during: during.length, during_s: (stop - down - 500) / 1000, widths: during.map((f) => f.width), full, steps: [] };
+    if (!after.length) return out;
+    const ref = after[after.length - 1], refPx = await pixels(ref.payload);
+    out.ref_samples = ref.samples;
+    out.ref_ms = ref.t - stop;
+    for (const f of after.slice(0, -1)) {
+      const px = await pixels(f.payload);
+      let se = 0;
+      for (let i = 0; i < px.length; i += 4) for (let c = 0; c < 3; c++) { const d = px[i + c] - refPx[i + c]; se += d * d; }
+      const mse = se / (px.length / 4 * 3);
+      out.steps.push([+(f.t - stop).toFixed(1), f.samples, mse > 0 ? +(10 * Math.log10(255 * 255 / mse)).toFixed(2) : 99]);
+    }
+    return out;
+  }, DRAG_MS);
+  const size = await page.evaluate(() => { const x = document.querySelector('xml3d'); return [x.tessera.width, x.tessera.height, x.getAttribute('ao-samples')]; });
+  await close();
+  const first35 = r.steps.find((s) => s[2] >= 35);
+  return { drag: `/demo/${name}.html`, query: DRAG_QUERY, size, drag_ms: DRAG_MS, frames_during: r.during, fps_during: +(r.during / r.during_s).toFixed(1),
+    median_width_during: median(r.widths), ref_samples: r.ref_samples ?? null, ref_ms: r.ref_ms === undefined ? null : +r.ref_ms.toFixed(0),
+    first_35db_ms: first35 ? first35[0] : null, first_35db_samples: first35 ? first35[1] : null, steps: r.steps };
+}
+
 const node = await startNode(BIN, { threads: THREADS, webRoot: WEB_ROOT, args: NODE_ARGS });
-const rows = { load: {}, loadRaw: {}, upload: {}, latency: {} };
+const rows = { load: {}, loadRaw: {}, upload: {}, latency: {}, drag: [] };
 try {
   for (const name of PAGES) {
     for (const noDeflate of [false, true]) {
@@ -205,6 +287,13 @@ try {
       const { out, size } = await latency(node, name, display);
       for (const [i, o] of out.entries()) emit({ latency: `/demo/${name}.html`, display, step: i, ...Object.fromEntries(Object.entries(o).map(([k, v]) => [k, +(+v).toFixed(1)])) });
       rows.latency[`${name} ${display}`] = { out, size };
+    }
+  }
+  for (const name of DRAG_PAGES) {
+    for (let k = 0; k < REPEAT; k++) {
+      const rec = { ...(await drag(node, name)), run: k };
+      emit(rec);
+      rows.drag.push(rec);
     }
   }
 } finally {
@@ -264,6 +353,11 @@ if (MARKDOWN) {
   for (const [key, { out, size }] of Object.entries(rows.latency)) {
     const col = (k) => `${median(out.map((o) => o[k])).toFixed(1)} (${pct(out.map((o) => o[k]), 0.1).toFixed(1)}–${pct(out.map((o) => o[k]), 0.9).toFixed(1)})`;
     console.log(`| ${key} | ${size[0]}x${size[1]}, ${size[2] ?? 0} | ${col('total')} | ${col('toSend')} | ${col('sendToFrame')} | ${median(out.map((o) => o.rendering)).toFixed(1)} |`);
+  }
+  if (rows.drag.length) {
+    console.log('\n| page | size, ao-samples | run | frames/s during the drag | median width during it | release → first frame at 35 dB, ms (samples) | release → converged still, ms (samples) |\n| --- | --- | --- | --- | --- | --- | --- |');
+    for (const d of rows.drag)
+      console.log(`| ${d.drag} | ${d.size[0]}x${d.size[1]}, ${d.size[2] ?? 0} | ${d.run} | ${d.fps_during} | ${d.median_width_during} | ${d.first_35db_ms === null ? 'not reached' : `${d.first_35db_ms.toFixed(0)} (${d.first_35db_samples})`} | ${d.ref_ms ?? '-'} (${d.ref_samples ?? '-'}) |`);
   }
   console.log('\n| page | visitor | connected → first frame of the whole scene, ms | its width | connected → that scene at full resolution, ms | page load → first frame of the whole scene, ms | references sent | WebSocket bytes sent, MB |\n| --- | --- | --- | --- | --- | --- | --- | --- |');
   for (const [key, recs] of Object.entries(rows.refs || {})) {
