@@ -4,8 +4,9 @@
 // pick by brute force in headless Chromium, on the main thread, before the camera controller
 // saw the mousemove.
 //
-// Built on the first pick of a geometry and kept for as long as its arrays live: the key is the
-// positions array and the index array (or none). Arrays are taken as immutable once read, as the
+// Built when a ray first enters the geometry's bounds (or ahead, in idle time: XML3DHandler)
+// and kept for as long as its arrays live: the key is the positions array and the index array
+// (or none). Arrays are taken as immutable once read, as the
 // markup reader's own caches take them (MarkupReader.scanned, floats).
 //
 // The triangle test is Picker.js's (Möller–Trumbore with the same tolerances), so a BVH pick
