@@ -257,7 +257,9 @@ TEST_CASE("A hostile peer on the cluster port gets refusals and failed tiles; th
     refused([](OpenRequest& r) { r.master = "x\"}\n{\"node\": \"forged"; }, "a master name");
     refused([](OpenRequest& r) { r.packet_w = 1000; }, "packet layout 1000x2");
     refused([](OpenRequest& r) { r.keepalive_ms = 0; }, "keep-alive period of 0 ms");
-    CHECK(w.p->err_count("\"open_refused\"") == 3);
+    // The refusals' lines come through the node's logger and the test's stderr reader, maybe
+    // after the replies (seen under ASan on a busy machine: 2 == 3), as with worker_opened below.
+    CHECK(wait_for([&] { return w.p->err_count("\"open_refused\"") == 3; }, 5000));
     CHECK(w.p->err_count("forged") == 0);
 
     // A worker, with a scene, and batches that no client could send through this node.
@@ -307,7 +309,7 @@ TEST_CASE("A hostile peer on the cluster port gets refusals and failed tiles; th
     REQUIRE(ok.tiles.size() == 1);
     CHECK(ok.tiles[0].error == "");
     CHECK(ok.tiles[0].rgba.size() == size_t(W * H * 4));
-    CHECK(w.p->err_count("\"bad_batch\"") == 5);
+    CHECK(wait_for([&] { return w.p->err_count("\"bad_batch\"") == 5; }, 5000));
 
     // max-workers=3: two more opens are served, the next is refused.
     CHECK(open(good, &err));
@@ -324,7 +326,7 @@ TEST_CASE("A hostile peer on the cluster port gets refusals and failed tiles; th
   }
   // The peer's actor is gone: its workers go too.
   CHECK(wait_for([&] { return w.live_workers() == 0; }, 5000));
-  CHECK(w.p->err_count("\"worker_closed\"") == 3);
+  CHECK(wait_for([&] { return w.p->err_count("\"worker_closed\"") == 3; }, 5000));
 }
 
 TEST_CASE("Bad worker-bound settings end serve with a clear error", "[cluster]") {
