@@ -101,7 +101,7 @@ void start_frame(self_ptr self, uint32_t client_frame, bool refine) {
       st.frame_level = st.budget->level();
     }
     // A frame below the page's samples is never the still's sample 0, even at full resolution.
-    st.still.after_scaled = (st.frame_scale < 1 || st.frame_level > 0) && st.frame_triangles > 0;
+    st.still.after_scaled = st.reduced_frame() && st.frame_triangles > 0;
     st.still.active = st.still.after_scaled || refinable();
     st.still.client_frame = client_frame;
     st.still.seed = st.seq;
@@ -115,7 +115,7 @@ void start_frame(self_ptr self, uint32_t client_frame, bool refine) {
     set_resolution(self, w, h);
     if (st.closed) return;
   }
-  fs.refine = st.frame_scale == 1 && st.frame_level == 0 && refinable();
+  fs.refine = !st.reduced_frame() && refinable();
   // Denoised while the plain average is noisy (renderer/denoise.h): only AO under a sky is
   // noise the filter knows.
   fs.denoise = fs.refine && st.settings->denoise_below_db > 0 && st.render.ao_samples > 0 &&
@@ -178,7 +178,7 @@ void start_frame(self_ptr self, uint32_t client_frame, bool refine) {
       .then(
           [self](uint32_t) {
             auto& st = self->state;
-            if (st.frame_scale == 1 && st.frame_level == 0) st.still.samples++;  // a sample of the still, not an interactive frame
+            if (!st.reduced_frame()) st.still.samples++;  // a sample of the still, not an interactive frame
             if (st.budget && st.frame_requested) {  // an interactive frame: its time steers the next scale
               st.budget->observe(st.frame_scale, double(steady_ns() - st.frame_t0_ns) / 1e6, st.frame_level);
               st.budget_triangles = st.frame_triangles;

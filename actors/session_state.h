@@ -75,6 +75,9 @@ struct session_state {
   int32_t full_w = 0, full_h = 0;
   double frame_scale = 1;            // of the frame in flight (1: it is a sample of the still)
   int frame_level = 0;               // of the frame in flight (FrameBudget::level; 0: the page's samples)
+  // The frame in flight is below the still's resolution or samples (an interactive frame within
+  // a budget), so it is no sample of the still.
+  bool reduced_frame() const { return frame_scale < 1 || frame_level > 0; }
   bool frame_requested = false;      // the frame in flight answers a render request
   int64_t frame_t0_ns = 0;
   // The still's average in the frame actor (Accumulation::bytes), counted in `share`.
