@@ -19,16 +19,22 @@ export function generateRay(camera, x, y, width, height) {
 
 const dot = (a, b) => a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
 
+// A visible mesh's positions, indices (or null) and picking tree; null for a mesh that is
+// hidden or has no positions.
+function meshGeometry(scene, mesh) {
+  const pos = mesh.visible && scene.buffers.get(mesh.positions);
+  if (!pos) return null;
+  const P = pos.data, idx = mesh.indices ? scene.buffers.get(mesh.indices).data : null;
+  return { P, idx, bvh: meshBvh(P, idx, idx ? idx.length : P.length / 3) };
+}
+
 // The picking trees of the scene's visible meshes that are not built yet, to build ahead of the
 // first pick (XML3DHandler does so in idle time); pick() builds the ones its ray needs itself.
 export function unbuiltPickTrees(scene) {
   const out = [];
   for (const mesh of scene.meshes.values()) {
-    const pos = mesh.visible && scene.buffers.get(mesh.positions);
-    if (!pos) continue;
-    const idx = mesh.indices ? scene.buffers.get(mesh.indices).data : null;
-    const bvh = meshBvh(pos.data, idx, idx ? idx.length : pos.data.length / 3);
-    if (!bvh.built) out.push(bvh);
+    const g = meshGeometry(scene, mesh);
+    if (g && !g.bvh.built) out.push(g.bvh);
   }
   return out;
 }
@@ -36,16 +42,12 @@ export function unbuiltPickTrees(scene) {
 export function pick(scene, ray) {
   let best = null;
   for (const mesh of scene.meshes.values()) {
-    if (!mesh.visible) continue;
-    const pos = scene.buffers.get(mesh.positions);
-    if (!pos) continue;
-    const inv = invert(mesh.transform);
+    const g = meshGeometry(scene, mesh);
+    const inv = g && invert(mesh.transform);
     if (!inv) continue;
+    const { P, idx } = g;
     const o = transformPoint(inv, ray.origin), d = transformDirection(inv, ray.direction);
-    const P = pos.data;
-    const idx = mesh.indices ? scene.buffers.get(mesh.indices).data : null;
-    const n = idx ? idx.length : P.length / 3;
-    const h = meshBvh(P, idx, n).nearest(o, d);
+    const h = g.bvh.nearest(o, d);
     if (!h) continue;
     const t = h.t, i = h.tri;
     const hit = transformPoint(mesh.transform, [o[0] + d[0] * t, o[1] + d[1] * t, o[2] + d[2] * t]);
