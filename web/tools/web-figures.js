@@ -16,10 +16,12 @@
 //    time went (the last scene message sent, the frames drawn until then).
 // 5. a drag and the still after it (issue 18's interactive targets), per --drag-pages page
 //    (default pavilion; JPEG display; the page refines to --drag-refine samples, default 256):
-//    the mouse held and moved 2 px right --drag-ms / 16 times (one move per 16 ms at most: each
-//    move is a round trip to the browser, so the drag lasts longer on a busy machine; moved_ms
-//    says how long), then released. Frames shown per second while it moved (from 500 ms after
-//    it started), and after the release each
+//    the mouse held and moved 2 px right --drag-ms / 16 times, along a path fixed in time (moves
+//    dispatched in the page every 16 ms, a late tick jumping to where the path is by then;
+//    --drag-input cdp: page.mouse.move, a round trip per move, so the drag lasts longer on a
+//    busy machine; moved_ms says how long, inputs how many moves the page got), then released.
+//    Frames shown per second while it moved (from 500 ms after it started), and after the
+//    release each
 //    full-size frame's PSNR (RGB) against the last refined one, the node's converged still (an
 //    n-sample frame against an N-sample average that contains it reads -10 log10(1 - n/N) dB
 //    high: 0.28 dB at 16 of 256), with the time from the last mousemove to the first at 35 dB.
@@ -46,7 +48,13 @@ const LATENCY_PAGES = (opt('--latency-pages', 'basic,pavilion')).split(',').filt
 const REF_PAGES = (opt('--ref-pages', 'kitchen,pavilion,living-room')).split(',').filter(Boolean);
 const DRAG_PAGES = (opt('--drag-pages', 'pavilion')).split(',').filter(Boolean);
 const DRAG_REFINE = Number(opt('--drag-refine', 256)), DRAG_MS = Number(opt('--drag-ms', 3000)), DRAG_QUERY = opt('--drag-query', '');
+// --drag-input page (default): moves dispatched in the page at 60 Hz; cdp: page.mouse.move, a
+// round trip to the browser per move (about 25 a second on the 2-core machine).
+const DRAG_INPUT = opt('--drag-input', 'page');
+if (!['page', 'cdp'].includes(DRAG_INPUT)) { console.error('--drag-input: page or cdp'); process.exit(2); }
 const MARKDOWN = argv.includes('--markdown');
+// --page-query "&A=B": appended to every demo page's URL (&sync-rate=30, say), before a section's own.
+const PAGE_QUERY = opt('--page-query', '');
 // --web-root DIR: serve another copy of web/ (an older client, say) to compare in one run.
 const WEB_ROOT = opt('--web-root', '') || undefined;
 const PROFILE = opt('--profile', '');
@@ -71,7 +79,8 @@ function instrument(noDeflate) {
     rendering: e.detail.timings && e.detail.timings.rendering, pipeline: e.detail.timings && e.detail.timings.pipeline,
     width: e.detail.width }), true);
   document.addEventListener('load', (e) => { if (e.target.localName === 'xml3d' && window.__load === null) window.__load = performance.now(); }, true);
-  document.addEventListener('mousemove', () => window.__inputs.push(performance.now()), true);
+  // The mouse's own moves, not those the client passes on to the scene's elements.
+  document.addEventListener('mousemove', (e) => { if (!(e.target.closest && e.target.closest('xml3d'))) window.__inputs.push(performance.now()); }, true);
   const send = WebSocket.prototype.send;
   WebSocket.prototype.send = function (data) {
     const b = data instanceof ArrayBuffer ? new Uint8Array(data) : new Uint8Array(data.buffer, data.byteOffset, data.byteLength);
@@ -132,7 +141,7 @@ async function loadPage(node, name, { noDeflate = false, display = 'jpeg', query
       if (r.type === 'buffer_ref' || r.type === 'texture_ref') up.refs++;
     }
   }));
-  await page.goto(`${node.base}/demo/${name}.html?server=${node.host}:${node.port}&display=${display}${query}`);
+  await page.goto(`${node.base}/demo/${name}.html?server=${node.host}:${node.port}&display=${display}${PAGE_QUERY}${query}`);
   await page.waitForFunction(() => window.__load !== null, null, { timeout: 180000, polling: 100 });
   while (Date.now() - lastSend < 1500) await new Promise((r) => setTimeout(r, 250));  // upload finished
   await page.waitForFunction(() => {  // the first frame requested after the last scene upload is on screen
@@ -215,16 +224,40 @@ async function drag(node, name) {
   const box = await page.evaluate(() => { const r = document.querySelector('.tessera-xml3d').getBoundingClientRect(); return [r.left + r.width / 2, r.top + r.height / 2]; });
   // A fixed path (2 px right a move, one move per 16 ms), so every run ends at the same view.
   const moves = Math.max(1, Math.round(DRAG_MS / 16));
-  await page.mouse.move(box[0] - moves, box[1]);
-  await page.mouse.down();
-  await page.evaluate(() => { window.__dragFrom = performance.now(); });
-  const t0 = Date.now();
-  for (let i = 1; i <= moves; i++) {
-    await page.mouse.move(box[0] - moves + 2 * i, box[1] + (i % 2));
-    await new Promise((r) => setTimeout(r, Math.max(0, t0 + 16 * i - Date.now())));
+  if (DRAG_INPUT === 'cdp') {
+    // Each page.mouse.move is a round trip to the browser: about 25 moves a second here.
+    await page.mouse.move(box[0] - moves, box[1]);
+    await page.mouse.down();
+    await page.evaluate(() => { window.__dragFrom = performance.now(); });
+    const t0 = Date.now();
+    for (let i = 1; i <= moves; i++) {
+      await page.mouse.move(box[0] - moves + 2 * i, box[1] + (i % 2));
+      await new Promise((r) => setTimeout(r, Math.max(0, t0 + 16 * i - Date.now())));
+    }
+    await page.evaluate(() => { window.__keepFrom = window.__inputs[window.__inputs.length - 1]; });
+    await page.mouse.up();
+  } else {
+    // Dispatched in the page on a 16 ms clock, as a browser delivers a real mouse's moves: a
+    // tick that comes late (the main thread busy) moves to where the path is by then, in one
+    // event, as Chromium coalesces moves, so the drag takes DRAG_MS whatever the load.
+    await page.evaluate(({ x0, y, moves }) => new Promise((resolve) => {
+      const el = document.elementFromPoint(x0 + moves, y);
+      const send = (type, i) => el.dispatchEvent(new MouseEvent(type, { bubbles: true, cancelable: true, view: window, clientX: x0 + 2 * i, clientY: y + (i % 2), button: 0, buttons: type === 'mouseup' ? 0 : 1 }));
+      send('mousedown', 0);
+      const t0 = window.__dragFrom = performance.now();
+      let i = 0;
+      const tick = () => {
+        const next = Math.min(moves, Math.max(i + 1, Math.floor((performance.now() - t0) / 16)));
+        i = next;
+        send('mousemove', i);
+        if (i < moves) { setTimeout(tick, Math.max(0, t0 + 16 * (i + 1) - performance.now())); return; }
+        window.__keepFrom = window.__inputs[window.__inputs.length - 1];
+        send('mouseup', i);
+        resolve();
+      };
+      setTimeout(tick, 16);
+    }), { x0: box[0] - moves, y: box[1], moves });
   }
-  await page.evaluate(() => { window.__keepFrom = window.__inputs[window.__inputs.length - 1]; });
-  await page.mouse.up();
   // Until the still is converged (a frame at the target), or nothing new for 5 s, or 120 s.
   const until = Date.now() + 120000;
   let last = -1, since = Date.now();
@@ -246,7 +279,7 @@ async function drag(node, name) {
       g.drawImage(b, 0, 0);
       return g.getImageData(0, 0, b.width, b.height).data;
     };
-    const out = { moved_ms: stop - down, during: during.length, during_s: (stop - down - 500) / 1000, widths: during.map((f) => f.width), full, steps: [] };
+    const out = { moved_ms: stop - down, inputs: window.__inputs.filter((t) => t >= down && t <= stop).length, during: during.length, during_s: (stop - down - 500) / 1000, widths: during.map((f) => f.width), full, steps: [] };
     if (!after.length) return out;
     const ref = after[after.length - 1], refPx = await pixels(ref.payload);
     out.ref_samples = ref.samples;
@@ -263,7 +296,7 @@ async function drag(node, name) {
   const size = await page.evaluate(() => { const x = document.querySelector('xml3d'); return [x.tessera.width, x.tessera.height, x.getAttribute('ao-samples')]; });
   await close();
   const first35 = r.steps.find((s) => s[2] >= 35);
-  return { drag: `/demo/${name}.html`, query: DRAG_QUERY, size, drag_ms: DRAG_MS, moved_ms: +r.moved_ms.toFixed(0), frames_during: r.during, fps_during: +(r.during / r.during_s).toFixed(1),
+  return { drag: `/demo/${name}.html`, query: DRAG_QUERY, input: DRAG_INPUT, size, drag_ms: DRAG_MS, moved_ms: +r.moved_ms.toFixed(0), inputs: r.inputs, frames_during: r.during, fps_during: +(r.during / r.during_s).toFixed(1),
     median_width_during: median(r.widths), ref_samples: r.ref_samples ?? null, ref_ms: r.ref_ms === undefined ? null : +r.ref_ms.toFixed(0),
     first_35db_ms: first35 ? first35[0] : null, first_35db_samples: first35 ? first35[1] : null, steps: r.steps };
 }
@@ -338,7 +371,7 @@ for (let k = 0; k < (REF_PAGES.length ? REPEAT : 0); k++) {
 }
 const chromiumVersion = execFileSync(CHROMIUM, ['--version'], { stdio: ['ignore', 'pipe', 'ignore'] }).toString().trim();
 const summary = { summary: true, cpu: os.cpus()[0].model, cores: os.cpus().length, loadavg: os.loadavg().map((v) => +v.toFixed(2)),
-  node_threads: THREADS, chromium: chromiumVersion, nodejs: process.version, repeat: REPEAT, steps: STEPS, tessera: node.info };
+  node_threads: THREADS, chromium: chromiumVersion, nodejs: process.version, repeat: REPEAT, steps: STEPS, tessera: node.info, page_query: PAGE_QUERY };
 emit(summary);
 
 if (MARKDOWN) {

@@ -1,5 +1,5 @@
 // Server rendering backend: <xml3d server="[wss://]host:port" renderer="raytracer"
-// display="jpeg|s3tc|mjpeg|h264|auto" nodes="N" sync-rate="30" jpeg-quality="85" video-kbps="8000"
+// display="jpeg|s3tc|mjpeg|h264|auto" nodes="N" sync-rate="60" jpeg-quality="85" video-kbps="8000"
 // ao-samples="0" max-depth="4" refine-samples="64" frame-budget="33" token="..." references="off">
 // (RenderSettings.js; the access token also from the page's #tessera-token=..., AccessToken.js;
 // references="off": every buffer and texture is uploaded, none is left for the node to load
@@ -93,7 +93,7 @@ export class RemoteBackend {
         width: handler.width, height: handler.height },
       settings,
       videoKbps: this.videoKbps,
-      rate: Math.min(120, Math.max(1, int(x, 'sync-rate', 30))),
+      rate: Math.min(120, Math.max(1, int(x, 'sync-rate', 60))),
       references,
       onReferencesAnswered: () => this.openDownloads(),
       onState: (state, detail) => this.state(state, detail),
