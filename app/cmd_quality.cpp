@@ -35,7 +35,7 @@ const char* kHelp =
     "  denoised, only the steps the node shows are measured (samples 1-4, then each a quarter\n"
     "  more), the others count in the time. The denoising counts in the time.\n"
     "  --denoise-iterations K (default 5) sets its passes, --denoise-sigma S (default 4) its value\n"
-    "  weight.\n"
+    "  weight; --denoise-from S (default 2, the node's rule) the first sample denoised.\n"
     "--write-png F writes the last image measured (the last step's average, or the last fixed frame).\n"
     "One JSON line per step (samples, elapsed_ms, psnr_db), then a summary line with\n"
     "seconds_to_psnr for 30, 35 and 40 dB (null: not reached), the step that reached each level\n"
@@ -152,7 +152,9 @@ int run(const std::vector<std::string>& argv) {
   denoise_options.iterations = int(args.integer("--denoise-iterations", denoise_options.iterations));
   denoise_options.sigma_value = float(args.number("--denoise-sigma", denoise_options.sigma_value));
   const double denoise_below_db = args.number("--denoise-below-db", kDenoiseBelowDb);
+  const long denoise_from = args.integer("--denoise-from", 2);
   args.finish();
+  if (denoise_from < 1 || denoise_from > 4) throw std::invalid_argument("--denoise-from must be in 1..4");
   const bool denoised = mode == "progressive+denoise";
   if (mode != "fixed" && mode != "progressive" && !denoised)
     throw std::invalid_argument("--mode must be fixed, progressive or progressive+denoise");
@@ -268,7 +270,7 @@ int run(const std::vector<std::string>& argv) {
     while (elapsed_s < seconds && acc.samples() < uint32_t(max_samples)) {
       const auto t0 = std::chrono::steady_clock::now();
       refine(rt, full, s, acc.samples(), 1, acc, denoising ? &still_ao : nullptr, &guides);
-      if (denoising && acc.samples() >= 2 && !shown_while_denoising(acc.samples(), shown, uint32_t(max_samples))) {
+      if (denoising && acc.samples() >= uint32_t(denoise_from) && !shown_while_denoising(acc.samples(), shown, uint32_t(max_samples))) {
         const double dt = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
         elapsed_s += dt;
         step_ms.push_back(dt * 1e3);
@@ -277,7 +279,7 @@ int run(const std::vector<std::string>& argv) {
       shown = acc.samples();
       double estimate = -1;  // the plain average's estimated PSNR; -1: not estimated
       Image avg;
-      if (denoising && acc.samples() >= 2) {  // sample 0 is the plain frame, as in the node
+      if (denoising && acc.samples() >= uint32_t(denoise_from)) {  // before: plain frames, as in the node
         DenoisedStep step = denoise_step(acc, guides, still_ao, denoise_below_db, denoise_options);
         estimate = step.estimate_db;
         denoising = step.denoised;
