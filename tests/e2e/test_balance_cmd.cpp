@@ -337,6 +337,13 @@ TEST_CASE("tessera quality: a refining still gains PSNR sample by sample, the re
     CHECK(d.lines[i]["plain_psnr_db"].get<double>() == p.lines[i]["psnr_db"].get<double>());
     CHECK(d.lines[i]["psnr_db"].get<double>() > p.lines[i]["psnr_db"].get<double>() + 0.5);
   }
+  // --denoise-from 1 denoises the first sample too; its plain average is the plain frame.
+  Run from1 = run_tessera(base + " --mode progressive+denoise --denoise-from 1 --max-samples 1 --seconds 60");
+  REQUIRE(from1.rc == 0);
+  REQUIRE(from1.lines.size() == 2);
+  CHECK(from1.lines[0]["denoised"].get<bool>());
+  CHECK(from1.lines[0]["plain_psnr_db"].get<double>() == p.lines[0]["psnr_db"].get<double>());
+  CHECK(from1.lines[0]["psnr_db"].get<double>() != p.lines[0]["psnr_db"].get<double>());
   // Past the threshold (here at once) the still is averaged plainly, as without the denoiser.
   Run plain_after = run_tessera(base + " --mode progressive+denoise --denoise-below-db 1 --max-samples 3 --seconds 60");
   REQUIRE(plain_after.rc == 0);
@@ -345,7 +352,7 @@ TEST_CASE("tessera quality: a refining still gains PSNR sample by sample, the re
   for (size_t i = 0; i < 3; ++i) CHECK(plain_after.lines[i]["psnr_db"].get<double>() == p.lines[i]["psnr_db"].get<double>());
   for (const char* bad : {"--mode x", "--seconds 0", "--max-samples 0", "--reference-samples 70000", "--ao -1",
                           "--denoise-iterations 11", "--mode progressive+denoise --denoise-sigma 0",
-                          "--denoise-below-db 100"}) {
+                          "--denoise-below-db 100", "--denoise-from 0", "--denoise-from 5"}) {
     INFO(bad);
     CHECK(run_tessera(base + " " + bad).rc != 0);
   }
