@@ -80,6 +80,11 @@ struct NodeSettings {
   // them within this many ms (lb/frame_budget.h); the still after them at full resolution.
   // 0: every frame at the client's resolution.
   uint32_t frame_budget_ms = 0;
+  // The still after scaled interactive frames starts this many ms after the last of them, unless
+  // a request comes first: while the user drags, its full-resolution sample would be abandoned
+  // by the next request, and on a machine shared with the browser it would also take the cores
+  // the browser needs to send that request (docs/results/web.md, "A drag"). 0: at once.
+  uint32_t still_delay_ms = 50;
   // The balancer carries each frame's cost into the next frame's camera with the packets'
   // first-hit depths, which the workers then return with their tiles (lb/reproject.h,
   // docs/load-balancing.md). false: the paper's predictor, the previous frame's map as it is.

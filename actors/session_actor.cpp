@@ -48,6 +48,9 @@ void frame_done(self_ptr self) {
     uint32_t f = *st.pending;
     st.pending.reset();
     start_frame(self, f);
+  } else if (st.still.active && st.still.after_scaled && st.settings->still_delay_ms > 0) {
+    // After an interactive frame: the still's first sample waits a moment for the next request.
+    self->delayed_send(self, std::chrono::milliseconds(st.settings->still_delay_ms), still_atom::value, st.still.seed);
   } else if (st.still.active && (st.still.after_scaled || st.still.samples < st.still.target)) {
     start_frame(self, st.still.client_frame, true);  // nothing changed: the next sample
   } else if (st.still.active) {
@@ -325,6 +328,14 @@ session_actor::behavior_type session_impl(self_ptr self, std::shared_ptr<ClientS
         if (st.handshake_done || st.closed) return;
         fail(self, Error{ErrorCode::bad_handshake,
                          "no handshake within " + std::to_string(st.settings->handshake_timeout_ms) + " ms", kNoRecord});
+      },
+      [=](still_atom, uint32_t seed) {
+        auto& st = self->state;
+        // Nothing came since the interactive frame (a request or any other message would have
+        // started a frame or ended the still): its still begins.
+        if (st.closed || st.in_flight || st.pending || !st.still.active || !st.still.after_scaled || st.still.seed != seed)
+          return;
+        start_frame(self, st.still.client_frame, true);
       },
       [=](tick_atom) { self->send(self->state.subtree, tick_atom::value); },
       [=](snapshot_atom) { return Payload{scene_snapshot_bytes(SceneSnapshot{self->state.scene})}; },

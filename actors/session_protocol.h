@@ -45,6 +45,9 @@ typename Inspector::result_type inspect(Inspector& f, SessionStatus& x) {
 
 // The handshake timeout (NodeSettings::handshake_timeout_ms), sent by the session to itself.
 using hs_timeout_atom = caf::atom_constant<caf::atom("hstimeout")>;
+// The still after interactive frames, due (NodeSettings::still_delay_ms), sent by the session to
+// itself with the still's seed: a still replaced meanwhile ignores it.
+using still_atom = caf::atom_constant<caf::atom("still")>;
 
 using session_actor = caf::typed_actor<caf::reacts_to<client_atom, std::vector<uint8_t>>,
                                        caf::replies_to<status_atom>::with<SessionStatus>,
@@ -52,6 +55,7 @@ using session_actor = caf::typed_actor<caf::reacts_to<client_atom, std::vector<u
                                        caf::replies_to<children_atom>::with<std::vector<caf::actor>>,
                                        caf::reacts_to<tick_atom>,
                                        caf::reacts_to<hs_timeout_atom>,
+                                       caf::reacts_to<still_atom, uint32_t>,
                                        caf::replies_to<snapshot_atom>::with<Payload>>;
 
 }  // namespace tessera

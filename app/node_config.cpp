@@ -79,6 +79,9 @@ NodeConfig::NodeConfig() {
            "H.264 display: the bitrate (kbit/s) for clients that do not say (100..200000)")
       .add(frame_budget_ms, "frame-budget-ms",
            "interactive frames are rendered at a lower resolution to take about this long (0: never)")
+      .add(still_delay_ms, "still-delay-ms",
+           "the full-resolution still after interactive frames starts this long after the last one, unless a "
+           "request comes first (0..10000; 0: at once)")
       .add(handshake_timeout_ms, "handshake-timeout-ms", "close a WebSocket without a valid handshake after this long")
       .add(max_node_bytes, "max-node-bytes",
            "memory budget over all clients: scene bytes + queued frames (0: half the physical memory)")
@@ -222,6 +225,8 @@ std::shared_ptr<NodeSettings> NodeConfig::node_settings() const {
   s->video_kbps = uint32_t(video_kbps);
   if (frame_budget_ms < 0 || frame_budget_ms > 60000) throw std::invalid_argument("tessera.frame-budget-ms must be in 0..60000");
   s->frame_budget_ms = uint32_t(frame_budget_ms);
+  if (still_delay_ms < 0 || still_delay_ms > 10000) throw std::invalid_argument("tessera.still-delay-ms must be in 0..10000");
+  s->still_delay_ms = uint32_t(still_delay_ms);
   s->budget = std::make_shared<MemoryBudget>(max_node_bytes > 0 ? uint64_t(max_node_bytes) : MemoryBudget::default_limit());
   s->render = renders;
   s->reproject = reproject;

@@ -35,7 +35,8 @@ struct NodeConfig : caf::actor_system_config {
   int refine_samples = 0;   // a still's samples per pixel for clients that send no refine record
   double denoise_below_db = kDenoiseBelowDb;  // a refining still is denoised below this PSNR (0: never)
   int video_kbps = 8000;
-  int frame_budget_ms = 0;  // interactive frames scaled to take about this long (0: never scaled)
+  int frame_budget_ms = 0;
+  int still_delay_ms = 50;  // the still after interactive frames waits this long for a request (0: none)  // interactive frames scaled to take about this long (0: never scaled)
   int handshake_timeout_ms = 5000;  // a WebSocket without a valid handshake by then is closed
   int64_t max_node_bytes = 0;       // node-wide memory budget over all clients (0: half the physical memory)
   int max_mjpeg_per_session = 4;    // MJPEG viewers of one session

@@ -445,6 +445,40 @@ TEST_CASE("Within a frame budget, interactive frames shrink and the still after 
   CHECK_FALSE(c.next<protocol::Frame>(500));  // converged: nothing more
 }
 
+TEST_CASE("Within a frame budget, the still after an interactive frame waits still-delay-ms for the next request",
+          "[e2e][budget]") {
+  // A long delay, so that the test does not race it: the request that follows a scaled frame
+  // within it starts at once, no still sample is started and abandoned in between, and the
+  // still of the last frame comes unasked after the delay.
+  TestNode node(8, [](NodeSettings& s, ServerOptions&) {
+    s.frame_budget_ms = 1;
+    s.still_delay_ms = 1500;
+  });
+  ProtoClient c;
+  REQUIRE(c.connect(node.port()));
+  REQUIRE(c.handshake(protocol::DisplayKind::jpeg, 320, 180, 80));
+  REQUIRE(c.upload(pavilion().scene));
+  REQUIRE(c.render(pavilion_loop().camera(0), 1));  // full size: nothing measured yet; no still follows it
+  for (uint32_t f = 2; f <= 4; ++f) {
+    auto small = c.render(pavilion_loop().camera(f), f);  // answered within the delay of the one before
+    REQUIRE(small);
+    CHECK(small->width == 80);
+    CHECK_FALSE(small->refined);
+  }
+  const auto t0 = std::chrono::steady_clock::now();
+  auto still = c.next<protocol::Frame>();
+  const double waited_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+  REQUIRE(still);
+  CHECK(still->frame == 4);
+  CHECK(still->refined);
+  CHECK(still->width == 320);
+  CHECK(waited_ms > 1000);  // the delay (1500 ms from the frame's end, less the time to read it)
+  CHECK(node.count(Ev::abandoned) == 0);
+  // 4 requested frames and one still sample: nothing started in between.
+  for (int i = 0; i < 100 && node.count(Ev::frame) < 5; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(20));
+  CHECK(node.count(Ev::frame) == 5);
+}
+
 TEST_CASE("Within a frame budget the smallest scale cannot meet, interactive frames drop AO rays and then depth, "
           "and the still after them renders the page's settings", "[e2e][budget]") {
   // A 1 ms budget no pavilion frame meets, with 4 AO rays a hit and depth 4: every second
