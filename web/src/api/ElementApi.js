@@ -15,7 +15,7 @@
 import * as M from '../math/Mat4.js';
 import { Vec3, AxisAngle, Mat4, Box } from './MathTypes.js';
 import { warnOnce } from './Debug.js';
-import { MarkupReader } from '../reader/MarkupReader.js';
+import { MarkupReader, legacyFieldOfView } from '../reader/MarkupReader.js';
 import { SceneDescription } from '../reader/SceneDescription.js';
 import { localName } from '../reader/Values.js';
 import { meshWorldBox, emptyBox, clippingPlanes } from '../scene/Bounds.js';
@@ -133,7 +133,7 @@ function cameraOf(view) {
   if (scene && scene.camera && scene.camera.element === view) return { ...scene.camera, toWorld: worldMatrixOf(view) };
   const d = withReader(view, (r) => r.collect(view));
   const num = (k) => { const e = d.get(k); return e && e.value && e.value.length ? Number(e.value[0]) : null; };
-  return { toWorld: worldMatrixOf(view), fovY: num('fovVertical') ?? Math.PI / 4, fovX: num('fovHorizontal'), near: num('near'), far: num('far') };
+  return { toWorld: worldMatrixOf(view), fovY: num('fovVertical') ?? legacyFieldOfView(view) ?? Math.PI / 4, fovX: num('fovHorizontal'), near: num('near'), far: num('far') };
 }
 
 // ---- member definitions ------------------------------------------------------------------

@@ -14,7 +14,7 @@ const NON_SCENE = new Set(['defs', 'data', 'material', 'transform', 'asset', 'as
 
 const MATERIAL_PARAMS = new Set(['diffuseColor', 'specularColor', 'shininess', 'emissiveColor', 'ambientIntensity',
   'opacity', 'diffuseTexture', 'specularTexture', 'emissiveTexture', 'useVertexColor', 'reflectionCoefficient',
-  'refractionCoefficient', 'refractionIndex', 'alphaCutoff']);
+  'refractionCoefficient', 'refractionIndex', 'alphaCutoff', 'transparency']);
 
 const urnName = (urn, fallback) => (urn ? String(urn).trim().split(':').pop().toLowerCase() : fallback);
 
@@ -49,6 +49,16 @@ export function projectiveFovY(entry) {
   if (!zero(m[1]) || !zero(m[2]) || !zero(m[3]) || !zero(m[4]) || !zero(m[6]) || !zero(m[7]) || !zero(m[12]) || !zero(m[13])) return null;
   const fov = 2 * Math.atan(1 / m[5]);
   return fov > 0 && fov < Math.PI ? fov : null;
+}
+
+// XML3D 4.x's visible attribute (a bool, default true): "false" hides the element and its subtree.
+const hiddenBy4x = (el) => (el.getAttribute('visible') || '').trim().toLowerCase() === 'false';
+
+// XML3D 4.x's <view fieldOfView="rad"> (vertical; 5.x: <float name="fovVertical">), or null.
+export function legacyFieldOfView(view) {
+  const f = view.getAttribute('fieldOfView');
+  const v = f === null || f.trim() === '' ? NaN : Number(f);
+  return Number.isFinite(v) ? v : null;
 }
 
 const allFinite = (a) => {
@@ -128,6 +138,7 @@ export class MarkupReader {
           display: cs.display || inline.display, visibility: cs.visibility || inline.visibility,
           transform: cs.transform && cs.transform !== 'none' ? cs.transform : inline.transform,
           material: inline.material,
+          shader: inline.shader,  // XML3D 4.x: style="shader: url(#id)"
           'z-index': cs.zIndex && cs.zIndex !== 'auto' ? cs.zIndex : inline['z-index'],
           computed: !!cs.visibility,  // computed visibility already holds what is inherited
         };
@@ -242,8 +253,13 @@ export class MarkupReader {
 
   readTexture(el) {
     const img = el.firstElementChild || [...el.children][0];
-    const wrap = (el.getAttribute('wrap') || 'clamp').trim().split(/\s+/);
-    const filter = (el.getAttribute('filter') || 'linear-mipmap-linear linear').trim().split(/\s+/);
+    // XML3D 4.x names (wrapS, wrapT, filterMin, filterMag) when the 5.x ones are absent.
+    const wrap = (el.getAttribute('wrap') ||
+      (el.hasAttribute('wrapS') || el.hasAttribute('wrapT') ? `${el.getAttribute('wrapS') || 'clamp'} ${el.getAttribute('wrapT') || 'clamp'}` : 'clamp'))
+      .trim().toLowerCase().split(/\s+/);
+    const filter = (el.getAttribute('filter') ||
+      (el.hasAttribute('filterMin') || el.hasAttribute('filterMag') ? `${el.getAttribute('filterMin') || 'linear-mipmap-linear'} ${el.getAttribute('filterMag') || 'linear'}` : 'linear-mipmap-linear linear'))
+      .trim().toLowerCase().split(/\s+/);
     const mag = filter[1] || filter[0];
     if (!img) { this.error(el, `<texture name="${el.getAttribute('name')}"> has no <img> child`); return null; }
     let url = img.getAttribute('src') || '';
@@ -264,7 +280,30 @@ export class MarkupReader {
   }
 
   // ---- transforms ---------------------------------------------------------------------
+  // The element's own matrix (CSS transform over the transform attribute); for a <view>, the
+  // XML3D 4.x pose attributes position="x y z" and orientation="x y z angle" come after it
+  // (4.x: view to parent = T(position) * R(orientation); 5.x pages have neither). null = identity.
   localMatrix(el, style) {
+    const m = this.ownMatrix(el, style);
+    if (localName(el) !== 'view') return m;
+    const pose = this.legacyViewPose(el);
+    return pose ? (m ? M.multiply(m, pose) : pose) : m;
+  }
+
+  legacyViewPose(el) {
+    const pos = el.getAttribute('position'), ori = el.getAttribute('orientation');
+    if (pos === null && ori === null) return null;
+    const nums = (name, s, n) => {
+      const v = (String(s).match(/[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?/g) || []).map(Number);
+      if (v.length < n) { this.error(el, `${this.describe(el)} ${name}="${s}" needs ${n} numbers`); return null; }
+      return v.slice(0, n);
+    };
+    const p = pos !== null && nums('position', pos, 3) || [0, 0, 0];
+    const o = ori !== null && nums('orientation', ori, 4) || [0, 0, 1, 0];
+    return M.multiply(M.translation(...p), M.axisAngle(...o));
+  }
+
+  ownMatrix(el, style) {
     if (style.transform && style.transform !== 'none') {
       try {
         const m = parseCssTransform(style.transform);
@@ -314,15 +353,18 @@ export class MarkupReader {
       if (!displayed && tag !== 'light') continue;
       const local = this.localMatrix(el, style);
       const w = local ? M.multiply(world, local) : world;
-      const visible = inheritVisible && visibility !== 'hidden' && visibility !== 'collapse';
-      const mat = el.getAttribute('material') || style.material || materialRef;
+      // XML3D 4.x visible="false" on group, mesh, model, light and view (5.x: CSS display/visibility).
+      const visible = inheritVisible && visibility !== 'hidden' && visibility !== 'collapse' && !hiddenBy4x(el);
+      // XML3D 4.x names: shader="#id" and style="shader: url(#id)" (5.x: material).
+      const mat = el.getAttribute('material') || style.material ||
+        (tag !== 'light' && (el.getAttribute('shader') || style.shader)) || materialRef;
       const z = style['z-index'];
       if ((tag === 'mesh' || tag === 'model') && z && z !== 'auto')
         this.warn(el, `${this.describe(el)} z-index: ${z} is ignored: the scene is drawn in one depth order (no render bins)`);
       switch (tag) {
         case 'mesh': this.readMesh(el, w, mat, visible); break;
         case 'model': this.readModel(el, w, mat, visible); break;
-        case 'light': this.readLight(el, w, displayed && visible); break;
+        case 'light': this.readLight(el, w, displayed && visible, style); break;
         case 'view': this.views.push({ el, world: w }); break;
         default: this.walk(el, w, mat, visible, visibility); break;  // group and unknown elements
       }
@@ -341,15 +383,21 @@ export class MarkupReader {
       this.error(context, `material reference ${ref} points at <${localName(el)}>, not <material>`);
       return null;
     }
-    const model = urnName(el.getAttribute('model') || el.getAttribute('script'), 'phong');
-    return { model, data: this.collect(el), element: el };
+    // <shader script="urn:xml3d:shader:phong"> is XML3D 4.x's <material model="urn:xml3d:material:phong">.
+    const urn = el.getAttribute('model') || el.getAttribute('script');
+    return { model: urnName(urn, 'phong'), urn, data: this.collect(el), element: el };
   }
 
   buildMaterial(params, overrides, element) {
     let model = params ? params.model : 'matte';
     if (model === 'flat') model = 'matte';
+    if (model === 'phongvs') model = 'phong';  // early XML3D's per-vertex phong: the same parameters
     if (!['matte', 'diffuse', 'phong'].includes(model)) {
-      this.error(element, `material model "${model}" not supported, phong used`);
+      // Valid XML3D that this library cannot draw as written: a material registered by the page's
+      // script (XML3D.materials.register), a shade.js script (model="#id"), the point material.
+      const el = (params && params.element) || element;
+      this.warn(el, `${this.describe(el)} model="${(params && params.urn) || model}" is not supported ` +
+        '(only urn:xml3d:material:matte, flat, diffuse and phong are): drawn as phong with its parameters');
       model = 'phong';
     }
     const m = params ? { ...MATERIAL_DEFAULTS, model } : defaultMaterial();
@@ -358,6 +406,8 @@ export class MarkupReader {
       for (const [name, e] of data) {
         const key = name === 'reflection' ? 'reflectionCoefficient' : name === 'refraction' ? 'refractionCoefficient'
           : name === 'ior' ? 'refractionIndex' : name;
+        // XML3D 4.x's transparency (0 = opaque) is 1 - opacity.
+        if (key === 'transparency') { const t = first(e, null); if (Number.isFinite(t)) m.opacity = Math.min(1, Math.max(0, 1 - t)); continue; }
         if (!MATERIAL_PARAMS.has(key)) continue;
         // useVertexColor first: it ends in "Color" but is a bool, not an RGB triple.
         if (key === 'useVertexColor') m[key] = !!first(e, 0);
@@ -378,14 +428,14 @@ export class MarkupReader {
   // ---- meshes -------------------------------------------------------------------------
   readMesh(el, world, materialRef, visible) {
     const data = this.collect(el);
-    const type = (el.getAttribute('type') || 'triangles').trim();
+    const type = (el.getAttribute('type') || 'triangles').trim().toLowerCase();  // xml3d.js lower-cases it
     const overrides = new Map([...data].filter(([k]) => MATERIAL_PARAMS.has(k)));
     const params = this.materialParams(materialRef, el);
     const mat = this.buildMaterial(params, overrides, el);
     this.addGeometry(el, el, this.ids.of(el, 0), {
       positions: data.get('position'), normals: data.get('normal'), texcoords: data.get('texcoord'),
       colors: data.get('color'), indices: data.get('index'), vertexCount: data.get('vertexCount'),
-      type: type === 'derived' ? first(data.get('type'), 'triangles') : type,
+      type: type === 'derived' ? String(first(data.get('type'), 'triangles')).trim().toLowerCase() : type,
     }, world, mat, visible);
   }
 
@@ -653,20 +703,40 @@ export class MarkupReader {
   }
 
   // ---- lights -------------------------------------------------------------------------
-  readLight(el, world, on) {
-    const model = urnName(el.getAttribute('model'), 'directional');
+  // XML3D 5: <light model="urn:xml3d:light:…"> with its parameters inline. XML3D 4.x: <light
+  // shader="#ls"> (or style="shader: url(#ls)") naming a <lightshader
+  // script="urn:xml3d:lightshader:point|directional|spot"> that holds the parameters (the light's
+  // own values override them), a scalar intensity="k" attribute multiplying the float3
+  // intensity, and the spot's falloffAngle for cutoffAngle.
+  readLight(el, world, on, style = {}) {
+    let urn = el.getAttribute('model'), d = this.collect(el), scale = 1;
+    const shaderRef = !urn && (el.getAttribute('shader') || style.shader);
+    if (shaderRef) {
+      const r = this.resolve(shaderRef, el);
+      if (r.pending) return;
+      if (r.error) this.error(el, `${this.describe(el)} shader: ${r.error}`);
+      else if (r.element && localName(r.element) === 'lightshader') {
+        urn = r.element.getAttribute('script') || r.element.getAttribute('model') || '';
+        d = new Map([...this.collect(r.element), ...d]);
+      } else if (r.element) this.error(el, `${this.describe(el)} shader="${shaderRef}" points at <${localName(r.element)}>, not <lightshader>`);
+      const k = el.getAttribute('intensity');
+      if (k !== null && k.trim() !== '') {
+        scale = Number(k);
+        if (!Number.isFinite(scale)) { this.error(el, `${this.describe(el)} intensity="${k}" is not a number`); scale = 1; }
+      }
+    }
+    const model = urnName(urn, 'directional');
     let type = model;
     if (!['point', 'directional', 'spot'].includes(model)) {
       this.error(el, `light model "${model}" unknown, directional used`);
       type = 'directional';
     }
-    const d = this.collect(el);
     this.addLight(el, 0, type, world, {
-      color: vec3(d.get('intensity'), [1, 1, 1]),
+      color: vec3(d.get('intensity'), [1, 1, 1]).map((c) => c * scale),
       position: vec3(d.get('position'), [0, 0, 0]),
       direction: vec3(d.get('direction'), [0, 0, -1]),
       attenuation: vec3(d.get('attenuation'), [0, 0, 1]),
-      cutoff: first(d.get('cutoffAngle'), Math.PI / 4),
+      cutoff: first(d.get('cutoffAngle'), first(d.get('falloffAngle'), Math.PI / 4)),
       softness: first(d.get('softness'), 0),
       on: on && !!first(d.get('on'), 1),
       castShadow: !!first(d.get('castShadow'), 0),  // XML3D: false unless the light says so
@@ -692,7 +762,8 @@ export class MarkupReader {
   // ---- view ---------------------------------------------------------------------------
   chooseView(xml3d) {
     let active = null;
-    const sel = xml3d.getAttribute('view');
+    // XML3D 4.x: activeView="#id" (a URI; 5.x: view, a selector). "#id" is both.
+    const sel = xml3d.getAttribute('view') || xml3d.getAttribute('activeView') || xml3d.getAttribute('activeview');
     if (sel) {
       let el = null;
       try { el = xml3d.querySelector(sel); } catch { /* bad selector */ }
@@ -705,7 +776,7 @@ export class MarkupReader {
     if (active) {
       cam.toWorld = active.world;
       const d = this.collect(active.el);
-      cam.fovY = first(d.get('fovVertical'), Math.PI / 4);
+      cam.fovY = first(d.get('fovVertical'), legacyFieldOfView(active.el) ?? Math.PI / 4);
       const model = (active.el.getAttribute('model') || PERSPECTIVE).trim();
       if (model === PROJECTIVE) {
         const fov = projectiveFovY(d.get('projectionMatrix'));
@@ -749,7 +820,7 @@ const newTable = (el, parent) => ({
 const newEntry = (name, table) => ({ name, table, posts: [], type: null, classes: new Set() });
 function addPost(e, el) {
   e.posts.push(el);
-  if (localName(el) === 'assetmesh') e.type = (el.getAttribute('type') || 'triangles').trim();
+  if (localName(el) === 'assetmesh') e.type = (el.getAttribute('type') || 'triangles').trim().toLowerCase();
   for (const c of (el.getAttribute('class') || '').split(/\s+/)) if (c) e.classes.add(c);
 }
 // A copy of entry `e` (its own post list and classes) becomes an entry of table `t`.

@@ -137,6 +137,9 @@ export class CameraController {
     }
     const parent = M.invert(parentWorldOf(view));
     if (parent) m = M.multiply(parent, m);
+    // An XML3D 4.x pose (position, orientation) is now part of the <transform>.
+    view.removeAttribute('position');
+    view.removeAttribute('orientation');
     const aa = M.toAxisAngle(m);
     t.setAttribute('translation', `${m[12]} ${m[13]} ${m[14]}`);
     t.setAttribute('rotation', aa.join(' '));

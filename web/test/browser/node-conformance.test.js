@@ -94,6 +94,13 @@ function quadColour([x, y]) {
 const VC = view(200, 100);
 const vcProbe = (what, x, y) => probe(VC, what, -1.2 + x, y, -3.5, ([X, Y]) => quadColour([X + 1.2, Y]));
 
+// v4-lightshader.html: a point light of intensity 9 (18 x the intensity attribute 0.5) at the
+// camera, attenuation 1/d², a white diffuse wall facing it 3 units away: 9 cos θ / d² = 27 / d³.
+function pointLit([X, Y]) {
+  const v = 255 * Math.min(1, 27 / (X * X + Y * Y + 9) ** 1.5);
+  return [v, v, v];
+}
+
 // Green rows in column c of a view (projective-view.html: the square's height in pixels).
 const greenRun = (img, c) => { let n = 0; for (let r = 0; r < img.h; r++) { const i = (r * img.w + c) * 3; if (img.rgb[i + 1] > 128 && img.rgb[i] < 128) n++; } return n; };
 
@@ -224,6 +231,36 @@ const PAGES = [
       probe(V200, 'no dot at (-1, 0)', -1, 0, -2, BLACK),
       probe(V200, 'no dot at (1, 0)', 1, 0, -2, BLACK),
       probe(V200, 'no dot at (0, 0.8)', 0, 0.8, -2, BLACK),
+    ],
+  },
+  {
+    page: 'v4-lightshader.html',
+    probes: [[0, 0], [1, 0], [1.5, 0.3], [2, -0.5], [-2.3, 0.8], [-0.6, -1]].map(([X, Y]) =>
+      probe(V240, `the wall at (${X}, ${Y}): 27 / d³ from the 4.x point light (intensity 18 x 0.5)`, X, Y, -3, pointLit, { tol: 16 })),
+  },
+  {
+    page: 'v4-shader.html',
+    probes: [
+      probe(V240, 'left: shader="#green" on the group', -1.5, 0, -3, GREEN),
+      probe(V240, 'left: green near its corner (the visible="false" white square not drawn)', -1.9, 0.4, -3, GREEN),
+      probe(V240, 'middle: style="shader: url(#blue)" on the mesh', 0, 0, -3, BLUE),
+      probe(V240, 'middle: blue near its corner', 0.4, -0.4, -3, BLUE),
+      probe(V240, 'right: phongvs drawn as phong, emissive yellow', 1.5, 0, -3, YELLOW),
+      probe(V240, 'right: yellow near its corner (the visible="false" white mesh not drawn)', 1.9, 0.4, -3, YELLOW),
+      probe(V240, 'black between the squares', -0.75, 0, -3, BLACK),
+      probe(V240, 'black above them', 0, 0.8, -3, BLACK),
+    ],
+  },
+  {
+    page: 'v4-view.html',
+    probes: [
+      probe(view(200, 100, 0.6), 'the green square, left', -1.2, 0, -3.5, GREEN),
+      probe(view(200, 100, 0.6), 'green near its top-left corner', -1.8, 0.7, -3.5, GREEN),
+      probe(view(200, 100, 0.6), 'black just above it (fieldOfView 0.6)', -1.2, 0.92, -3.5, BLACK),
+      probe(view(200, 100, 0.6), 'the red square, right', 1.2, 0, -3.5, RED),
+      probe(view(200, 100, 0.6), 'red near its bottom-right corner', 1.8, -0.7, -3.5, RED),
+      probe(view(200, 100, 0.6), 'black in the centre (no blue square from the first view)', 0, 0, -3.5, BLACK),
+      probe(view(200, 100, 0.6), 'black above the centre', 0, 0.6, -3.5, BLACK),
     ],
   },
   {
