@@ -18,6 +18,8 @@ const MATERIAL_PARAMS = new Set(['diffuseColor', 'specularColor', 'shininess', '
 
 const urnName = (urn, fallback) => (urn ? String(urn).trim().split(':').pop().toLowerCase() : fallback);
 
+const XHTML_NS = 'http://www.w3.org/1999/xhtml';
+
 // A minimal style reader for DOMs without getComputedStyle (unit tests): the style attribute.
 function inlineStyle(el) {
   const out = {};
@@ -134,9 +136,13 @@ export class MarkupReader {
     if (this.computedStyle && (!pageDoc || el.ownerDocument === pageDoc)) {
       try {
         const cs = this.computedStyle(el);
+        // Elements of the XML3D namespace in an XHTML page (<xml3d xmlns="http://www.xml3d.org/2009/xml3d">,
+        // as 4.x pages wrote them): the browser applies style sheets to them but not their style
+        // attribute, so there what the attribute says wins.
+        const own = el.namespaceURI && el.namespaceURI !== XHTML_NS ? inline : {};
         return {
-          display: cs.display || inline.display, visibility: cs.visibility || inline.visibility,
-          transform: cs.transform && cs.transform !== 'none' ? cs.transform : inline.transform,
+          display: own.display || cs.display || inline.display, visibility: own.visibility || cs.visibility || inline.visibility,
+          transform: own.transform || (cs.transform && cs.transform !== 'none' ? cs.transform : inline.transform),
           material: inline.material,
           shader: inline.shader,  // XML3D 4.x: style="shader: url(#id)"
           'z-index': cs.zIndex && cs.zIndex !== 'auto' ? cs.zIndex : inline['z-index'],
