@@ -454,9 +454,18 @@ LoadedScene load_gltf(const std::string& path, const GltfOptions& options) {
   const tinygltf::Value* lights_ext = nullptr;
   if (auto it = model.extensions.find("KHR_lights_punctual"); it != model.extensions.end()) lights_ext = &it->second;
 
+  // glTF's nodes form disjoint trees: a node has at most one parent and is reached once. A node
+  // reached a second time (a second parent, a cycle, a root listed twice) is refused: otherwise
+  // each node listing the next one twice doubles the walk (64 such nodes, 1.4 KB, would never
+  // finish), and a cycle would recurse until the depth check.
+  std::vector<uint8_t> reached(model.nodes.size(), 0);
   std::function<void(int, const Mat4&, int)> visit = [&](int ni, const Mat4& parent, int depth) {
     if (ni < 0 || size_t(ni) >= model.nodes.size()) throw LoadError(path + ": node index " + std::to_string(ni) + " out of range");
-    if (depth > 256) throw LoadError(path + ": node hierarchy deeper than 256 (a cycle?)");
+    if (reached[size_t(ni)])
+      throw LoadError(path + ": node " + std::to_string(ni) +
+                      " is reached twice from the scene (a second parent, a cycle or a repeated root; glTF nodes form trees)");
+    reached[size_t(ni)] = 1;
+    if (depth > 256) throw LoadError(path + ": node hierarchy deeper than 256");
     const auto& node = model.nodes[ni];
     Mat4 world = parent * node_local(node);
     if (!world.finite()) throw LoadError(path + ": node '" + node.name + "' has a non-finite transform");

@@ -362,6 +362,32 @@ TEST_CASE("broken glTF files throw std::runtime_error naming the file", "[gltf][
   std::string cyc = good;
   cyc.replace(cyc.find(R"({"mesh":0},)"), 11, R"({"mesh":0,"children":[0]},)");
   expect_error(dir.write("cycle.gltf", cyc), "node cycle");
+  // A node reached twice (fuzz finding gltf_node_dag_hang): 64 nodes each listing the next one
+  // twice as its child made 2^64 visits, so the load never ended. Refused at the second visit,
+  // as are a node with two parents and a root listed twice; the message says which node.
+  auto expect_reached_twice = [&](const std::string& name, const std::string& text, int node) {
+    const std::string path = dir.write(name, text);
+    INFO(name);
+    try {
+      load_gltf(path);
+      FAIL("loaded without an error");
+    } catch (const std::runtime_error& e) {
+      const std::string msg = e.what();
+      INFO("message: " << msg);
+      CHECK(msg.find(path) != std::string::npos);
+      CHECK(msg.find("node " + std::to_string(node) + " is reached twice") != std::string::npos);
+    }
+  };
+  std::string dag = R"({"asset":{"version":"2.0"},"scene":0,"scenes":[{"nodes":[0]}],"nodes":[)";
+  for (int i = 0; i < 64; ++i) dag += R"({"children":[)" + std::to_string(i + 1) + "," + std::to_string(i + 1) + "]},";
+  dag += "{}]}";
+  expect_reached_twice("dag.gltf", dag, 64);  // depth first: 0..64, then 63's second child
+  std::string two_parents = good;
+  two_parents.replace(two_parents.find(R"({"mesh":0},)"), 11, R"({"mesh":0,"children":[1]},)");
+  expect_reached_twice("two_parents.gltf", two_parents, 1);
+  std::string root_twice = good;
+  root_twice.replace(root_twice.find(R"("nodes":[0,1])"), 13, R"("nodes":[0,1,0])");
+  expect_reached_twice("root_twice.gltf", root_twice, 0);
   // A .glb that is not one.
   expect_error(dir.write("fake.glb", std::string("glTF\x02\x00\x00\x00garbage", 15)), "bad binary glTF");
 }
