@@ -27,6 +27,7 @@ const char* mime_type(const std::string& path) {
     const char* type;
   } kTypes[] = {
       {".html", "text/html; charset=utf-8"}, {".htm", "text/html; charset=utf-8"},
+      {".xhtml", "application/xhtml+xml"},  // XML3D 4.x pages
       {".js", "text/javascript; charset=utf-8"}, {".mjs", "text/javascript; charset=utf-8"},
       {".css", "text/css; charset=utf-8"}, {".json", "application/json"},
       {".png", "image/png"}, {".jpg", "image/jpeg"}, {".jpeg", "image/jpeg"}, {".gif", "image/gif"},

@@ -23,6 +23,7 @@ TEST_CASE("MIME types follow the file extension", "[unit]") {
   CHECK(std::string(mime_type("x.JS")) == "text/javascript; charset=utf-8");
   CHECK(std::string(mime_type("x.png")) == "image/png");
   CHECK(std::string(mime_type("x.wasm")) == "application/wasm");
+  CHECK(std::string(mime_type("old/page.XHTML")) == "application/xhtml+xml");
   CHECK(std::string(mime_type("dir.d/noext")) == "application/octet-stream");
 }
 
