@@ -10,6 +10,11 @@
 #define STBI_FAILURE_USERMSG
 // Each side at most 16384 (kMaxDecodedPixels in all): a header cannot make stb_image allocate more.
 #define STBI_MAX_DIMENSIONS 16384
+// PNG and JPEG only (all glTF 2.0 and the protocol allow). stb_image's other readers (PSD, BMP,
+// TGA, HDR, PIC, PNM, GIF) allocate and fill the header's size whatever data follows: a
+// 30-byte PSD header in a glTF data: URI made it allocate and write 1 GiB.
+#define STBI_ONLY_PNG
+#define STBI_ONLY_JPEG
 #if defined(__GNUC__)
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wmissing-field-initializers"
@@ -74,7 +79,13 @@ bool decode_image(const uint8_t* data, size_t size, Image& out, std::string& err
     error = "image data too large";
     return false;
   }
-  if (size >= 3 && data[0] == 0xFF && data[1] == 0xD8 && data[2] == 0xFF) {
+  static const uint8_t png_sig[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
+  const bool jpeg = size >= 3 && data[0] == 0xFF && data[1] == 0xD8 && data[2] == 0xFF;
+  if (!jpeg && !(size >= 8 && std::memcmp(data, png_sig, 8) == 0)) {
+    error = "not a PNG or JPEG image";
+    return false;
+  }
+  if (jpeg) {
     std::string jpeg_error;
     switch (turbo_decode(data, size, out, jpeg_error)) {
       case Jpeg::ok: return true;

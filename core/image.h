@@ -20,10 +20,11 @@ struct Image {
 void write_png(const std::string& path, const Image& img);
 // Reads a PNG or JPEG into RGBA8; throws std::runtime_error naming the file on failure.
 Image read_image(const std::string& path);
-// Decodes an in-memory PNG/JPEG; returns false and sets error on failure. JPEGs are decoded by
-// libjpeg-turbo (jpeg_decode: the San Miguel-sized scene's 222 textures in 1.4 s instead of
-// stb_image's 2.0 s, docs/results/load.md); stb_image decodes the rest and the JPEGs
-// libjpeg-turbo cannot (such as CMYK ones), but not those it refuses as too large.
+// Decodes an in-memory PNG/JPEG; returns false and sets error on failure (any other format:
+// "not a PNG or JPEG image"). JPEGs are decoded by libjpeg-turbo (jpeg_decode: the San
+// Miguel-sized scene's 222 textures in 1.4 s instead of stb_image's 2.0 s,
+// docs/results/load.md); stb_image decodes PNGs and the JPEGs libjpeg-turbo cannot (such as
+// CMYK ones), but not those it refuses as too large.
 bool decode_image(const uint8_t* data, size_t size, Image& out, std::string& error);
 // Decodes a JPEG into RGBA8 (alpha 255) with libjpeg-turbo. Creates a handle per call (so any
 // thread may call it). Progressive files with an unreasonable number of scans are rejected

@@ -143,6 +143,28 @@ TEST_CASE("a JPEG that declares a huge size is refused before decoding, by jpeg_
   CHECK(a.rgba == b.rgba);
 }
 
+TEST_CASE("decode_image reads PNG and JPEG only: other formats are refused before anything is allocated", "[codecs]") {
+  // Fuzz finding gltf_psd_header_1GiB: a 30-byte PSD header claiming 16384 x 16384 made
+  // stb_image allocate and fill 1 GiB with no pixel data behind it. Its other formats (BMP,
+  // TGA, GIF, HDR, PNM, PIC) are refused the same way.
+  std::vector<uint8_t> psd = {'8', 'B', 'P', 'S', 0, 1, 0, 0, 0, 0, 0, 0, 0, 3, 0, 0, 0x40, 0, 0, 0, 0x40, 0, 0, 8, 0, 3};
+  psd.resize(psd.size() + 14, 0);  // empty colour, resource and layer sections; raw data, none of it there
+  const std::vector<uint8_t> bmp = {'B', 'M', 0, 0, 0, 0, 0, 0, 0, 0, 54, 0, 0, 0, 40, 0, 0, 0, 0, 0x40, 0, 0, 0, 0x40, 0, 0, 1, 0, 24, 0};
+  const std::vector<uint8_t> pnm = {'P', '6', '\n', '1', '6', '3', '8', '4', ' ', '1', '6', '3', '8', '4', '\n', '2', '5', '5', '\n'};
+  const std::vector<uint8_t>* inputs[] = {&psd, &bmp, &pnm};
+  for (const std::vector<uint8_t>* bytes : inputs) {
+    Image back;
+    std::string err;
+    CHECK_FALSE(decode_image(bytes->data(), bytes->size(), back, err));
+    CHECK(err == "not a PNG or JPEG image");
+    CHECK(back.rgba.empty());
+  }
+  Image back;
+  std::string err;
+  CHECK_FALSE(decode_image(psd.data(), 0, back, err));
+  CHECK(err == "not a PNG or JPEG image");
+}
+
 TEST_CASE("DXT1 sizes are ceil(w/4)*ceil(h/4)*8", "[codecs][dxt1]") {
   CHECK(dxt1_size(1, 1) == 8);
   CHECK(dxt1_size(5, 3) == 16);

@@ -257,6 +257,24 @@ TEST_CASE("glTF emissiveTexture becomes the material's emissive texture, times e
   CHECK(warned);
 }
 
+TEST_CASE("a glTF image that is not PNG or JPEG is left out with a warning, the rest loads", "[gltf][broken]") {
+  // Fuzz finding gltf_psd_header_1GiB: a PSD header claiming 16384 x 16384 in a data: URI
+  // (30 bytes, no pixels) made stb_image allocate and write 1 GiB.
+  TempDir dir;
+  dir.write("tri.bin", tri_bin());
+  std::string j = tri_gltf();
+  j.pop_back();
+  j += R"(,"images":[{"uri":"data:image/png;base64,OEJQUwABAAAAAAAAAAMAAEAAAABAAAAIAAMAAAAAAAAAAAAAAAAAAA=="}],)"
+       R"("textures":[{"source":0}],"materials":[{"pbrMetallicRoughness":{"baseColorTexture":{"index":0}}}]})";
+  LoadedScene ls = load_gltf(dir.write("psd.gltf", j));
+  CHECK(ls.scene.textures().empty());
+  CHECK(ls.scene.meshes().size() == 2);
+  bool warned = false;
+  for (const std::string& w : ls.warnings)
+    warned = warned || (w.find("could not be decoded (not a PNG or JPEG image)") != std::string::npos);
+  CHECK(warned);
+}
+
 TEST_CASE("glTF textures of one image share its decoded bytes", "[gltf]") {
   TempDir dir;
   const uint8_t texels[8] = {200, 30, 40, 255, 10, 220, 90, 128};
