@@ -5,11 +5,14 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <limits>
 #include <map>
 #include <stdexcept>
+#include <utility>
 
 #define TINYGLTF_IMPLEMENTATION
 #define TINYGLTF_NO_STB_IMAGE_WRITE
@@ -275,6 +278,41 @@ bool keep_encoded(tinygltf::Image* image, const int index, std::string*, std::st
   return true;
 }
 
+// tinygltf turns JSON under "extras" and "extensions" into its Values recursively, one stack
+// frame a level: 100000 nested brackets (200 KB) overflowed the stack. Files nested deeper
+// than this are refused before tinygltf parses them (glTF's own structure nests fewer than ten).
+constexpr size_t kMaxJsonDepth = 256;
+
+// The deepest nesting of arrays and objects in JSON text (brackets inside strings skipped).
+size_t json_depth(const unsigned char* p, size_t n) {
+  size_t depth = 0, deepest = 0;
+  bool in_string = false;
+  for (size_t i = 0; i < n; ++i) {
+    const unsigned char c = p[i];
+    if (in_string) {
+      if (c == '\\') ++i;
+      else if (c == '"') in_string = false;
+    } else if (c == '"') {
+      in_string = true;
+    } else if (c == '[' || c == '{') {
+      deepest = std::max(deepest, ++depth);
+    } else if ((c == ']' || c == '}') && depth > 0) {
+      --depth;
+    }
+  }
+  return deepest;
+}
+
+// The JSON text of a glTF file: all of a .gltf, the first chunk of a .glb (as far as it lies in
+// the file; tinygltf checks the rest of the container).
+std::pair<const unsigned char*, size_t> json_text(const std::vector<unsigned char>& file, bool binary) {
+  if (!binary) return {file.data(), file.size()};
+  if (file.size() < 20) return {file.data(), 0};
+  uint32_t length = 0;
+  std::memcpy(&length, file.data() + 12, 4);  // little-endian, as the .glb header
+  return {file.data() + 20, std::min<size_t>(length, file.size() - 20)};
+}
+
 double ms_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
 }
@@ -297,8 +335,26 @@ LoadedScene load_gltf(const std::string& path, const GltfOptions& options) {
   tinygltf::FsCallbacks fs{&tinygltf::FileExists, &tinygltf::ExpandFilePath, &jailed_read, &tinygltf::WriteWholeFile, &jail};
   ctx.SetFsCallbacks(fs);
   try {
-    bool binary = path.size() > 4 && path.compare(path.size() - 4, 4, ".glb") == 0;
-    ok = binary ? ctx.LoadBinaryFromFile(&model, &err, &warn, path) : ctx.LoadASCIIFromFile(&model, &err, &warn, path);
+    // Read here (through the jail, as tinygltf's *FromFile would) so that the JSON's nesting is
+    // checked before tinygltf parses it.
+    const bool binary = path.size() > 4 && path.compare(path.size() - 4, 4, ".glb") == 0;
+    std::vector<unsigned char> file;
+    std::string read_err;
+    if (!jailed_read(&file, &read_err, path, &jail)) throw LoadError(path + ": cannot read file: " + read_err);
+    if (file.size() > std::numeric_limits<unsigned int>::max()) throw LoadError(path + ": file larger than 4 GiB");
+    const auto [text, text_size] = json_text(file, binary);
+    if (json_depth(text, text_size) > kMaxJsonDepth)
+      throw LoadError(path + ": JSON nested deeper than " + std::to_string(kMaxJsonDepth) + " levels");
+    const std::string base_dir = tinygltf::GetBaseDir(path);
+    if (binary)
+      ok = ctx.LoadBinaryFromMemory(&model, &err, &warn, file.data(), static_cast<unsigned int>(file.size()), base_dir);
+    else if (file.empty())
+      err = "empty file";
+    else
+      ok = ctx.LoadASCIIFromString(&model, &err, &warn, reinterpret_cast<const char*>(file.data()),
+                                   static_cast<unsigned int>(file.size()), base_dir);
+  } catch (const LoadError&) {
+    throw;
   } catch (const std::exception& e) {
     throw LoadError(path + ": " + e.what());
   }

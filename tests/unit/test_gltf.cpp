@@ -408,6 +408,40 @@ TEST_CASE("broken glTF files throw std::runtime_error naming the file", "[gltf][
   expect_reached_twice("root_twice.gltf", root_twice, 0);
   // A .glb that is not one.
   expect_error(dir.write("fake.glb", std::string("glTF\x02\x00\x00\x00garbage", 15)), "bad binary glTF");
+  expect_error(dir.write("empty.glb", ""), "empty binary file");
+  // JSON nested 100000 deep in "extras" (fuzz finding gltf_deep_extras_stack): tinygltf's
+  // recursive conversion overflowed the stack. Refused before parsing, in .gltf and .glb alike;
+  // 256 levels still load, and brackets inside strings do not count.
+  auto nested = [&](size_t depth, const std::string& in_string) {
+    std::string t = good;
+    t.pop_back();
+    return t + R"(,"extras":{"s":")" + in_string + R"(","x":)" + std::string(depth - 2, '[') + std::string(depth - 2, ']') + "}}";
+  };
+  auto expect_too_deep = [&](const std::string& path) {
+    INFO(path);
+    try {
+      load_gltf(path);
+      FAIL("loaded without an error");
+    } catch (const std::runtime_error& e) {
+      const std::string msg = e.what();
+      INFO("message: " << msg);
+      CHECK(msg.find(path + ": JSON nested deeper than 256 levels") != std::string::npos);
+    }
+  };
+  expect_too_deep(dir.write("deep.gltf", nested(100000, "")));
+  expect_too_deep(dir.write("deep257.gltf", nested(257, "")));
+  CHECK(load_gltf(dir.write("deep256.gltf", nested(256, std::string(300, '[') + "\\\"{"))).scene.meshes().size() == 2);
+  {
+    std::string json = nested(100000, "");
+    json.resize((json.size() + 3) / 4 * 4, ' ');
+    std::string glb = "glTF";
+    auto u32 = [&](uint32_t v) { glb.append(reinterpret_cast<const char*>(&v), 4); };
+    u32(2);
+    u32(uint32_t(20 + json.size()));
+    u32(uint32_t(json.size()));
+    glb += "JSON" + json;
+    expect_too_deep(dir.write("deep.glb", glb));
+  }
 }
 
 TEST_CASE("mutated glTF files never crash: they load or throw a runtime_error naming the file", "[gltf][broken]") {
