@@ -194,7 +194,7 @@ TEST_CASE("an injected 5 ms stall is detected, replaced and does not move the ti
   // stall added to the stalled packet (what the raw map held, at least 5% of the frame's cost,
   // so that it steers the tiling also where packets are slow, as under ASan), and with that
   // packet replaced as the renderer replaced it above. The cleaned map's tiling must balance the undisturbed
-  // costs as well as the undisturbed map's own tiling, within 2% of a task's share; the raw
+  // costs as well as the undisturbed map's own tiling, within 2% of a task's share or a packet line; the raw
   // map's must be visibly worse.
   CostMap ref_min = ref.cost;
   for (int i = 1; i < 3; ++i) {
@@ -217,7 +217,11 @@ TEST_CASE("an injected 5 ms stall is detected, replaced and does not move the ti
     const double imb_raw = imbalance(tiling(raw_min, nodes), ref_min);
     INFO(nodes << " nodes: worst task off its share by " << imb_ref << " (undisturbed tiling), " << imb_clean
                << " (cleaned), " << imb_raw << " (raw)");
-    CHECK(imb_clean <= imb_ref + 0.02);
+    // One packet's cost moved (the replacement is a neighbour's, not the packet's own) can move a
+    // split by a whole packet line, about sqrt(nodes / packets) of a task's share (0.047 at 8
+    // nodes here): the bound is that or 2%, whichever is larger.
+    const double line = std::sqrt(double(nodes) / double(n));
+    CHECK(imb_clean <= imb_ref + std::max(0.02, line));
     CHECK(imb_raw > imb_clean + 0.02);
   }
 }
