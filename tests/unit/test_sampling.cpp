@@ -40,6 +40,36 @@ double rms_error(F f, double exact, uint32_t n, P point) {
 
 }  // namespace
 
+TEST_CASE("sampling: sobol1 and shifted give the bits of their definitions", "[sampling]") {
+  // The second dimension from its direction numbers, one set bit of i at a time, and a point
+  // as Owen-scrambled Sobol dimensions of an Owen-scrambled index, spelled out.
+  auto sobol1_loop = [](uint32_t i) {
+    uint32_t r = 0;
+    for (uint32_t v = 1u << 31; i; i >>= 1, v ^= v >> 1)
+      if (i & 1) r ^= v;
+    return r;
+  };
+  auto shifted_spelled = [&](uint32_t i, uint32_t seed, uint32_t salt) {
+    const uint32_t key = sampling::mix(seed ^ salt);
+    const uint32_t index = sampling::owen(i, key);
+    const uint32_t a = sampling::owen(sampling::sobol0(index), sampling::mix(key ^ 0x5BD1E995u));
+    const uint32_t b = sampling::owen(sobol1_loop(index), sampling::mix(key ^ 0x1B873593u));
+    return sampling::Point{float(a >> 8) * 5.9604644775390625e-08f, float(b >> 8) * 5.9604644775390625e-08f};
+  };
+  for (uint32_t i = 0; i < 4096; ++i) REQUIRE(sampling::sobol1(i) == sobol1_loop(i));
+  std::mt19937 rng(11);
+  for (int n = 0; n < 200000; ++n) {
+    const uint32_t i = rng();
+    REQUIRE(sampling::sobol1(i) == sobol1_loop(i));
+  }
+  for (int n = 0; n < 20000; ++n) {
+    const uint32_t i = rng() & 0xFFFFu, seed = rng(), salt = rng();
+    const sampling::Point p = sampling::shifted(i, seed, salt), q = shifted_spelled(i, seed, salt);
+    REQUIRE(p.u == q.u);
+    REQUIRE(p.v == q.v);
+  }
+}
+
 TEST_CASE("sampling: every 2^k consecutive points form a (0,k,2)-net under any per-pixel shift", "[sampling]") {
   std::mt19937 rng(7);
   for (int trial = 0; trial < 20; ++trial) {
