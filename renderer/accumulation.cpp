@@ -1,7 +1,11 @@
 #include "renderer/accumulation.h"
 
+#include <algorithm>
 #include <cstring>
 #include <stdexcept>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 
 #include "renderer/raytracer_impl.h"
 
@@ -52,17 +56,21 @@ std::vector<float> Accumulation::mean() const {
 namespace {
 
 // width x height pixels whose RGB value i is value(i), encoded as the renderer encodes a frame.
+// Rows in parallel (TBB, the calling arena): every refined frame of a still goes through here,
+// 10 ms a 1280x720 frame on one thread.
 template <class Value>
 Image encode_values(int32_t width, int32_t height, bool srgb, Value value) {
   Image out(width, height);
-  const size_t pixels = size_t(width) * size_t(height);
-  for (size_t p = 0; p < pixels; ++p) {
-    for (int c = 0; c < 3; ++c) {
-      const float v = value(p * 3 + size_t(c));
-      out.rgba[p * 4 + size_t(c)] = uint8_t(srgb ? raytracer_detail::encode_srgb(v) : raytracer_detail::encode_plain(v));
+  const size_t W = size_t(std::max(width, 0));
+  tbb::parallel_for(tbb::blocked_range<int32_t>(0, std::max(height, 0), 16), [&](const tbb::blocked_range<int32_t>& r) {
+    for (size_t p = size_t(r.begin()) * W; p < size_t(r.end()) * W; ++p) {
+      for (int c = 0; c < 3; ++c) {
+        const float v = value(p * 3 + size_t(c));
+        out.rgba[p * 4 + size_t(c)] = uint8_t(srgb ? raytracer_detail::encode_srgb(v) : raytracer_detail::encode_plain(v));
+      }
+      out.rgba[p * 4 + 3] = 255;
     }
-    out.rgba[p * 4 + 3] = 255;
-  }
+  });
   return out;
 }
 

@@ -10,31 +10,19 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include "renderer/cpu.h"
 #include "renderer/renderer.h"
 
 namespace tessera {
 namespace {
 
+using raytracer_detail::cpu_avx2;
+using raytracer_detail::cpu_avx512;
+
 static_assert(kDenoiseGuideFloats == kGuideFloats, "denoise.h's guide count is renderer.h's");
 
 // Offsets into one pixel's guides.
 constexpr int kNormal = 0, kDistance = 3, kAmbient = 4, kOpen = 7;
-
-// exp(-e) for e >= 0 to about 1e-3 relative (a weight, not a result): 2^-(e log2 e) as a
-// power of two times a quartic in the fraction. Large e, +inf and NaN give 0. Branch-free
-// (selects), so that loops over pixels vectorise.
-inline float exp_neg(float e) {
-  const float x0 = e * 1.44269504f;
-  const bool small = x0 < 126.0f;  // false for large e, +inf and NaN
-  const float x = small ? x0 : 0.0f;
-  const int32_t i = int32_t(x);  // x >= 0: truncation is the floor
-  const float f = x - float(i);
-  const float poly = 1.0f + f * (-0.69314718f + f * (0.24022651f + f * (-0.05550411f + f * 0.00961813f)));
-  const uint32_t bits = uint32_t(127 - i) << 23;
-  float scale;
-  std::memcpy(&scale, &bits, sizeof scale);
-  return small ? poly * scale : 0.0f;
-}
 
 constexpr float kB3[5] = {1.0f / 16, 1.0f / 4, 3.0f / 8, 1.0f / 4, 1.0f / 16};
 constexpr float kGauss3[3] = {0.25f, 0.5f, 0.25f};
@@ -58,89 +46,52 @@ struct Pass {
   int32_t width, height, step;
 };
 
-// A tap's weight: the B3 kernel's, times how alike p and q are in normal (their cosine), open
-// fraction (dval) and distance (dz) on p's scales. q not taking part (qz < 0) weighs nothing:
-// a factor, not a branch, so that interior()'s loop vectorises.
-inline float tap_weight(float cosn, float dval, float dz, float v_scale, float z_scale, float kernel, float inv_d,
-                        float qz) {
-  float wn = cosn > 0.0f ? cosn : 0.0f;
-  static_assert(kNormalSquarings == 7, "the squarings below");
-  wn *= wn, wn *= wn, wn *= wn, wn *= wn, wn *= wn, wn *= wn, wn *= wn;
-  const float e = std::fabs(dval) * v_scale + std::fabs(dz) * z_scale * inv_d;
-  return kernel * wn * exp_neg(e) * (qz >= 0 ? 1.0f : 0.0f);
-}
+// What one row of a pass's weight scales reads and writes (scales_row).
+struct Scales {
+  const float *var, *grad, *z;
+  float *v_scale, *z_scale;
+  int32_t width, height, step;
+  float sigma_value, sigma_distance;
+};
 
-// One tap: q's weight for p, added to p's sums.
-inline void tap(const Pass& a, size_t p, size_t q, float kernel, float inv_d, float& sv, float& svar, float& sw) {
-  const float w = tap_weight(a.nx[p] * a.nx[q] + a.ny[p] * a.ny[q] + a.nz[p] * a.nz[q], a.val[p] - a.val[q],
-                             a.z[p] - a.z[q], a.v_scale[p], a.z_scale[p], kernel, inv_d, a.z[q]);
-  sv += w * a.val[q];
-  svar += w * w * a.var[q];
-  sw += w;
-}
+// The most pixels interior() filters at once: 13 input rows and 3 sums of this many floats
+// stay in a first-level cache (512 floats: 32 KB).
+constexpr int32_t kSpan = 512;
 
-// The filtered pixel from its sums; one not taking part, or with no weight (guides not
-// finite), stays as it is.
-inline void put(const Pass& a, size_t p, float sv, float svar, float sw) {
-  const bool keep = !(a.z[p] >= 0) || !(sw > 0);
-  const float inv = keep ? 0.0f : 1.0f / sw;
-  a.val2[p] = keep ? a.val[p] : sv * inv;
-  a.var2[p] = keep ? a.var[p] : svar * inv * inv;
-}
-
-// Pixels [x0, x1) of row y, all of whose taps lie inside the row's width: tap after tap over
-// the whole span, in loops that vectorise (with -fno-trapping-math: renderer/CMakeLists.txt).
-// sums: room for 3 (x1 - x0) floats.
-void interior(const Pass& a, int32_t y, int32_t x0, int32_t x1, float* sums) {
-  const size_t n = size_t(x1 - x0), W = size_t(a.width), row = size_t(y) * W + size_t(x0);
-  float* __restrict sv = sums;
-  float* __restrict svar = sv + n;
-  float* __restrict sw = svar + n;
-  std::fill(sums, sums + 3 * n, 0.0f);
-  // The span's own pixels (p) as plain pointers, so that the loop below is one the
-  // vectoriser reads: every access an affine function of i.
-  const float *__restrict pnx = a.nx + row, *__restrict pny = a.ny + row, *__restrict pnz = a.nz + row;
-  const float *__restrict pz = a.z + row, *__restrict pval = a.val + row;
-  const float *__restrict pvs = a.v_scale + row, *__restrict pzs = a.z_scale + row;
-  for (int dy = -2; dy <= 2; ++dy) {
-    const int32_t qy = y + dy * a.step;
-    if (qy < 0 || qy >= a.height) continue;
-    for (int dx = -2; dx <= 2; ++dx) {
-      const float kernel = kB3[dx + 2] * kB3[dy + 2], inv_d = kInvDist.v[dy + 2][dx + 2];
-      const size_t q0 = size_t(ptrdiff_t(row) + ptrdiff_t(qy - y) * ptrdiff_t(W) + ptrdiff_t(dx) * a.step);
-      const float *__restrict qnx = a.nx + q0, *__restrict qny = a.ny + q0, *__restrict qnz = a.nz + q0;
-      const float *__restrict qz = a.z + q0, *__restrict qval = a.val + q0, *__restrict qvar = a.var + q0;
-      // The pointers only read what the loop never writes (sums is scratch space of its own).
-#if defined(__GNUC__) && !defined(__clang__)  // (clang builds are the sanitizer builds, at -O1)
-#pragma GCC ivdep
+// The pixel loops, once per instruction set (see renderer/denoise_pass.inc). -ffp-contract=off
+// for this file (renderer/CMakeLists.txt): no copy fuses a multiply and an add, so all give
+// the same bits.
+namespace isa_sse {
+#include "renderer/denoise_pass.inc"
+}  // namespace isa_sse
+#if defined(__clang__)
+// clang ignores `#pragma GCC target`: one baseline copy (the sanitizer builds), as in raytracer.cpp.
+namespace isa_avx2 = isa_sse;
+namespace isa_avx512 = isa_sse;
+#else
+#pragma GCC push_options
+#pragma GCC target("avx2,fma,bmi,bmi2,lzcnt,popcnt,f16c")
+namespace isa_avx2 {
+#include "renderer/denoise_pass.inc"
+}  // namespace isa_avx2
+#pragma GCC pop_options
+#pragma GCC push_options
+#pragma GCC target("avx512f,avx512vl,avx512dq,avx512bw,avx512cd,avx2,fma,bmi,bmi2,lzcnt,popcnt,f16c")
+namespace isa_avx512 {
+#include "renderer/denoise_pass.inc"
+}  // namespace isa_avx512
+#pragma GCC pop_options
 #endif
-      for (size_t i = 0; i < n; ++i) {
-        const float w = tap_weight(pnx[i] * qnx[i] + pny[i] * qny[i] + pnz[i] * qnz[i], pval[i] - qval[i],
-                                   pz[i] - qz[i], pvs[i], pzs[i], kernel, inv_d, qz[i]);
-        sv[i] += w * qval[i];
-        svar[i] += w * w * qvar[i];
-        sw[i] += w;
-      }
-    }
-  }
-  for (size_t i = 0; i < n; ++i) put(a, row + i, sv[i], svar[i], sw[i]);
-}
 
-// A pixel near the left or right edge, with bounds checks.
-void border(const Pass& a, int32_t y, int32_t x) {
-  const size_t W = size_t(a.width);
-  float v = 0, vv = 0, w = 0;
-  for (int dy = -2; dy <= 2; ++dy) {
-    const int32_t qy = y + dy * a.step;
-    if (qy < 0 || qy >= a.height) continue;
-    for (int dx = -2; dx <= 2; ++dx) {
-      const int32_t qx = x + dx * a.step;
-      if (qx < 0 || qx >= a.width) continue;
-      tap(a, size_t(y) * W + size_t(x), size_t(qy) * W + size_t(qx), kB3[dx + 2] * kB3[dy + 2],
-          kInvDist.v[dy + 2][dx + 2], v, vv, w);
-    }
-  }
-  put(a, size_t(y) * W + size_t(x), v, vv, w);
+// The copy this CPU runs (the ray tracer's test), or the baseline one (DenoiseOptions).
+struct PassCode {
+  void (*pass_row)(const Pass&, int32_t);
+  void (*scales_row)(const Scales&, int32_t);
+};
+PassCode pass_code(bool baseline) {
+  if (!baseline && cpu_avx512()) return {isa_avx512::pass_row, isa_avx512::scales_row};
+  if (!baseline && cpu_avx2()) return {isa_avx2::pass_row, isa_avx2::scales_row};
+  return {isa_sse::pass_row, isa_sse::scales_row};
 }
 
 template <class Row>
@@ -203,8 +154,8 @@ std::vector<float> StillAo::variance_of_mean(const std::vector<float>& guides) c
   }
   // Few samples: the spread of the 3x3 neighbourhood's means on the same surface (normals
   // within about 25 degrees, both hits), which holds the mean's noise and the occlusion's own
-  // detail; the latter only makes the filter more careful.
-  for (int32_t y = 0; y < height_; ++y)
+  // detail; the latter only makes the filter more careful. Rows in parallel.
+  rows(height_, [&](int32_t y) {
     for (int32_t x = 0; x < width_; ++x) {
       const size_t p = size_t(y) * size_t(width_) + size_t(x);
       const float* gp = &guides[p * kGuideFloats];
@@ -227,6 +178,7 @@ std::vector<float> StillAo::variance_of_mean(const std::vector<float>& guides) c
       const double m = s / k;  // k >= 1: the pixel itself
       var[p] = float(std::max(0.0, s2 / k - m * m));
     }
+  });
   return var;
 }
 
@@ -269,39 +221,17 @@ std::vector<float> denoise(const std::vector<float>& mean, const std::vector<flo
     }
   });
 
+  const PassCode code = pass_code(o.baseline);
   for (int it = 0; it < o.iterations; ++it) {
     const int32_t step = int32_t(1) << it;
     // The value and distance weights' scales per pixel: the pixel's noise (its variance
     // blurred over 3x3) and its distance gradient over the taps' spacing.
-    rows(height, [&](int32_t y) {
-      for (int32_t x = 0; x < width; ++x) {
-        const size_t p = size_t(y) * W + size_t(x);
-        float v = 0, vw = 0;
-        for (int dy = -1; dy <= 1; ++dy) {
-          const int32_t qy = y + dy;
-          if (qy < 0 || qy >= height) continue;
-          for (int dx = -1; dx <= 1; ++dx) {
-            const int32_t qx = x + dx;
-            if (qx < 0 || qx >= width) continue;
-            const float k = kGauss3[dx + 1] * kGauss3[dy + 1];
-            v += k * var[size_t(qy) * W + size_t(qx)];
-            vw += k;
-          }
-        }
-        v_scale[p] = 1.0f / (o.sigma_value * std::sqrt(std::max(v / vw, 0.0f)) + 1e-6f);
-        z_scale[p] = 1.0f / (o.sigma_distance * grad[p] * float(step) + 1e-3f * std::max(z[p], 0.0f) + 1e-6f);
-      }
-    });
+    const Scales scales{var.data(), grad.data(), z.data(), v_scale.data(), z_scale.data(), width, height, step,
+                        o.sigma_value, o.sigma_distance};
+    rows(height, [&](int32_t y) { code.scales_row(scales, y); });
     const Pass pass{nx.data(), ny.data(), nz.data(), z.data(), val.data(), var.data(), v_scale.data(), z_scale.data(),
                     val2.data(), var2.data(), width, height, step};
-    rows(height, [&](int32_t y) {
-      // Pixels whose taps all lie inside the row's width: tap after tap over all of them
-      // (loops that vectorise); the others one by one, with bounds checks.
-      const int32_t x0 = std::min(width, 2 * step), x1 = std::max(x0, width - 2 * step);
-      std::vector<float> sums(3 * size_t(x1 - x0));
-      interior(pass, y, x0, x1, sums.data());
-      for (int32_t x = 0; x < width; x = x + 1 == x0 ? x1 : x + 1) border(pass, y, x);
-    });
+    rows(height, [&](int32_t y) { code.pass_row(pass, y); });
     std::swap(val, val2);
     std::swap(var, var2);
   }
@@ -328,18 +258,26 @@ double estimated_psnr_db(const std::vector<float>& mean, const std::vector<float
     if (!(c < 1.0f)) return 0.0;  // clips (or not a number)
     if (!srgb) return 1.0;
     if (c <= 0.0031308f) return 12.92;
-    return 1.055 / 2.4 * std::pow(double(c), 1.0 / 2.4 - 1.0);
+    return 1.055 / 2.4 * double(std::pow(c, 1.0f / 2.4f - 1.0f));
   };
-  double sum = 0;
-  for (size_t p = 0; p < pixels; ++p) {
-    const float v = open_variance[p];
-    if (!(v > 0)) continue;
-    const float* a = &guides[p * kGuideFloats + kAmbient];
-    for (int c = 0; c < 3; ++c) {
-      const double s = slope(mean[p * 3 + size_t(c)]) * double(a[c]);
-      sum += s * s * double(v);
+  // Rows in parallel, each row's sum apart, added in row order: the same figure every time.
+  std::vector<double> row_sums(size_t(std::max(height, 0)), 0.0);
+  const size_t W = size_t(std::max(width, 0));
+  rows(height, [&](int32_t y) {
+    double row = 0;
+    for (size_t p = size_t(y) * W; p < size_t(y + 1) * W; ++p) {
+      const float v = open_variance[p];
+      if (!(v > 0)) continue;
+      const float* a = &guides[p * kGuideFloats + kAmbient];
+      for (int c = 0; c < 3; ++c) {
+        const double s = slope(mean[p * 3 + size_t(c)]) * double(a[c]);
+        row += s * s * double(v);
+      }
     }
-  }
+    row_sums[size_t(y)] = row;
+  });
+  double sum = 0;
+  for (double r : row_sums) sum += r;
   if (pixels == 0 || !(sum > 0)) return std::numeric_limits<double>::infinity();
   return -10.0 * std::log10(sum / double(pixels * 3));
 }

@@ -34,6 +34,8 @@ struct DenoiseOptions {
   int iterations = 5;           // a-trous passes (tap spacing 1, 2, 4, ...); 0 returns the input
   float sigma_value = 4.0f;     // open-fraction distance, in standard deviations of the mean
   float sigma_distance = 1.0f;  // distance difference, in units of the local distance gradient
+  bool baseline = false;        // the SSE2 copy of the pixel loops whatever the CPU (every copy
+                                // gives the same bits: tests compare them)
 };
 
 // A still's AO open fractions at its primary hits, per pixel, over its samples.

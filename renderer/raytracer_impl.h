@@ -4,6 +4,7 @@
 // compiles the production kernel, and by the benchmarks' kernel variants
 // (app/bench_kernels.cpp), which compile the same kernel source with their own policies.
 // Not part of the renderer API: nothing else includes it.
+#include "renderer/cpu.h"
 #include "renderer/disturbance.h"
 #include "renderer/embree_device.h"
 #include "renderer/raytracer.h"
@@ -228,9 +229,8 @@ __attribute__((always_inline)) inline void sample_texture(const Tex& t, float u,
 }
 
 // Which copy of the kernel runs: the packet width's own instruction set where this CPU has
-// it (16 lanes: AVX-512, 8 lanes: AVX2 with FMA), else the SSE2 copy, which every x86-64 runs.
-bool cpu_avx512();
-bool cpu_avx2();
+// it (16 lanes: AVX-512, 8 lanes: AVX2 with FMA; renderer/cpu.h), else the SSE2 copy, which
+// every x86-64 runs.
 
 }  // namespace raytracer_detail
 
