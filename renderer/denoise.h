@@ -82,7 +82,7 @@ double estimated_psnr_db(const std::vector<float>& mean, const std::vector<float
 
 // While a still is denoised, the steps shown: each of its first 4 samples, then each with a
 // quarter more samples than the last one shown (`last_shown`), and its last (`target`). A
-// denoising costs about as much as a sample (docs/renderer.md); the samples between are
+// denoising costs a third to a whole sample (docs/renderer.md); the samples between are
 // averaged and not shown, so the still converges nearly as fast as a plain one, and each
 // frame shown is better than the one before.
 inline bool shown_while_denoising(uint32_t samples, uint32_t last_shown, uint32_t target) {
