@@ -37,21 +37,19 @@ namespace bench_sse {
 namespace bench_avx2 = bench_sse;
 namespace bench_avx512 = bench_sse;
 #else
-#pragma GCC push_options
-#pragma GCC target("avx2,fma,bmi,bmi2,lzcnt,popcnt,f16c")
+TESSERA_ISA_AVX2_BEGIN
 namespace bench_avx2 {
 #include "renderer/raytracer_kernel.inc"
 #include "app/bench_kernels.inc"
 }  // namespace bench_avx2
-#pragma GCC pop_options
+TESSERA_ISA_END
 
-#pragma GCC push_options
-#pragma GCC target("avx512f,avx512vl,avx512dq,avx512bw,avx512cd,avx2,fma,bmi,bmi2,lzcnt,popcnt,f16c")
+TESSERA_ISA_AVX512_BEGIN
 namespace bench_avx512 {
 #include "renderer/raytracer_kernel.inc"
 #include "app/bench_kernels.inc"
 }  // namespace bench_avx512
-#pragma GCC pop_options
+TESSERA_ISA_END
 #endif
 
 namespace bench {

@@ -69,18 +69,16 @@ namespace isa_sse {
 namespace isa_avx2 = isa_sse;
 namespace isa_avx512 = isa_sse;
 #else
-#pragma GCC push_options
-#pragma GCC target("avx2,fma,bmi,bmi2,lzcnt,popcnt,f16c")
+TESSERA_ISA_AVX2_BEGIN
 namespace isa_avx2 {
 #include "renderer/denoise_pass.inc"
 }  // namespace isa_avx2
-#pragma GCC pop_options
-#pragma GCC push_options
-#pragma GCC target("avx512f,avx512vl,avx512dq,avx512bw,avx512cd,avx2,fma,bmi,bmi2,lzcnt,popcnt,f16c")
+TESSERA_ISA_END
+TESSERA_ISA_AVX512_BEGIN
 namespace isa_avx512 {
 #include "renderer/denoise_pass.inc"
 }  // namespace isa_avx512
-#pragma GCC pop_options
+TESSERA_ISA_END
 #endif
 
 // The copy this CPU runs (the ray tracer's test), or the baseline one (DenoiseOptions).

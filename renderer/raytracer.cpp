@@ -495,19 +495,17 @@ namespace isa_sse {
 namespace isa_avx2 = isa_sse;
 namespace isa_avx512 = isa_sse;
 #else
-#pragma GCC push_options
-#pragma GCC target("avx2,fma,bmi,bmi2,lzcnt,popcnt,f16c")
+TESSERA_ISA_AVX2_BEGIN
 namespace isa_avx2 {
 #include "renderer/raytracer_kernel.inc"
 }  // namespace isa_avx2
-#pragma GCC pop_options
+TESSERA_ISA_END
 
-#pragma GCC push_options
-#pragma GCC target("avx512f,avx512vl,avx512dq,avx512bw,avx512cd,avx2,fma,bmi,bmi2,lzcnt,popcnt,f16c")
+TESSERA_ISA_AVX512_BEGIN
 namespace isa_avx512 {
 #include "renderer/raytracer_kernel.inc"
 }  // namespace isa_avx512
-#pragma GCC pop_options
+TESSERA_ISA_END
 #endif
 
 // ---------------------------------------------------------------------------------------
