@@ -17,7 +17,7 @@ import { Vec3, AxisAngle, Mat4, Box } from './MathTypes.js';
 import { warnOnce } from './Debug.js';
 import { MarkupReader, legacyFieldOfView } from '../reader/MarkupReader.js';
 import { SceneDescription } from '../reader/SceneDescription.js';
-import { localName } from '../reader/Values.js';
+import { localName, numbersIn } from '../reader/Values.js';
 import { meshWorldBox, emptyBox, clippingPlanes } from '../scene/Bounds.js';
 
 const tags = (s) => new Set(s.split(' '));
@@ -51,7 +51,6 @@ const STRING_PROPS = {
   wrap: tags('texture'),
 };
 
-const numbers = (s) => (String(s).match(/[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?/g) || []).map(Number);
 const expando = new WeakMap();
 const ownValue = (el, k) => { const m = expando.get(el); return m ? m[k] : undefined; };
 const setOwnValue = (el, k, v) => { let m = expando.get(el); if (!m) expando.set(el, (m = {})); m[k] = v; };
@@ -143,7 +142,7 @@ function transformProp(prop, [attr, Type, def]) {
     get() {
       if (localName(this) !== 'transform') return ownValue(this, prop);
       const s = this.getAttribute(attr);
-      const n = s ? numbers(s) : [];
+      const n = s ? numbersIn(s) : [];
       return new Type(...(n.length >= def.length ? n.slice(0, def.length) : def));
     },
     set(v) {

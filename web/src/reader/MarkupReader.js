@@ -3,7 +3,7 @@
 // a Resources object and the page is read again when they arrive.
 import * as M from '../math/Mat4.js';
 import { parseCssTransform } from '../math/CssTransform.js';
-import { parseValueElement, isValueElement, localName, first, vec3 } from './Values.js';
+import { parseValueElement, isValueElement, localName, first, vec3, numbersIn } from './Values.js';
 import { SceneDescription, MATERIAL_DEFAULTS, defaultMaterial } from './SceneDescription.js';
 import { pendingValues } from './GltfLoader.js';
 
@@ -296,16 +296,18 @@ export class MarkupReader {
     return pose ? (m ? M.multiply(m, pose) : pose) : m;
   }
 
+  // The first n numbers of an attribute's text `s`; fewer: an error saying `what` needs n, and null.
+  leadingNumbers(el, s, n, what) {
+    const v = numbersIn(s);
+    if (v.length < n) { this.error(el, `${what} needs ${n} numbers`); return null; }
+    return v.slice(0, n);
+  }
+
   legacyViewPose(el) {
     const pos = el.getAttribute('position'), ori = el.getAttribute('orientation');
     if (pos === null && ori === null) return null;
-    const nums = (name, s, n) => {
-      const v = (String(s).match(/[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?/g) || []).map(Number);
-      if (v.length < n) { this.error(el, `${this.describe(el)} ${name}="${s}" needs ${n} numbers`); return null; }
-      return v.slice(0, n);
-    };
-    const p = pos !== null && nums('position', pos, 3) || [0, 0, 0];
-    const o = ori !== null && nums('orientation', ori, 4) || [0, 0, 1, 0];
+    const p = pos !== null && this.leadingNumbers(el, pos, 3, `${this.describe(el)} position="${pos}"`) || [0, 0, 0];
+    const o = ori !== null && this.leadingNumbers(el, ori, 4, `${this.describe(el)} orientation="${ori}"`) || [0, 0, 1, 0];
     return M.multiply(M.translation(...p), M.axisAngle(...o));
   }
 
@@ -329,10 +331,7 @@ export class MarkupReader {
     if (localName(el) === 'transform') {
       const v = (name, def) => {
         const s = el.getAttribute(name);
-        if (!s) return def;
-        const n = (s.match(/[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?/g) || []).map(Number);
-        if (n.length < def.length) { this.error(el, `<transform ${name}="${s}"> needs ${def.length} numbers`); return def; }
-        return n.slice(0, def.length);
+        return s ? this.leadingNumbers(el, s, def.length, `<transform ${name}="${s}">`) || def : def;
       };
       const t = v('translation', [0, 0, 0]), r = v('rotation', [0, 0, 1, 0]), s = v('scale', [1, 1, 1]);
       const c = v('center', [0, 0, 0]), so = v('scaleOrientation', [0, 0, 1, 0]);

@@ -17,6 +17,9 @@ export const VALUE_TYPES = {
 export const SCRIPT_PLACEHOLDER = '[value set by script]';
 const NUMBER = /[+-]?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?/g;
 
+// The numbers written in an attribute's text, in order (anything else between them ignored).
+export const numbersIn = (s) => (String(s).match(NUMBER) || []).map(Number);
+
 // Values given by setScriptValue, kept out of band (as xml3d.js does).
 const scriptValues = new WeakMap();
 // Parse cache: an unchanged element gives the same typed array (stable buffer identity).
