@@ -306,8 +306,15 @@ export class MarkupReader {
   legacyViewPose(el) {
     const pos = el.getAttribute('position'), ori = el.getAttribute('orientation');
     if (pos === null && ori === null) return null;
-    const p = pos !== null && this.leadingNumbers(el, pos, 3, `${this.describe(el)} position="${pos}"`) || [0, 0, 0];
-    const o = ori !== null && this.leadingNumbers(el, ori, 4, `${this.describe(el)} orientation="${ori}"`) || [0, 0, 1, 0];
+    // Too few numbers, or one that is not finite (1e999): an error, and that part left out.
+    const part = (s, n, name, def) => {
+      if (s === null) return def;
+      const what = `${this.describe(el)} ${name}="${s}"`;
+      const v = this.leadingNumbers(el, s, n, what);
+      if (v && !allFinite(v)) { this.error(el, `${what} is not finite`); return def; }
+      return v || def;
+    };
+    const p = part(pos, 3, 'position', [0, 0, 0]), o = part(ori, 4, 'orientation', [0, 0, 1, 0]);
     return M.multiply(M.translation(...p), M.axisAngle(...o));
   }
 

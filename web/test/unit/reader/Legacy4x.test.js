@@ -142,3 +142,26 @@ test('mesh type is read without regard to case, as xml3d.js does', () => {
   assert.equal(scene.meshes.size, 2);
   assert.deepEqual(scene.errors, []);
 });
+
+test('bad 4.x values are errors and fall back: view pose, fieldOfView, light intensity and shader', () => {
+  const camera = (viewAttrs) => read(`<xml3d><view id="v" ${viewAttrs}></view></xml3d>`).scene;
+  let scene = camera('position="1 2" orientation="0 1 0 0.5"');
+  assert.deepEqual(messages(scene.errors), ['<view id="v"> position="1 2" needs 3 numbers']);
+  nearAll(scene.camera.toWorld, M.axisAngle(0, 1, 0, 0.5));
+  scene = camera('position="1e999 0 0" orientation="0 1 0 NaN"');
+  assert.deepEqual(messages(scene.errors), ['<view id="v"> position="1e999 0 0" is not finite',
+    '<view id="v"> orientation="0 1 0 NaN" needs 4 numbers']);
+  nearAll(scene.camera.toWorld, M.identity());
+  for (const fov of ['0', '-1', '3.2']) {
+    scene = camera(`fieldOfView="${fov}"`);
+    assert.equal(scene.errors.length, 1, `fieldOfView="${fov}"`);
+    assert.match(scene.errors[0].message, /outside \(0, pi\)/);
+    near(scene.camera.fovY, Math.PI / 4);
+  }
+  scene = read(`<xml3d><lightshader id="ls" script="urn:xml3d:lightshader:point"></lightshader>
+    <shader id="s" script="urn:xml3d:shader:phong"></shader>
+    <light id="a" shader="#ls" intensity="bright"></light><light id="b" shader="#s"></light></xml3d>`).scene;
+  assert.deepEqual(messages(scene.errors), ['<light id="a"> intensity="bright" is not a number',
+    '<light id="b"> shader="#s" points at <shader>, not <lightshader>']);
+  for (const l of scene.lights.values()) assert.ok(l.color.every(Number.isFinite));
+});
