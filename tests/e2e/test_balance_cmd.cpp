@@ -96,7 +96,12 @@ TEST_CASE("tessera balance: per-frame lines per node count, consistent efficienc
       double single = l["single_kernel_ms"], eff = l["efficiency"];
       CHECK(single > 0);
       CHECK(eff > 0);
-      CHECK(eff < 3);  // noise and repeat locality stay far below this
+      // A sanity bound (the formula itself is checked just below): a 64x36 frame's kernel is a few
+      // hundred microseconds, and a neighbour test on the other vCPU slowed the whole
+      // single-node reference (per-packet best of 3) 3x once (efficiencies 3.12 and 3.30 in a
+      // ctest run beside chromium; alone, under the ASan suite's load, at most 1.18). Leaving out
+      // the coefficients' sum (7 at 5 nodes) would multiply it by 7.
+      CHECK(eff < 6);
       // Efficiency = (single / sum of coefficients) / largest normalised node kernel.
       CHECK(eff == Approx(single / coeff_sum / worst).epsilon(0.01));
       CHECK(double(l["balance"]) >= 0.999);
