@@ -19,7 +19,7 @@ namespace {
 const char* kHelp =
     "tessera bench --scene S.gltf --camera-loop L.json [--frames N] [--step K] [--size W H]\n"
     "              [--ao N] [--depth D] [--shadows 0|1] [--threads T] [--warmup W] [--reps R]\n"
-    "              [--compare bare|specialised|costmap|disturbance|breakdown] [--plain] [--renderer raytracer|rasterizer]\n"
+    "              [--compare bare|specialised|costmap|disturbance|mipmaps|breakdown] [--plain] [--renderer raytracer|rasterizer]\n"
     "              [--bvh-quality medium|high]\n"
     "Replays the camera loop (every K-th frame with --step K) and prints one JSON line per frame:\n"
     "kernel_ms (sum of the cost map), rendering_ms (wall), rays by kind and Mrays/s, then a summary\n"
@@ -38,6 +38,8 @@ const char* kHelp =
     "  disturbance the same render with the disturbance check (stalled packets found with the thread's\n"
     "              CPU clock and replaced; docs/load-balancing.md) switched off; every frame also\n"
     "              prints disturbed_packets and disturbed_ms (the stall found) of its render\n"
+    "  mipmaps     the same render with every texture read at level 0 (bilinear, no mip levels: the\n"
+    "              renderer before trilinear filtering)\n"
     "  breakdown   marginal Mrays/s per ray kind (primary; +shadow; +AO; +secondary)\n"
     "--plain strips textures, reflection, refraction and alpha masks from the scene's materials.\n"
     "--renderer rasterizer replays the loop with the OpenGL ES rasterizer (its threads: LP_NUM_THREADS;\n"
@@ -129,8 +131,8 @@ int run(const std::vector<std::string>& argv) {
   }
   if (step < 1 || frames < 1) throw std::invalid_argument("--step and --frames must be >= 1");
   if (!compare.empty() && compare != "bare" && compare != "specialised" && compare != "costmap" && compare != "disturbance" &&
-      compare != "breakdown")
-    throw std::invalid_argument("--compare must be bare, specialised, costmap, disturbance or breakdown");
+      compare != "mipmaps" && compare != "breakdown")
+    throw std::invalid_argument("--compare must be bare, specialised, costmap, disturbance, mipmaps or breakdown");
 
   RayTracer rt;
   std::vector<std::string> warnings;
@@ -172,12 +174,14 @@ int run(const std::vector<std::string>& argv) {
     sync();
     // With a same-run comparison, odd frames render the comparison first so that neither
     // side always pays for the first touch after a camera change.
-    // specialised and costmap compare against the same frame rendered another way.
-    const bool against_variant = compare == "specialised" || compare == "costmap" || compare == "disturbance";
+    // specialised, costmap, disturbance and mipmaps compare against the same frame rendered another way.
+    const bool against_variant =
+        compare == "specialised" || compare == "costmap" || compare == "disturbance" || compare == "mipmaps";
     auto variant = [&] {
       TaskResult t;
       RenderSettings off = settings;
       if (compare == "disturbance") off.disturbance_check = false;
+      else if (compare == "mipmaps") off.mip_levels = false;
       else off.cost_map = false;
       if (compare == "specialised") bench::render_specialised(rt, full, settings, t);
       else rt.render(full, off, t);
@@ -253,6 +257,8 @@ int run(const std::vector<std::string>& argv) {
       cmp_ratio.push_back(v.rendering_ms > 0 ? r.rendering_ms / v.rendering_ms : 0);
       if (compare == "specialised")
         std::printf(", \"specialised_rendering_ms\": %.3f, \"general_over_specialised\": %.4f", v.rendering_ms, cmp_ratio.back());
+      else if (compare == "mipmaps")
+        std::printf(", \"level0_rendering_ms\": %.3f, \"trilinear_over_level0\": %.4f", v.rendering_ms, cmp_ratio.back());
       else if (compare == "disturbance")
         std::printf(", \"no_check_rendering_ms\": %.3f, \"no_check_kernel_ms\": %.3f, \"with_over_without\": %.4f", v.rendering_ms,
                     v.kernel_ms, cmp_ratio.back());

@@ -66,7 +66,8 @@ uint64_t fnv1a(const std::string& s, uint64_t h = 1469598103934665603ull) {
   return h;
 }
 
-// What makes a reference: the scene file's bytes, the view and the settings.
+// What makes a reference: the scene file's bytes, the view and the settings, and a version that
+// changes with what the renderer computes.
 std::string reference_key(const SceneSetup& setup, long frame, const RenderSettings& s, uint32_t samples) {
   std::ifstream f(setup.scene_path, std::ios::binary);
   std::stringstream bytes;
@@ -74,7 +75,7 @@ std::string reference_key(const SceneSetup& setup, long frame, const RenderSetti
   std::ostringstream k;
   k << std::hex << fnv1a(bytes.str()) << std::dec << "-" << setup.loaded.scene.width() << "x"
     << setup.loaded.scene.height() << "-f" << frame << "-ao" << s.ao_samples << "-d" << s.max_depth << "-s"
-    << samples << "-v4";
+    << samples << "-v5";  // v5: trilinear texture filtering (mip levels by ray cones)
   return k.str();
 }
 

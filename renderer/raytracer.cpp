@@ -5,6 +5,7 @@
 #include "core/validate.h"
 
 #include <embree3/rtcore.h>
+#include <tbb/blocked_range.h>
 #include <tbb/blocked_range2d.h>
 #include <tbb/combinable.h>
 #include <tbb/parallel_for.h>
@@ -20,6 +21,7 @@
 #include <cstring>
 #include <fstream>
 #include <map>
+#include <mutex>
 #include <stdexcept>
 #include <thread>
 #include <tuple>
@@ -109,6 +111,79 @@ struct SrgbLut {
 const SrgbLut& srgb_lut() {
   static const SrgbLut lut;
   return lut;
+}
+
+// The nearest 8-bit sRGB code to a linear value (the lut's own decoding inverted exactly).
+uint8_t srgb_code(float linear) {
+  const auto& t = srgb_lut().to_linear;
+  const auto it = std::lower_bound(t.begin(), t.end(), linear);
+  if (it == t.begin()) return 0;
+  if (it == t.end()) return 255;
+  const size_t i = size_t(it - t.begin());
+  return uint8_t(linear - t[i - 1] < t[i] - linear ? i - 1 : i);
+}
+
+// Level k + 1 of a mip chain from level k (w x h RGBA8): each texel the mean of a 2x2 box (a
+// dimension of 1 stays 1; an odd one drops its last row or column, as glGenerateMipmap may).
+// Colour is averaged as linear light where the texture is decoded from sRGB, else as stored.
+void mip_level(const uint8_t* src, int w, int h, bool srgb, uint8_t* dst, int dw, int dh) {
+  const auto& lin = srgb_lut().to_linear;
+  tbb::parallel_for(tbb::blocked_range<int>(0, dh, 16), [&](const tbb::blocked_range<int>& r) {
+    for (int y = r.begin(); y != r.end(); ++y) {
+      const int ya = std::min(2 * y, h - 1), yb = std::min(2 * y + 1, h - 1);
+      for (int x = 0; x < dw; ++x) {
+        const int xa = std::min(2 * x, w - 1), xb = std::min(2 * x + 1, w - 1);
+        const uint8_t* q[4] = {src + (size_t(ya) * size_t(w) + size_t(xa)) * 4, src + (size_t(ya) * size_t(w) + size_t(xb)) * 4,
+                               src + (size_t(yb) * size_t(w) + size_t(xa)) * 4, src + (size_t(yb) * size_t(w) + size_t(xb)) * 4};
+        uint8_t* o = dst + (size_t(y) * size_t(dw) + size_t(x)) * 4;
+        for (int c = 0; c < 4; ++c) {
+          if (srgb && c < 3) {
+            o[c] = srgb_code(0.25f * (lin[q[0][c]] + lin[q[1][c]] + lin[q[2][c]] + lin[q[3][c]]));
+          } else {
+            o[c] = uint8_t((unsigned(q[0][c]) + q[1][c] + q[2][c] + q[3][c] + 2) / 4);
+          }
+        }
+      }
+    }
+  });
+}
+
+// The mip chain of a texture's bytes (levels down to 1x1, at most Tex::kMaxLevels in all), from
+// the process's cache when another ray tracer made it for the same bytes.
+std::shared_ptr<const MipChain> mip_chain(const SharedBytes& bytes, int w, int h, bool repeat_s, bool repeat_t,
+                                          bool srgb) {
+  using Key = std::tuple<const uint8_t*, int, int, bool, bool, bool>;
+  static std::mutex mutex;
+  static std::map<Key, std::weak_ptr<const MipChain>> cache;
+  const Key key{bytes.data(), w, h, repeat_s, repeat_t, srgb};
+  {
+    std::lock_guard<std::mutex> lock(mutex);
+    for (auto it = cache.begin(); it != cache.end();) it = it->second.expired() ? cache.erase(it) : std::next(it);
+    auto it = cache.find(key);
+    if (it != cache.end())
+      if (auto chain = it->second.lock()) return chain;
+  }
+  auto chain = std::make_shared<MipChain>();
+  chain->base = bytes;  // keeps the key's address this texture's while the chain lives
+  chain->addr.push_back(TexelAddressing(w, h, repeat_s, repeat_t, false));
+  chain->offset.push_back(0);
+  size_t total = 0;
+  for (int lw = w, lh = h, n = 1; (lw > 1 || lh > 1) && n < RayTracer::Impl::Tex::kMaxLevels; ++n) {
+    lw = std::max(lw / 2, 1);
+    lh = std::max(lh / 2, 1);
+    chain->addr.push_back(TexelAddressing(lw, lh, repeat_s, repeat_t, false));
+    chain->offset.push_back(total);
+    total += size_t(lw) * size_t(lh) * 4;
+  }
+  chain->texels.resize(total);
+  for (size_t k = 1; k < chain->addr.size(); ++k) {
+    const TexelAddressing& a = chain->addr[k - 1];
+    const uint8_t* src = k == 1 ? bytes.data() : chain->texels.data() + chain->offset[k - 1];
+    mip_level(src, a.w, a.h, srgb, chain->texels.data() + chain->offset[k], chain->addr[k].w, chain->addr[k].h);
+  }
+  std::lock_guard<std::mutex> lock(mutex);
+  cache[key] = chain;
+  return chain;
 }
 
 inline float max_abs(const Vec3& p) { return std::fmax(std::fabs(p.x), std::fmax(std::fabs(p.y), std::fabs(p.z))); }
@@ -201,6 +276,30 @@ std::shared_ptr<SharedGeometry> RayTracer::Impl::build_geom(const Scene& scene, 
   g.colors = col_id != kNoId ? scene.buffer(col_id)->f : std::vector<float>{};
   for (float& c : g.colors) c = std::fmax(c, 0.0f);  // colours are >= 0 (validate_mesh refused NaN and Inf)
   const size_t nt = idx->size() / 3;
+  // Per triangle: half the log2 of its texture-space area over its object-space area (a lane's
+  // level of detail adds its ray cone's footprint; Akenine-Moeller et al., "Texture Level of
+  // Detail Strategies for Real-Time Ray Tracing", Ray Tracing Gems, 2019). Degenerate: level 0.
+  g.tri_lod.clear();
+  if (!g.texcoords.empty()) {
+    g.tri_lod.resize(nt);
+    const float* P = pos.f.data();
+    const float* T = g.texcoords.data();
+    for (size_t t = 0; t < nt; ++t) {
+      const uint32_t a = (*idx)[t * 3], b = (*idx)[t * 3 + 1], c = (*idx)[t * 3 + 2];
+      if (size_t(std::max({a, b, c})) >= std::min(nv, g.texcoords.size() / 2)) {
+        g.tri_lod[t] = -64.0f;
+        continue;
+      }
+      const Vec3 pa{P[a * 3], P[a * 3 + 1], P[a * 3 + 2]}, pb{P[b * 3], P[b * 3 + 1], P[b * 3 + 2]},
+          pc{P[c * 3], P[c * 3 + 1], P[c * 3 + 2]};
+      const float area = length(cross(pb - pa, pc - pa));
+      const float ua = T[b * 2] - T[a * 2], va = T[b * 2 + 1] - T[a * 2 + 1];
+      const float ub = T[c * 2] - T[a * 2], vb = T[c * 2 + 1] - T[a * 2 + 1];
+      const float uv_area = std::fabs(ua * vb - va * ub);
+      const float ratio = uv_area / area;
+      g.tri_lod[t] = ratio > 0 && std::isfinite(ratio) ? std::fmin(std::fmax(0.5f * std::log2(ratio), -64.0f), 64.0f) : -64.0f;
+    }
+  }
   GeometryContent content{pos.f.data(), nv, idx->data(), nt, g.filter, g.see_through, EmbreeDevice::high_quality_bvh()};
   GeometryCache& cache = shared_device->geometries();
   const uint64_t h = cache.hash(content);
@@ -265,6 +364,23 @@ void RayTracer::Impl::sync(const Scene& scene, std::vector<std::string>& warning
     t.bytes = src.rgba;  // shared
     t.lut = decode ? srgb_lut().texel_linear.data() : srgb_lut().texel_plain.data();
     t.translucent = src.has_alpha();
+    // Minification as the markup's default filter (linear-mipmap-linear) and the rasterizer
+    // have it: trilinear over the mip chain; nearest: level 0 only.
+    t.mips = nullptr;
+    t.max_level = 0;
+    t.lod_size = 0.5f * std::log2(float(src.width) * float(src.height));
+    t.level_texels.fill(nullptr);
+    t.level_texels[0] = t.bytes.data();
+    t.level_addr[0] = t.addr;
+    if (src.sampler.filter == Sampler::Filter::linear) {
+      t.mips = mip_chain(t.bytes, src.width, src.height, src.sampler.wrap_s == Sampler::Wrap::repeat,
+                         src.sampler.wrap_t == Sampler::Wrap::repeat, decode);
+      t.max_level = int(t.mips->addr.size()) - 1;
+      for (int k = 1; k <= t.max_level; ++k) {
+        t.level_texels[size_t(k)] = t.mips->texels.data() + t.mips->offset[size_t(k)];
+        t.level_addr[size_t(k)] = t.mips->addr[size_t(k)];
+      }
+    }
   }
   // Materials (rebuilt whole: they are small).
   materials.assign(1, default_material());
@@ -386,6 +502,8 @@ void RayTracer::Impl::sync(const Scene& scene, std::vector<std::string>& warning
       rtcCommitGeometry(inst.geom);
       inst.normal_matrix = transpose(inverse(e.value.transform));
       inst.det_sign = e.value.transform.det3() < 0 ? -1.0f : 1.0f;
+      const float det = std::fabs(e.value.transform.det3());
+      inst.lod_bias = det > 0 && std::isfinite(det) ? -std::log2(det) / 3.0f : 0.0f;
       inst.version = e.version;
       inst.g = &g;
       inst.geom_version = g.version;

@@ -12,6 +12,7 @@
 
 #include <embree3/rtcore.h>
 
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -173,6 +174,17 @@ struct TexelAddressing {
         above_x(rs ? 0 : width - 1), below_y(rt ? height - 1 : 0), above_y(rt ? 0 : height - 1) {}
 };
 
+// A linear texture's mip levels below its own (level 0): each level a box filter of 2x2 texels
+// of the one above (averaged as linear colour for sRGB textures that are decoded), RGBA8 like
+// the texture, with its own addressing. Made by RayTracer::Impl::sync (raytracer.cpp) and
+// shared by every ray tracer of the process that shows the same texels.
+struct MipChain {
+  SharedBytes base;                   // level 0's bytes, held: the cache knows a chain by their address
+  std::vector<uint8_t> texels;        // levels 1..n, one after another
+  std::vector<TexelAddressing> addr;  // levels 0..n
+  std::vector<size_t> offset;         // levels 0..n, into texels (level 0: unused)
+};
+
 // max/min as the vector instructions compute them (the second operand when either is NaN),
 // so that lane loops vectorise: std::fmax is a library call on baseline x86-64.
 inline float fmaxf_(float a, float b) { return a > b ? a : b; }
@@ -246,6 +258,65 @@ __attribute__((always_inline)) inline void sample_texture(const Tex& t, float u,
   texel_blend(lo, hi, c.fx, c.fy, out);
 }
 
+// log2(x) for x > 0 to about 1e-4, in plain arithmetic that vectorises (the texture level of a
+// lane); x below 1e-30 (and 0, NaN) reads as 1e-30.
+inline float log2_approx(float x) {
+  x = x > 1e-30f ? x : 1e-30f;
+  uint32_t b;
+  std::memcpy(&b, &x, 4);
+  const float e = float(int(b >> 23) - 127);
+  b = (b & 0x007FFFFFu) | 0x3F800000u;  // mantissa in [1, 2)
+  float m;
+  std::memcpy(&m, &b, 4);
+  const float s = (m - 1.0f) / (m + 1.0f), s2 = s * s;  // log2 m = 2 atanh(s) / ln 2
+  return e + s * (2.88539008f + s2 * (0.96179669f + s2 * (0.57707801f + s2 * 0.41219858f)));
+}
+
+// Trilinear filtering (linear-mipmap-linear, XML3D's and glTF viewers' default for a linear
+// texture): a lane's level of detail `lod` (log2 of its footprint in texels, see the kernel's
+// textures()) picks two neighbouring mip levels, bilinear in each, blended by the fraction. The
+// arithmetic of the kernel's vector path (Kernel::modulate), so a pixel never depends on its
+// packet. A texture without mip levels (nearest filter) is sample_texture.
+struct TexelLevel {
+  int l0, l1;  // the two levels
+  float f;     // the second one's weight
+};
+template <class Tex>
+__attribute__((always_inline)) inline TexelLevel texel_level(const Tex& t, float lod) {
+  const float top = float(t.max_level);
+  float lv = lod + t.lod_size;
+  lv = lv > 0.0f ? (lv < top ? lv : top) : 0.0f;  // NaN: 0
+  TexelLevel r;
+  r.l0 = int(lv);
+  r.f = lv - float(r.l0);
+  r.l1 = r.l0 < t.max_level ? r.l0 + 1 : r.l0;
+  return r;
+}
+template <class Tex>
+__attribute__((always_inline)) inline void sample_texture_lod(const Tex& t, float u, float v, float lod, float out[4]) {
+  if (t.max_level == 0) {
+    sample_texture(t, u, v, out);
+    return;
+  }
+  const TexelLevel l = texel_level(t, lod);
+  float a[4], b[4];
+  const int levels[2] = {l.l0, l.l1};
+  float* dst[2] = {a, b};
+  // With weight 0 the second level adds 0 x (a finite, non-negative value): a alone is the sum.
+  const int count = l.f > 0.0f ? 2 : 1;
+  if (count == 1)
+    for (int c = 0; c < 4; ++c) b[c] = 0.0f;
+  for (int k2 = 0; k2 < count; ++k2) {
+    const TexelCoords c = texel_coords(t.level_addr[size_t(levels[k2])], u, v);
+    const int idx[4] = {c.i00, c.i10, c.i01, c.i11};
+    uint32_t lo[4], hi[4];
+    const uint8_t* texels = t.level_texels[size_t(levels[k2])];
+    for (int k = 0; k < 4; ++k) texel_halves(t.lut, texels, idx[k], lo[k], hi[k]);
+    texel_blend(lo, hi, c.fx, c.fy, dst[k2]);
+  }
+  for (int c = 0; c < 4; ++c) out[c] = a[c] * (1.0f - l.f) + b[c] * l.f;
+}
+
 // Which copy of the kernel runs: the packet width's own instruction set where this CPU has
 // it (16 lanes: AVX-512, 8 lanes: AVX2 with FMA; renderer/cpu.h), else the SSE2 copy, which
 // every x86-64 runs.
@@ -268,6 +339,15 @@ struct RayTracer::Impl {
     bool decoded = false;  // colour channels decoded from sRGB
     bool translucent = false;  // some texel's alpha is below 1: a material without an alpha mask lets light through there
     uint64_t version = 0;
+    // Mip levels (trilinear filtering, raytracer_detail::sample_texture_lod) for a linear
+    // filter: level 0 is `bytes` and `addr`, levels 1..max_level are in `mips` (shared between
+    // the ray tracers of a process that show the same texels). Nearest: max_level 0.
+    static constexpr int kMaxLevels = 16;
+    std::shared_ptr<const raytracer_detail::MipChain> mips;
+    int max_level = 0;
+    float lod_size = 0;  // log2 of the texture's side (half the log2 of its texel count)
+    std::array<const uint8_t*, kMaxLevels> level_texels{};
+    std::array<raytracer_detail::TexelAddressing, kMaxLevels> level_addr{};
   };
   struct Geom {
     // The BVH and triangles, possibly shared with other sessions (renderer/geometry_cache.h).
@@ -278,6 +358,9 @@ struct RayTracer::Impl {
     std::vector<float> texcoords;  // 2 per vertex (empty: none)
     std::vector<float> colors;     // 3 per vertex, negatives as 0 (empty: none)
     uint64_t version = 0;          // max version of the buffers it was built from
+    // Textured geometry: per triangle, half the log2 of its texture-space area (in units of the
+    // whole texture) over its object-space area, the triangle's part of a lane's level of detail.
+    std::vector<float> tri_lod;
     bool filter = false;           // alpha-mask filter attached
     bool see_through = false;      // occlusion filter for refracting and partly transparent materials attached
     bool used = false;
@@ -290,6 +373,7 @@ struct RayTracer::Impl {
     int material = 0;      // index into materials_
     Mat4 normal_matrix;    // inverse transpose of the object-to-world transform
     float det_sign = 1;
+    float lod_bias = 0;    // -log2 of the transform's scale (|det|^(1/3)): its part of a level of detail
     uint64_t version = 0;
     uint64_t geom_version = 0;
     Vec3 origin_used;      // the rebasing origin its transform was built for

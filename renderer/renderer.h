@@ -27,6 +27,10 @@ struct RenderSettings {
   // (stall_px, stall_py) (absolute packet coordinates), as a preemption would; 0 = none.
   uint32_t stall_us = 0;
   int32_t stall_px = -1, stall_py = -1;
+  // Trilinear texture filtering over mip levels for linear textures (the kernel's textures());
+  // false: every texture read at level 0 alone, as before mip levels (`tessera bench --compare
+  // mipmaps` measures the difference).
+  bool mip_levels = true;
   uint32_t frame = 0;         // seeds the AO sample pattern
   // Progressive rendering (renderer/sampling.h): which of the frame's samples this render is.
   // 0: pixel centres and the fixed AO pattern (what a non-progressive frame shows); s > 0: a

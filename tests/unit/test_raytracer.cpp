@@ -330,6 +330,157 @@ TEST_CASE("a 2x2 nearest texture on a quad facing the camera shows its texels ex
   }
 }
 
+// Trilinear filtering: a linear texture is read from the mip level that matches the pixel's
+// footprint (ray cones). A 256x256 checkerboard on a quad that faces the camera, seen with a 2
+// degree field of view on 32x32 pixels from a distance where a pixel covers F x F texels:
+// footprint F = d tan(fov / 2) T / H. The camera sits half a texel off the texel grid, so pixel
+// centres fall on level-0 texel centres (level 0 alone shows pure black and white).
+namespace {
+
+Texture checkerboard(int size, int check) {
+  Texture t;
+  t.width = t.height = size;
+  t.rgba.resize(size_t(size) * size_t(size) * 4);
+  for (int y = 0; y < size; ++y)
+    for (int x = 0; x < size; ++x) {
+      const uint8_t v = ((x / check + y / check) % 2) ? 255 : 0;
+      for (int c = 0; c < 3; ++c) t.rgba[(size_t(y) * size_t(size) + size_t(x)) * 4 + size_t(c)] = v;
+      t.rgba[(size_t(y) * size_t(size) + size_t(x)) * 4 + 3] = 255;
+    }
+  return t;
+}
+
+// The 8-bit sRGB code of a linear value, from the exact curve.
+int srgb_of(double linear) {
+  const double e = linear <= 0.0031308 ? 12.92 * linear : 1.055 * std::pow(linear, 1 / 2.4) - 0.055;
+  return int(std::lround(e * 255));
+}
+
+struct LodScene {
+  static constexpr int kW = 32, kT = 256;
+  static constexpr float kFov = 2 * kDeg;
+  Scene scene;
+  // Camera distance for a footprint of `texels` texels a pixel.
+  static float distance(float texels) { return texels * float(kW) / (float(kT) * std::tan(kFov / 2)); }
+  LodScene(int check, Sampler::Filter filter, bool linear) {
+    scene.set_resolution(kW, kW);
+    Environment env = plain_env();
+    env.linear = linear;
+    scene.set_environment(env);
+    Texture tex = checkerboard(kT, check);
+    tex.sampler.filter = filter;
+    scene.set_texture(7, tex);
+    Material m = matte({1, 1, 1});
+    m.diffuse_texture = 7;
+    scene.set_material(1, m);
+  }
+  void direct(float texels) {
+    add_object(scene, 100, quad({-1, -1, 0}, {2, 0, 0}, {0, 2, 0}), 1);
+    const float s = 1.0f / kT;  // half a texel
+    scene.set_camera(look({s, s, distance(texels)}, {s, s, 0}, kFov));
+  }
+  // The same footprint through a mirror at z = 0: 30% of the path to the mirror, 70% back to
+  // the textured quad at z = 0.7 d, behind the camera and facing it.
+  void mirrored(float texels) {
+    const float d = distance(texels);
+    Material mirror = matte({0, 0, 0});
+    mirror.reflection = 1;
+    scene.set_material(2, mirror);
+    add_object(scene, 200, quad({-1, -1, 0}, {2, 0, 0}, {0, 2, 0}), 2);
+    add_object(scene, 100, quad({-1, -1, 0.7f * d}, {0, 2, 0}, {2, 0, 0}), 1);
+    const float s = 1.0f / kT;
+    scene.set_camera(look({s, s, 0.3f * d}, {s, s, 0}, kFov));
+  }
+};
+
+// Every pixel's red channel.
+std::vector<int> reds(const Image& img) {
+  std::vector<int> out;
+  for (int y = 0; y < img.height; ++y)
+    for (int x = 0; x < img.width; ++x) out.push_back(px(img, x, y).r);
+  return out;
+}
+
+}  // namespace
+
+TEST_CASE("trilinear filtering reads the mip level of a pixel's footprint, averaged as linear light", "[raytracer][texture][mip]") {
+  RenderSettings settings = no_ao();
+  SECTION("1-texel checks, 2 texels a pixel: level 1 is a uniform grey of linear 0.5 (sRGB 188, not 128)") {
+    for (bool linear : {true, false}) {
+      LodScene ls(1, Sampler::Filter::linear, linear);
+      ls.direct(2);
+      RayTracer rt;
+      const Image img = render_full(rt, ls.scene, settings);
+      dump(std::string("mip_grey_") + (linear ? "linear" : "plain"), img);
+      // Linear scenes decode sRGB texels and average light (sRGB 188 is the code nearest linear
+      // 0.5: 0.5029, against 0.4969 for 187); plain scenes average the codes: (0 + 255) / 2.
+      const int expected = linear ? 188 : 128;
+      for (int r : reds(img)) {
+        INFO("linear " << linear << " red " << r << " expected " << expected);
+        REQUIRE(std::abs(r - expected) <= 1);
+      }
+      // Level 0 alone (the renderer before mip levels) shows the checks themselves.
+      RenderSettings level0 = settings;
+      level0.mip_levels = false;
+      TaskResult r0;
+      rt.render({0, 0, LodScene::kW, LodScene::kW}, level0, r0);
+      for (int r : reds(r0.image)) {
+        INFO("level 0: red " << r);
+        REQUIRE((r <= 1 || r >= 254));
+      }
+    }
+  }
+  SECTION("2-texel checks: level 1 at 2 texels a pixel (checks of one pixel, blended 3:1 by the half-texel offset), "
+          "level 2 at 4 texels (grey)") {
+    LodScene near(2, Sampler::Filter::linear, true);
+    near.direct(2);
+    RayTracer rt;
+    const Image img = render_full(rt, near.scene, settings);
+    dump("mip_level1", img);
+    // Level 1 has one-texel checks; a pixel centre sits a quarter texel off a level-1 texel
+    // centre in x and in y: weights 3/4 and 1/4 each way, so 10/16 of its own check's colour.
+    const int bright = srgb_of(0.625), dark = srgb_of(0.375);
+    for (int y = 0; y < LodScene::kW; ++y)
+      for (int x = 0; x < LodScene::kW; ++x) {
+        const int r = px(img, x, y).r;
+        INFO("pixel " << x << "," << y << " red " << r << " (" << bright << " or " << dark << ")");
+        REQUIRE((std::abs(r - bright) <= 2 || std::abs(r - dark) <= 2));
+        if (x > 0) REQUIRE(std::abs(r - px(img, x - 1, y).r) >= 30);  // neighbours alternate
+      }
+    LodScene far(2, Sampler::Filter::linear, true);
+    far.direct(4);
+    RayTracer rt2;
+    const Image grey = render_full(rt2, far.scene, settings);
+    dump("mip_level2", grey);
+    for (int r : reds(grey)) {
+      INFO("red " << r);
+      REQUIRE(std::abs(r - 188) <= 1);
+    }
+  }
+  SECTION("a nearest texture has no mip levels") {
+    LodScene ls(1, Sampler::Filter::nearest, true);
+    ls.direct(2);
+    RayTracer rt;
+    for (int r : reds(render_full(rt, ls.scene, settings))) {
+      INFO("red " << r);
+      REQUIRE((r <= 1 || r >= 254));
+    }
+  }
+  SECTION("through a mirror the cone keeps the width it had at the mirror") {
+    // With the cone restarted at the mirror the footprint would be 0.7 x 2 texels (level 0.49,
+    // half checks); carried through it, 2 texels: level 1's uniform grey.
+    LodScene ls(1, Sampler::Filter::linear, true);
+    ls.mirrored(2);
+    RayTracer rt;
+    const Image img = render_full(rt, ls.scene, settings);
+    dump("mip_mirror", img);
+    for (int r : reds(img)) {
+      INFO("red " << r);
+      REQUIRE(std::abs(r - 188) <= 1);
+    }
+  }
+}
+
 // XML3D's useVertexColor: a quad with red, green, blue and white corners; the vertex colour,
 // interpolated with the hit's barycentrics, multiplies the diffuse colour where the material
 // asks for it, and changes nothing where it does not or where the mesh has no colours.
