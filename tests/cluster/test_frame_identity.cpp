@@ -26,6 +26,7 @@
 #include <string>
 #include <vector>
 
+#include "app/common.h"
 #include "codecs/dxt1.h"
 #include "codecs/jpeg.h"
 #include "renderer/accumulation.h"
@@ -152,21 +153,6 @@ std::string hex64(uint64_t v) {
 }
 
 // "<isa> <packet> | <compiler>": the conditions under which a hash is reproducible.
-// The CPU's model name (/proc/cpuinfo), or "unknown".
-std::string cpu_model_name() {
-  std::ifstream f("/proc/cpuinfo");
-  std::string line;
-  while (std::getline(f, line))
-    if (line.rfind("model name", 0) == 0) {
-      auto colon = line.find(':');
-      if (colon != std::string::npos) {
-        auto start = line.find_first_not_of(' ', colon + 1);
-        return start == std::string::npos ? "unknown" : line.substr(start);
-      }
-    }
-  return "unknown";
-}
-
 // ISA, packet, compiler and CPU model: three machines with the same ISA, packet and compiler have
 // rendered some of these frames to different bits, each the same in every run, for reasons not
 // found (frame-hashes.txt), so the hashes are recorded per CPU model too.
@@ -179,7 +165,7 @@ std::string platform_key() {
 #elif defined(__GNUC__)
       "gcc "
 #endif
-    << __VERSION__ << " | " << cpu_model_name();
+    << __VERSION__ << " | " << app::cpu_model();
   return k.str();
 }
 

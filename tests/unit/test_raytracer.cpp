@@ -401,6 +401,16 @@ std::vector<int> reds(const Image& img) {
   return out;
 }
 
+// Every pixel's red channel is `expected` within 1 (a uniform grey), or, with expected < 0,
+// black or white (checks seen at level 0).
+void require_reds(const Image& img, int expected, const std::string& what) {
+  for (int r : reds(img)) {
+    INFO(what << ": red " << r << " expected " << (expected < 0 ? std::string("0 or 255") : std::to_string(expected)));
+    if (expected < 0) REQUIRE((r <= 1 || r >= 254));
+    else REQUIRE(std::abs(r - expected) <= 1);
+  }
+}
+
 }  // namespace
 
 TEST_CASE("trilinear filtering reads the mip level of a pixel's footprint, averaged as linear light", "[raytracer][texture][mip]") {
@@ -414,20 +424,13 @@ TEST_CASE("trilinear filtering reads the mip level of a pixel's footprint, avera
       dump(std::string("mip_grey_") + (linear ? "linear" : "plain"), img);
       // Linear scenes decode sRGB texels and average light (sRGB 188 is the code nearest linear
       // 0.5: 0.5029, against 0.4969 for 187); plain scenes average the codes: (0 + 255) / 2.
-      const int expected = linear ? 188 : 128;
-      for (int r : reds(img)) {
-        INFO("linear " << linear << " red " << r << " expected " << expected);
-        REQUIRE(std::abs(r - expected) <= 1);
-      }
+      require_reds(img, linear ? 188 : 128, linear ? "linear" : "plain");
       // Level 0 alone (the renderer before mip levels) shows the checks themselves.
       RenderSettings level0 = settings;
       level0.mip_levels = false;
       TaskResult r0;
       rt.render({0, 0, LodScene::kW, LodScene::kW}, level0, r0);
-      for (int r : reds(r0.image)) {
-        INFO("level 0: red " << r);
-        REQUIRE((r <= 1 || r >= 254));
-      }
+      require_reds(r0.image, -1, "level 0 alone");
     }
   }
   SECTION("2-texel checks: level 1 at 2 texels a pixel (checks of one pixel, blended 3:1 by the half-texel offset), "
@@ -452,19 +455,13 @@ TEST_CASE("trilinear filtering reads the mip level of a pixel's footprint, avera
     RayTracer rt2;
     const Image grey = render_full(rt2, far.scene, settings);
     dump("mip_level2", grey);
-    for (int r : reds(grey)) {
-      INFO("red " << r);
-      REQUIRE(std::abs(r - 188) <= 1);
-    }
+    require_reds(grey, 188, "level 2");
   }
   SECTION("a nearest texture has no mip levels") {
     LodScene ls(1, Sampler::Filter::nearest, true);
     ls.direct(2);
     RayTracer rt;
-    for (int r : reds(render_full(rt, ls.scene, settings))) {
-      INFO("red " << r);
-      REQUIRE((r <= 1 || r >= 254));
-    }
+    require_reds(render_full(rt, ls.scene, settings), -1, "nearest");
   }
   SECTION("through a mirror the cone keeps the width it had at the mirror") {
     // With the cone restarted at the mirror the footprint would be 0.7 x 2 texels (level 0.49,
@@ -474,10 +471,7 @@ TEST_CASE("trilinear filtering reads the mip level of a pixel's footprint, avera
     RayTracer rt;
     const Image img = render_full(rt, ls.scene, settings);
     dump("mip_mirror", img);
-    for (int r : reds(img)) {
-      INFO("red " << r);
-      REQUIRE(std::abs(r - 188) <= 1);
-    }
+    require_reds(img, 188, "through a mirror");
   }
 }
 
