@@ -1100,6 +1100,16 @@ Scene busy_scene(int W, int H) {
   leaf.diffuse_texture = 1;
   leaf.alpha_mask = true;
   scene.set_material(4, leaf);
+  // The floor: a 128x128 texture over 10 x 10 units, minified towards the back (trilinear over
+  // its mip levels, packets whose lanes span several levels included) and seen in the mirror.
+  Texture fine;
+  fine.width = fine.height = 128;
+  for (int y = 0; y < 128; ++y)
+    for (int x = 0; x < 128; ++x)
+      fine.rgba.insert(fine.rgba.end(), {uint8_t(((x ^ y) & 1) ? 230 : 40), uint8_t(2 * x), uint8_t(2 * y), 255});
+  scene.set_texture(2, fine);
+  white.diffuse_texture = 2;
+  scene.set_material(1, white);
   add_object(scene, 100, quad({-5, -1, 5}, {10, 0, 0}, {0, 0, -10}), 1);
   add_object(scene, 200, sphere(0.7f, 32), 2, Mat4::translate({-1, -0.3f, 0}));
   add_object(scene, 300, sphere(0.6f, 32), 3, Mat4::translate({0.8f, -0.4f, 0.8f}));
@@ -1326,6 +1336,18 @@ TEST_CASE("packet layouts 2x2, 4x2 and 4x4 give identical images", "[raytracer][
     for (size_t k = 0; k < images[0].rgba.size(); ++k) diff += images[i].rgba[k] != images[0].rgba[k];
     INFO("layout " << i << " differs from 2x2 in " << diff << " bytes");
     CHECK(diff == 0);
+  }
+  // The floor's texture is minified: its mip levels change the image (so the layouts above
+  // agreed on trilinear lookups, not only on level 0).
+  {
+    RayTracer rt;
+    RenderSettings level0 = busy_settings();
+    level0.mip_levels = false;
+    const Image flat = render_full(rt, scene, level0);
+    int diff = 0;
+    for (size_t k = 0; k < flat.rgba.size(); ++k) diff += flat.rgba[k] != images[0].rgba[k];
+    INFO("level 0 alone differs from trilinear in " << diff << " bytes");
+    CHECK(diff > 200);
   }
   CHECK_THROWS_AS(RayTracer(PacketLayout{3, 3}), std::invalid_argument);
 }
