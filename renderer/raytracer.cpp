@@ -99,12 +99,21 @@ struct SrgbLut {
   std::array<float, 256> to_linear;
   // A texel channel (16 bits) for each 8-bit value: decoded from sRGB, or as it is (x 257).
   std::array<uint32_t, 256> texel_linear, texel_plain;
+  // The inverse of texel_linear: for each 16-bit linear value, the sRGB code whose decoded value
+  // is nearest (ties to the lower code). Mip levels of sRGB textures are averaged through it.
+  std::array<uint8_t, 65536> code_of_linear;
   SrgbLut() {
     for (int i = 0; i < 256; ++i) {
       float c = i / 255.0f;
       to_linear[i] = c <= 0.04045f ? c / 12.92f : std::pow((c + 0.055f) / 1.055f, 2.4f);
       texel_linear[size_t(i)] = uint32_t(std::lround(to_linear[size_t(i)] * 65535.0f));
       texel_plain[size_t(i)] = uint32_t(i) * 257;
+    }
+    size_t code = 0;
+    for (uint32_t v = 0; v < 65536; ++v) {
+      // The next code is nearer once v is past the midpoint of the two decoded values.
+      while (code < 255 && 2 * v > texel_linear[code] + texel_linear[code + 1]) ++code;
+      code_of_linear[v] = uint8_t(code);
     }
   }
 };
@@ -113,21 +122,14 @@ const SrgbLut& srgb_lut() {
   return lut;
 }
 
-// The nearest 8-bit sRGB code to a linear value (the lut's own decoding inverted exactly).
-uint8_t srgb_code(float linear) {
-  const auto& t = srgb_lut().to_linear;
-  const auto it = std::lower_bound(t.begin(), t.end(), linear);
-  if (it == t.begin()) return 0;
-  if (it == t.end()) return 255;
-  const size_t i = size_t(it - t.begin());
-  return uint8_t(linear - t[i - 1] < t[i] - linear ? i - 1 : i);
-}
-
 // Level k + 1 of a mip chain from level k (w x h RGBA8): each texel the mean of a 2x2 box (a
 // dimension of 1 stays 1; an odd one drops its last row or column, as glGenerateMipmap may).
 // Colour is averaged as linear light where the texture is decoded from sRGB, else as stored.
+// In 16-bit units, as the kernel decodes texels (SrgbLut::texel_linear), so a level costs a
+// few table reads a texel (the first sync of the pavilion builds about 5 million texels of them).
 void mip_level(const uint8_t* src, int w, int h, bool srgb, uint8_t* dst, int dw, int dh) {
-  const auto& lin = srgb_lut().to_linear;
+  const auto& lin = srgb_lut().texel_linear;
+  const auto& code = srgb_lut().code_of_linear;
   tbb::parallel_for(tbb::blocked_range<int>(0, dh, 16), [&](const tbb::blocked_range<int>& r) {
     for (int y = r.begin(); y != r.end(); ++y) {
       const int ya = std::min(2 * y, h - 1), yb = std::min(2 * y + 1, h - 1);
@@ -138,7 +140,7 @@ void mip_level(const uint8_t* src, int w, int h, bool srgb, uint8_t* dst, int dw
         uint8_t* o = dst + (size_t(y) * size_t(dw) + size_t(x)) * 4;
         for (int c = 0; c < 4; ++c) {
           if (srgb && c < 3) {
-            o[c] = srgb_code(0.25f * (lin[q[0][c]] + lin[q[1][c]] + lin[q[2][c]] + lin[q[3][c]]));
+            o[c] = code[(lin[q[0][c]] + lin[q[1][c]] + lin[q[2][c]] + lin[q[3][c]] + 2) / 4];
           } else {
             o[c] = uint8_t((unsigned(q[0][c]) + q[1][c] + q[2][c] + q[3][c] + 2) / 4);
           }
