@@ -391,6 +391,13 @@ struct LodScene {
     const float s = 1.0f / kT;
     scene.set_camera(look({s, s, 0.3f * d}, {s, s, 0}, kFov));
   }
+  // Renders the whole frame with a fresh ray tracer (written to $TESSERA_TEST_DUMP as `name`).
+  Image render(const RenderSettings& settings, const std::string& name) const {
+    RayTracer rt;
+    const Image img = render_full(rt, scene, settings);
+    dump(name, img);
+    return img;
+  }
 };
 
 // Every pixel's red channel.
@@ -419,27 +426,21 @@ TEST_CASE("trilinear filtering reads the mip level of a pixel's footprint, avera
     for (bool linear : {true, false}) {
       LodScene ls(1, Sampler::Filter::linear, linear);
       ls.direct(2);
-      RayTracer rt;
-      const Image img = render_full(rt, ls.scene, settings);
-      dump(std::string("mip_grey_") + (linear ? "linear" : "plain"), img);
+      const Image img = ls.render(settings, std::string("mip_grey_") + (linear ? "linear" : "plain"));
       // Linear scenes decode sRGB texels and average light (sRGB 188 is the code nearest linear
       // 0.5: 0.5029, against 0.4969 for 187); plain scenes average the codes: (0 + 255) / 2.
       require_reds(img, linear ? 188 : 128, linear ? "linear" : "plain");
       // Level 0 alone (the renderer before mip levels) shows the checks themselves.
       RenderSettings level0 = settings;
       level0.mip_levels = false;
-      TaskResult r0;
-      rt.render({0, 0, LodScene::kW, LodScene::kW}, level0, r0);
-      require_reds(r0.image, -1, "level 0 alone");
+      require_reds(ls.render(level0, "mip_level0"), -1, "level 0 alone");
     }
   }
   SECTION("2-texel checks: level 1 at 2 texels a pixel (checks of one pixel, blended 3:1 by the half-texel offset), "
           "level 2 at 4 texels (grey)") {
     LodScene near(2, Sampler::Filter::linear, true);
     near.direct(2);
-    RayTracer rt;
-    const Image img = render_full(rt, near.scene, settings);
-    dump("mip_level1", img);
+    const Image img = near.render(settings, "mip_level1");
     // Level 1 has one-texel checks; a pixel centre sits a quarter texel off a level-1 texel
     // centre in x and in y: weights 3/4 and 1/4 each way, so 10/16 of its own check's colour.
     const int bright = srgb_of(0.625), dark = srgb_of(0.375);
@@ -452,26 +453,19 @@ TEST_CASE("trilinear filtering reads the mip level of a pixel's footprint, avera
       }
     LodScene far(2, Sampler::Filter::linear, true);
     far.direct(4);
-    RayTracer rt2;
-    const Image grey = render_full(rt2, far.scene, settings);
-    dump("mip_level2", grey);
-    require_reds(grey, 188, "level 2");
+    require_reds(far.render(settings, "mip_level2"), 188, "level 2");
   }
   SECTION("a nearest texture has no mip levels") {
     LodScene ls(1, Sampler::Filter::nearest, true);
     ls.direct(2);
-    RayTracer rt;
-    require_reds(render_full(rt, ls.scene, settings), -1, "nearest");
+    require_reds(ls.render(settings, "mip_nearest"), -1, "nearest");
   }
   SECTION("through a mirror the cone keeps the width it had at the mirror") {
     // With the cone restarted at the mirror the footprint would be 0.7 x 2 texels (level 0.49,
     // half checks); carried through it, 2 texels: level 1's uniform grey.
     LodScene ls(1, Sampler::Filter::linear, true);
     ls.mirrored(2);
-    RayTracer rt;
-    const Image img = render_full(rt, ls.scene, settings);
-    dump("mip_mirror", img);
-    require_reds(img, 188, "through a mirror");
+    require_reds(ls.render(settings, "mip_mirror"), 188, "through a mirror");
   }
 }
 
