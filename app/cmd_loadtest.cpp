@@ -1,8 +1,8 @@
 // tessera loadtest --scene S.gltf --camera-loop L.json [--clients N] [--display jpeg|s3tc|mjpeg|h264]
 //                  [--seconds S | --frames F] [--warmup K] [--size W H] [--ao A] [--quality Q] [--host H --port P [--token T]] [--threads T]
-//                  [--tls [--tls-ca F] | --tls-cert C --tls-key K]
+//                  [--tls [--tls-ca F] | --tls-cert C --tls-key K] [--outstanding 1|2]
 // Uploads the scene from N simultaneous WebSocket clients; each replays the camera loop with two
-// render requests outstanding. Once every client has received K frames (all connected and
+// render requests outstanding (or one: --outstanding 1). Once every client has received K frames (all connected and
 // streaming), a common window of S seconds opens; the frames each client receives inside it
 // are counted. Prints one JSON line per frame received in the window and a summary (frames
 // per second per client and in total over the common window, pipeline/encode/bytes medians).
@@ -43,7 +43,7 @@ int run(const std::vector<std::string>& argv) {
     std::puts("tessera loadtest --scene S.gltf --camera-loop L.json [--clients N] [--display jpeg|s3tc|mjpeg|h264]\n"
               "                 [--seconds S | --frames F] [--warmup K] [--size W H] [--ao A] [--quality Q]\n"
               "                 [--host H --port P [--token T]] [--threads T]\n"
-              "                 [--tls [--tls-ca F] | --tls-cert C --tls-key K]\n"
+              "                 [--tls [--tls-ca F] | --tls-cert C --tls-key K] [--outstanding 1|2]\n"
               "Frames per second over a common window of S seconds (default 20) that opens once every client\n"
               "has received K frames (default 2). --frames F: the window closes instead once every client has\n"
               "received F frames after its K warm-up frames (frame numbers K..K+F-1, the camera loop's frames\n"
@@ -52,8 +52,10 @@ int run(const std::vector<std::string>& argv) {
               "token for a node that asks for one (tessera token; sent as ?access_token=). --tls: wss:// to the node at\n"
               "--port (its certificate verified against --tls-ca F when given). --tls-cert/--tls-key: the in-process\n"
               "node serves WSS with them, and the clients connect over TLS. latency_ms: from sending a frame's camera\n"
-              "and render request to receiving the frame (two requests outstanding, so it includes the wait behind\n"
-              "the frame before it).");
+              "and render request to receiving the frame. --outstanding: render requests each client keeps in flight\n"
+              "(default 2: the node renders a frame while the one before is encoded and sent, and latency includes\n"
+              "the wait behind it; 1: the next camera is sent when a frame arrives, so latency is one round trip,\n"
+              "the rendering, encoding and transfer of one frame, and nothing else).");
     return 0;
   }
   int threads = 0;
@@ -64,6 +66,7 @@ int run(const std::vector<std::string>& argv) {
   const double seconds = double(args.integer("--seconds", 20));
   const int warmup = int(args.integer("--warmup", 2));
   const int frames_wanted = int(args.integer("--frames", 0));
+  const int outstanding = int(args.integer("--outstanding", 2));
   const int ao = int(args.integer("--ao", 0));
   const int quality = int(args.integer("--quality", 85));
   std::string host = args.str("--host", "127.0.0.1");
@@ -77,6 +80,7 @@ int run(const std::vector<std::string>& argv) {
   if (!tls_cert.empty()) tls = true;
   if (clients < 1 || clients > 64 || seconds < 1 || warmup < 1 || frames_wanted < 0)
     throw std::invalid_argument("--clients 1..64, --seconds >= 1, --warmup >= 1, --frames >= 0");
+  if (outstanding < 1 || outstanding > 2) throw std::invalid_argument("--outstanding must be 1 or 2");
   if (display != "jpeg" && display != "s3tc" && display != "mjpeg" && display != "h264")
     throw std::invalid_argument("--display must be jpeg, s3tc, mjpeg or h264");
   const int W = setup.loaded.scene.width(), H = setup.loaded.scene.height();
@@ -149,7 +153,7 @@ int run(const std::vector<std::string>& argv) {
         ++sent;
       };
       request();
-      request();  // two outstanding: the node renders f+1 while f is encoded and sent
+      if (outstanding > 1) request();  // two: the node renders f+1 while f is encoded and sent
       protocol::Limits lim;
       auto last = Clock::now();
       while (!stop) {
@@ -249,11 +253,11 @@ int run(const std::vector<std::string>& argv) {
               "\"median_rendering_ms\": %.3f, \"median_kernel_ms\": %.3f, \"median_sat_ms\": %.3f, "
               "\"median_tiling_ms\": %.3f, \"median_encode_ms\": %.3f, \"median_pipeline_ms\": %.3f, "
               "\"median_latency_ms\": %.3f, \"p90_latency_ms\": %.3f, "
-              "\"median_bytes\": %.0f, \"node_bytes_per_frame\": %.0f, \"median_upload_ms\": %.1f, \"errors\": %zu, \"scene\": %s, "
+              "\"median_bytes\": %.0f, \"node_bytes_per_frame\": %.0f, \"median_upload_ms\": %.1f, \"errors\": %zu, \"outstanding\": %d, \"scene\": %s, "
               "\"triangles\": %zu, \"node\": \"%s\", \"tls\": %s, \"cpu\": %s, \"threads\": %d}\n",
               clients, display.c_str(), quality, W, H, ao, window_s, all.size(), per.c_str(), total_fps, median(rendering),
               median(kernel), median(sat), median(tiling), median(encode), median(pipeline), median(latency),
-              percentile(latency, 0.9), median(bytes), median(node_bytes), median(upload_ms), errors.size(),
+              percentile(latency, 0.9), median(bytes), median(node_bytes), median(upload_ms), errors.size(), outstanding,
               json_str(setup.scene_path).c_str(), setup.loaded.scene.triangle_count(), server ? "in-process" : "external",
               tls ? json_str(tls_sessions[0].empty() ? "yes" : tls_sessions[0]).c_str() : "false",
               json_str(cpu_model()).c_str(), threads);

@@ -1,0 +1,275 @@
+// `tessera linkem` (app/cmd_linkem.cpp) between two network namespaces: TCP across it sees the
+// round-trip time and the rate asked for, UDP the loss, and the counters it prints on SIGTERM
+// agree. The display bench (bench/display_network.sh) measures every display across such links
+// on kernels without sch_netem.
+//
+// Needs root (namespaces, TUN devices), iproute2's `ip` and /dev/net/tun. Without them, or with
+// TESSERA_NO_NETNS=1, it prints why and exits 77 (CTest: skipped).
+#include <catch2/catch.hpp>
+
+#include "tests/catch_runner.h"
+
+#include <arpa/inet.h>
+#include <fcntl.h>
+#include <netinet/in.h>
+#include <netinet/tcp.h>
+#include <sched.h>
+#include <signal.h>
+#include <sys/socket.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <memory>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "tests/e2e/process.h"
+
+using namespace tessera::test;
+using Clock = std::chrono::steady_clock;
+
+namespace {
+
+std::string ip_binary() {
+  for (const char* p : {"/usr/sbin/ip", "/sbin/ip", "/usr/bin/ip", "/bin/ip"})
+    if (access(p, X_OK) == 0) return p;
+  return {};
+}
+
+bool sh(const std::string& cmd) { return std::system((cmd + " > /dev/null 2>&1").c_str()) == 0; }
+
+// Two namespaces, removed again by the destructor.
+struct Namespaces {
+  std::string a, b;
+  bool ok = false;
+  Namespaces() {
+    const std::string ip = ip_binary(), tag = std::to_string(getpid());
+    a = "tlkt" + tag + "a";
+    b = "tlkt" + tag + "b";
+    ok = sh(ip + " netns add " + a) && sh(ip + " netns add " + b) && sh(ip + " -n " + a + " link set lo up") &&
+         sh(ip + " -n " + b + " link set lo up");
+  }
+  ~Namespaces() {
+    sh(ip_binary() + " netns del " + a);
+    sh(ip_binary() + " netns del " + b);
+  }
+};
+
+std::string unavailable() {
+  if (const char* e = std::getenv("TESSERA_NO_NETNS"); e && *e && std::string(e) != "0")
+    return "TESSERA_NO_NETNS=" + std::string(e);
+  if (ip_binary().empty()) return "no iproute2 `ip` binary";
+  if (geteuid() != 0) return "not root: namespaces and TUN devices need CAP_NET_ADMIN (run as root)";
+  if (access("/dev/net/tun", R_OK | W_OK) != 0) return "no /dev/net/tun";
+  Namespaces probe;
+  return probe.ok ? std::string() : "cannot make network namespaces";
+}
+
+// This thread's network namespace becomes `name`'s (sockets made afterwards live there).
+bool enter(const std::string& name) {
+  const int fd = open(("/run/netns/" + name).c_str(), O_RDONLY | O_CLOEXEC);
+  if (fd < 0) return false;
+  const bool ok = setns(fd, CLONE_NEWNET) == 0;
+  close(fd);
+  return ok;
+}
+
+sockaddr_in address(const char* ip, uint16_t port) {
+  sockaddr_in sa{};
+  sa.sin_family = AF_INET;
+  sa.sin_port = htons(port);
+  inet_pton(AF_INET, ip, &sa.sin_addr);
+  return sa;
+}
+
+constexpr const char* kA = "10.216.0.1";
+constexpr const char* kB = "10.216.0.2";
+constexpr uint16_t kPort = 5017;
+
+// `tessera linkem` between the namespaces, started and ready (its first line), stopped with
+// SIGTERM by stop(), which returns all it printed.
+struct Link {
+  std::unique_ptr<Process> p;
+  Link(const Namespaces& ns, std::vector<std::string> shape) {
+    std::vector<std::string> argv = {TESSERA_BINARY, "linkem", "--ns", ns.a, ns.b, "--addr", kA, kB};
+    argv.insert(argv.end(), shape.begin(), shape.end());
+    p = std::make_unique<Process>(argv);
+    auto first = p->first_line(10000);
+    INFO(p->err());
+    REQUIRE(first);
+    REQUIRE(first->find("\"linkem\": \"ready\"") != std::string::npos);
+  }
+  std::string stop() {
+    p->signal(SIGTERM);
+    auto st = p->wait(5000);
+    REQUIRE(st);
+    CHECK(WIFEXITED(*st));
+    CHECK(WEXITSTATUS(*st) == 0);
+    return p->out();
+  }
+};
+
+long counter(const std::string& out, const std::string& direction, const std::string& key) {
+  auto at = out.find("\"direction\": \"" + direction + "\"");
+  if (at == std::string::npos) return -1;
+  at = out.find("\"" + key + "\": ", at);
+  if (at == std::string::npos) return -1;
+  return std::strtol(out.c_str() + at + key.size() + 4, nullptr, 10);
+}
+
+}  // namespace
+
+int test_prelude() {
+  if (std::string why = unavailable(); !why.empty()) {
+    std::printf("test_linkem: skipped: %s\n", why.c_str());
+    return 77;
+  }
+  return 0;
+}
+
+TEST_CASE("TCP across an emulated link sees its round-trip time and its rate", "[linkem]") {
+  Namespaces ns;
+  REQUIRE(ns.ok);
+  Link link(ns, {"--mbit", "20", "--rtt-ms", "40"});
+  constexpr size_t kBulk = 2'000'000;
+  std::atomic<bool> listening{false};
+  std::string server_error;
+  std::thread server([&] {  // in B: answers 10 pings, then sends kBulk bytes
+    if (!enter(ns.b)) return void(server_error = "setns b");
+    const int s = socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+    const int one = 1;
+    setsockopt(s, SOL_SOCKET, SO_REUSEADDR, &one, sizeof one);
+    auto sa = address(kB, kPort);
+    if (bind(s, reinterpret_cast<sockaddr*>(&sa), sizeof sa) != 0 || listen(s, 1) != 0)
+      return void(server_error = "bind/listen");
+    listening = true;
+    const int c = accept(s, nullptr, nullptr);
+    close(s);
+    if (c < 0) return void(server_error = "accept");
+    setsockopt(c, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
+    char ch;
+    for (int i = 0; i < 10; ++i)
+      if (recv(c, &ch, 1, MSG_WAITALL) != 1 || send(c, &ch, 1, 0) != 1) return void(server_error = "ping");
+    std::vector<char> data(kBulk, 'x');
+    for (size_t sent = 0; sent < kBulk;) {
+      const ssize_t n = send(c, data.data() + sent, kBulk - sent, 0);
+      if (n <= 0) return void(server_error = "bulk send");
+      sent += size_t(n);
+    }
+    recv(c, &ch, 1, 0);  // until the client has everything and closes
+    close(c);
+  });
+  std::vector<double> rtts;
+  double bulk_s = 0;
+  std::thread client([&] {  // in A
+    if (!enter(ns.a)) return;
+    while (!listening && server_error.empty()) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    const int c = socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+    auto sa = address(kB, kPort);
+    if (connect(c, reinterpret_cast<sockaddr*>(&sa), sizeof sa) != 0) return void(close(c));
+    const int one = 1;
+    setsockopt(c, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
+    char ch = 'p';
+    for (int i = 0; i < 10; ++i) {
+      const auto t = Clock::now();
+      if (send(c, &ch, 1, 0) != 1 || recv(c, &ch, 1, MSG_WAITALL) != 1) break;
+      rtts.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t).count());
+    }
+    std::vector<char> buf(1 << 20);
+    size_t got = 0;
+    const auto t = Clock::now();
+    while (got < kBulk) {
+      const ssize_t n = recv(c, buf.data(), buf.size(), 0);
+      if (n <= 0) break;
+      got += size_t(n);
+    }
+    if (got == kBulk) bulk_s = std::chrono::duration<double>(Clock::now() - t).count();
+    close(c);
+  });
+  client.join();
+  server.join();
+  const std::string out = link.stop();
+  INFO(out);
+  REQUIRE(server_error.empty());
+  REQUIRE(rtts.size() == 10);
+  std::sort(rtts.begin(), rtts.end());
+  // A round trip is never shorter than the link's 40 ms, and not much longer (two 1-byte
+  // segments take microseconds at 20 Mbit/s; the margin is for a busy machine).
+  CHECK(rtts.front() >= 40.0);
+  CHECK(rtts[5] < 55.0);
+  // The bulk transfer runs at most at the link's rate: 1448 payload bytes in a 1500-byte
+  // packet, so 19.3 Mbit/s of payload; TCP's slow start over 40 ms round trips keeps it below.
+  REQUIRE(bulk_s > 0);
+  const double mbit = double(kBulk) * 8 / bulk_s / 1e6;
+  INFO("payload " << mbit << " Mbit/s");
+  CHECK(mbit < 19.5);
+  CHECK(mbit > 8.0);
+  CHECK(counter(out, "b_to_a", "lost") == 0);
+  CHECK(counter(out, "b_to_a", "bytes") > long(kBulk));
+  CHECK(counter(out, "a_to_b", "forwarded") > 10);
+}
+
+TEST_CASE("UDP across an emulated link loses the share of datagrams asked for", "[linkem]") {
+  Namespaces ns;
+  REQUIRE(ns.ok);
+  Link link(ns, {"--loss-percent", "10", "--seed", "5"});
+  constexpr int kSent = 2000;
+  std::atomic<bool> bound{false}, done{false};
+  std::atomic<int> received{0};
+  std::thread receiver([&] {
+    if (!enter(ns.b)) return;
+    const int s = socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+    const int big = 4 << 20;
+    setsockopt(s, SOL_SOCKET, SO_RCVBUF, &big, sizeof big);
+    timeval tv{0, 100000};
+    setsockopt(s, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof tv);
+    auto sa = address(kB, kPort);
+    if (bind(s, reinterpret_cast<sockaddr*>(&sa), sizeof sa) != 0) return void(close(s));
+    bound = true;
+    char buf[256];
+    while (!done)
+      if (recv(s, buf, sizeof buf, 0) > 0) ++received;
+    close(s);
+  });
+  std::thread sender([&] {
+    if (!enter(ns.a)) return;
+    while (!bound) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    const int s = socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+    auto sa = address(kB, kPort);
+    char msg[100] = {};
+    for (int i = 0; i < kSent; ++i) {
+      sendto(s, msg, sizeof msg, 0, reinterpret_cast<sockaddr*>(&sa), sizeof sa);
+      if (i % 20 == 19) std::this_thread::sleep_for(std::chrono::microseconds(500));  // not past the TUN's queue
+    }
+    close(s);
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    done = true;
+  });
+  sender.join();
+  receiver.join();
+  const std::string out = link.stop();
+  INFO(out);
+  // 10% of 2000 lost: binomial, standard deviation 13.4; 5 of them either side.
+  INFO("received " << received.load());
+  CHECK(received > kSent - 200 - 67);
+  CHECK(received < kSent - 200 + 67);
+  // What arrived is what the link forwarded (the kernel may add a packet or two of its own).
+  const long forwarded = counter(out, "a_to_b", "forwarded");
+  CHECK(forwarded >= received);
+  CHECK(forwarded <= received + 5);
+  CHECK(counter(out, "a_to_b", "lost") + forwarded == counter(out, "a_to_b", "packets"));
+}
+
+TEST_CASE("linkem refuses a namespace that does not exist, with the reason", "[linkem]") {
+  Process p({TESSERA_BINARY, "linkem", "--ns", "tlkt-no-such-ns", "tlkt-nor-this", "--addr", kA, kB});
+  auto st = p.wait(10000);
+  REQUIRE(st);
+  CHECK(WEXITSTATUS(*st) == 1);
+  CHECK(p.err().find("no network namespace 'tlkt-no-such-ns'") != std::string::npos);
+}
