@@ -1,5 +1,5 @@
 // tessera linkem --ns A B --addr IP_A IP_B [--mbit R] [--rtt-ms T] [--loss-percent P]
-//                [--queue-kb Q] [--mtu M] [--dev NAME] [--seed S]
+//                [--queue-kb Q] [--mtu M] [--dev NAME] [--seed S] [--open-until-signal]
 // An emulated network link between two Linux network namespaces, for kernels without sch_netem
 // (this project's VMs: "Specified qdisc kind is unknown"). It makes a TUN device in each
 // namespace, gives them point-to-point addresses (A's device IP_A with peer IP_B, B's the other
@@ -10,7 +10,9 @@
 // sees a real link: its round trips, its losses (and retransmits them), its rate.
 //
 // Prints one JSON line {"linkem": "ready", ...} once both devices are up, and on SIGINT or SIGTERM
-// one line of counters per direction. Needs CAP_NET_ADMIN and CAP_SYS_ADMIN (setns) and
+// one line of counters per direction. --open-until-signal: the link forwards at once (no rate,
+// delay or loss) until SIGUSR1, then shapes as asked: a bench uploads its scene, then measures
+// frames on the shaped link (loadtest --on-streaming). Needs CAP_NET_ADMIN and CAP_SYS_ADMIN (setns) and
 // /dev/net/tun. Used by bench/display_network.sh and tests/e2e/test_linkem.cpp.
 #include <arpa/inet.h>
 #include <fcntl.h>
@@ -43,7 +45,7 @@ namespace {
 
 const char* kHelp =
     "tessera linkem --ns A B --addr IP_A IP_B [--mbit R] [--rtt-ms T] [--loss-percent P]\n"
-    "               [--queue-kb Q] [--mtu M] [--dev NAME] [--seed S]\n"
+    "               [--queue-kb Q] [--mtu M] [--dev NAME] [--seed S] [--open-until-signal]\n"
     "An emulated link between network namespaces A and B (names under /run/netns, as `ip netns add`\n"
     "makes them, or paths), for kernels without sch_netem: a TUN device NAME (default tlk0) in each,\n"
     "addressed IP_A and IP_B (IPv4, point to point), and every packet between them forwarded through\n"
@@ -51,10 +53,12 @@ const char* kHelp =
     "R Mbit/s (default 0: no limit), then T/2 ms of delay (default 0), and lost with probability P%\n"
     "(default 0), in each direction. MTU M (default 1500). --seed S: the loss draws (default 1).\n"
     "Prints {\"linkem\": \"ready\", ...} once the devices are up; runs until SIGINT or SIGTERM, then\n"
-    "prints each direction's counters. Needs root (CAP_NET_ADMIN, CAP_SYS_ADMIN) and /dev/net/tun.\n";
+    "prints each direction's counters (of the shaped link). --open-until-signal: no rate, delay or loss\n"
+    "until SIGUSR1 (then {\"linkem\": \"shaped\"}). Needs root (CAP_NET_ADMIN, CAP_SYS_ADMIN) and /dev/net/tun.\n";
 
-volatile sig_atomic_t g_stop = 0;
+volatile sig_atomic_t g_stop = 0, g_shape = 0;
 void on_signal(int) { g_stop = 1; }
+void on_usr1(int) { g_shape = 1; }
 
 [[noreturn]] void fail(const std::string& what) {
   throw std::runtime_error(what + ": " + std::strerror(errno));
@@ -179,6 +183,7 @@ int run(const std::vector<std::string>& argv) {
   const long mtu = args.integer("--mtu", 1500);
   const std::string dev = args.str("--dev", "tlk0");
   p.seed = uint64_t(args.integer("--seed", 1));
+  const bool open_first = args.flag("--open-until-signal");
   args.finish();
   p.validate();
   if (!(queue_kb >= 0 && queue_kb <= 1 << 20)) throw std::invalid_argument("--queue-kb must be 0..1048576");
@@ -187,19 +192,19 @@ int run(const std::vector<std::string>& argv) {
   if (dev.empty() || dev.size() >= IFNAMSIZ) throw std::invalid_argument("--dev must be 1..15 characters");
   const in_addr a = parse_ipv4(ip_a), b = parse_ipv4(ip_b);
 
-  // SIGINT and SIGTERM are blocked except inside ppoll, so a stop is never missed between the
+  // SIGINT, SIGTERM and SIGUSR1 are blocked except inside ppoll, so none is missed between the
   // check and the wait.
   struct sigaction sa {};
   sa.sa_handler = on_signal;
   sigaction(SIGINT, &sa, nullptr);
   sigaction(SIGTERM, &sa, nullptr);
-  sigset_t stop_set, wait_mask;
-  sigemptyset(&stop_set);
-  sigaddset(&stop_set, SIGINT);
-  sigaddset(&stop_set, SIGTERM);
-  sigprocmask(SIG_BLOCK, &stop_set, &wait_mask);
-  sigdelset(&wait_mask, SIGINT);
-  sigdelset(&wait_mask, SIGTERM);
+  sa.sa_handler = on_usr1;
+  sigaction(SIGUSR1, &sa, nullptr);
+  sigset_t ours, wait_mask;
+  sigemptyset(&ours);
+  for (int sig : {SIGINT, SIGTERM, SIGUSR1}) sigaddset(&ours, sig);
+  sigprocmask(SIG_BLOCK, &ours, &wait_mask);
+  for (int sig : {SIGINT, SIGTERM, SIGUSR1}) sigdelset(&wait_mask, sig);
 
   const int home = open("/proc/self/ns/net", O_RDONLY | O_CLOEXEC);
   const int fa = make_tun(netns_path(ns_a), dev, a, b, int(mtu));
@@ -212,8 +217,10 @@ int run(const std::vector<std::string>& argv) {
 
   LinkParams pb = p;
   pb.seed = p.seed * 0x9E3779B97F4A7C15ull + 1;  // the other direction's own loss draws
-  Direction dirs[2] = {{"a_to_b", fa, fb, LinkDirection(p), {}, 0, 0, 0},
-                       {"b_to_a", fb, fa, LinkDirection(pb), {}, 0, 0, 0}};
+  const LinkParams open{};
+  Direction dirs[2] = {{"a_to_b", fa, fb, LinkDirection(open_first ? open : p), {}, 0, 0, 0},
+                       {"b_to_a", fb, fa, LinkDirection(open_first ? open : pb), {}, 0, 0, 0}};
+  if (!open_first) g_shape = 0;
   std::printf("{\"linkem\": \"ready\", \"ns\": [\"%s\", \"%s\"], \"addr\": [\"%s\", \"%s\"], \"dev\": \"%s\", "
               "\"mbit_s\": %g, \"rtt_ms\": %g, \"loss_percent\": %g, \"queue_bytes\": %zu, \"mtu\": %ld}\n",
               ns_a.c_str(), ns_b.c_str(), ip_a.c_str(), ip_b.c_str(), dev.c_str(), p.mbit_s, p.delay_ms * 2,
@@ -221,7 +228,15 @@ int run(const std::vector<std::string>& argv) {
   std::fflush(stdout);
 
   std::vector<unsigned char> buf(size_t(mtu) + 64);
+  bool shaped = !open_first;
   while (!g_stop) {
+    if (g_shape && !shaped) {  // packets already in flight arrive as the open link said
+      shaped = true;
+      dirs[0].link = LinkDirection(p);
+      dirs[1].link = LinkDirection(pb);
+      std::printf("{\"linkem\": \"shaped\"}\n");
+      std::fflush(stdout);
+    }
     int64_t next = -1;
     for (auto& d : dirs)
       if (!d.flight.empty() && (next < 0 || d.flight.front().arrive_ns < next)) next = d.flight.front().arrive_ns;

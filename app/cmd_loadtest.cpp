@@ -1,6 +1,7 @@
 // tessera loadtest --scene S.gltf --camera-loop L.json [--clients N] [--display jpeg|s3tc|mjpeg|h264]
 //                  [--seconds S | --frames F] [--warmup K] [--size W H] [--ao A] [--quality Q] [--host H --port P [--token T]] [--threads T]
-//                  [--tls [--tls-ca F] | --tls-cert C --tls-key K] [--outstanding 1|2]
+//                  [--tls [--tls-ca F] | --tls-cert C --tls-key K] [--outstanding 1|2] [--latency-seconds L]
+//                  [--on-streaming CMD]
 // Uploads the scene from N simultaneous WebSocket clients; each replays the camera loop with two
 // render requests outstanding (or one: --outstanding 1). Once every client has received K frames (all connected and
 // streaming), a common window of S seconds opens; the frames each client receives inside it
@@ -11,6 +12,7 @@
 #include <atomic>
 #include <chrono>
 #include <cstdio>
+#include <cstdlib>
 #include <mutex>
 #include <thread>
 
@@ -43,7 +45,8 @@ int run(const std::vector<std::string>& argv) {
     std::puts("tessera loadtest --scene S.gltf --camera-loop L.json [--clients N] [--display jpeg|s3tc|mjpeg|h264]\n"
               "                 [--seconds S | --frames F] [--warmup K] [--size W H] [--ao A] [--quality Q]\n"
               "                 [--host H --port P [--token T]] [--threads T]\n"
-              "                 [--tls [--tls-ca F] | --tls-cert C --tls-key K] [--outstanding 1|2]\n"
+              "                 [--tls [--tls-ca F] | --tls-cert C --tls-key K] [--outstanding 1|2] [--latency-seconds L]\n"
+              "                 [--on-streaming CMD]\n"
               "Frames per second over a common window of S seconds (default 20) that opens once every client\n"
               "has received K frames (default 2). --frames F: the window closes instead once every client has\n"
               "received F frames after its K warm-up frames (frame numbers K..K+F-1, the camera loop's frames\n"
@@ -55,7 +58,12 @@ int run(const std::vector<std::string>& argv) {
               "and render request to receiving the frame. --outstanding: render requests each client keeps in flight\n"
               "(default 2: the node renders a frame while the one before is encoded and sent, and latency includes\n"
               "the wait behind it; 1: the next camera is sent when a frame arrives, so latency is one round trip,\n"
-              "the rendering, encoding and transfer of one frame, and nothing else).");
+              "the rendering, encoding and transfer of one frame, and nothing else). --latency-seconds L: after the\n"
+              "window, each client lets its requests in flight arrive, then keeps one outstanding for L seconds; the\n"
+              "summary's \"one_outstanding\" has that phase's latency (the scene is uploaded once for both).\n"
+              "--on-streaming CMD: once every client has its first frame (the scene is uploaded), the clients wait\n"
+              "while CMD runs (sh -c), then go on; with --warmup 2 or more, so no counted frame was asked for\n"
+              "before it. A bench shapes its link there (bench/display_network.sh).");
     return 0;
   }
   int threads = 0;
@@ -67,6 +75,8 @@ int run(const std::vector<std::string>& argv) {
   const int warmup = int(args.integer("--warmup", 2));
   const int frames_wanted = int(args.integer("--frames", 0));
   const int outstanding = int(args.integer("--outstanding", 2));
+  const double latency_seconds = args.number("--latency-seconds", 0);
+  const std::string on_streaming = args.str("--on-streaming");
   const int ao = int(args.integer("--ao", 0));
   const int quality = int(args.integer("--quality", 85));
   std::string host = args.str("--host", "127.0.0.1");
@@ -81,6 +91,8 @@ int run(const std::vector<std::string>& argv) {
   if (clients < 1 || clients > 64 || seconds < 1 || warmup < 1 || frames_wanted < 0)
     throw std::invalid_argument("--clients 1..64, --seconds >= 1, --warmup >= 1, --frames >= 0");
   if (outstanding < 1 || outstanding > 2) throw std::invalid_argument("--outstanding must be 1 or 2");
+  if (!(latency_seconds >= 0 && latency_seconds <= 3600)) throw std::invalid_argument("--latency-seconds must be 0..3600");
+  if (!on_streaming.empty() && warmup < 2) throw std::invalid_argument("--on-streaming needs --warmup 2 or more");
   if (display != "jpeg" && display != "s3tc" && display != "mjpeg" && display != "h264")
     throw std::invalid_argument("--display must be jpeg, s3tc, mjpeg or h264");
   const int W = setup.loaded.scene.width(), H = setup.loaded.scene.height();
@@ -116,6 +128,14 @@ int run(const std::vector<std::string>& argv) {
   std::vector<std::string> tls_sessions(static_cast<size_t>(clients));
   std::atomic<int> ready{0}, finished{0}, complete{0};  // complete: clients with their --frames
   std::atomic<bool> stop{false};
+  // The latency phase (--latency-seconds): opened by the main thread when the window closes;
+  // each client's frames of it (latency, rendering ms), and the clients that have finished it.
+  std::atomic<bool> phase_one{false};
+  // --on-streaming: clients with their first frame, and the command's end.
+  std::atomic<int> streaming{0};
+  std::atomic<bool> go{on_streaming.empty()};
+  std::atomic<int> phase_one_done{0};
+  std::vector<std::vector<std::pair<double, double>>> one_outstanding(static_cast<size_t>(clients));
   auto client_main = [&](int ci) {
     WsClient ws;
     if (tls) ws.use_tls(tls_ca);
@@ -143,8 +163,11 @@ int run(const std::vector<std::string>& argv) {
       ws.send(protocol::encode(protocol::ClientRecord{hs}));
       for (auto& m : upload) ws.send(m);
       ws.send(protocol::encode(protocol::ClientRecord{protocol::Settings{uint32_t(ao), 4}}));
-      uint32_t sent = 0;
+      uint32_t sent = 0, arrived = 0;
       int got = 0;
+      uint32_t phase_one_first = UINT32_MAX;  // the first frame requested in the latency phase
+      Clock::time_point phase_one_start;
+      bool phase_one_over = false;
       auto request = [&] {
         size_t k = size_t(sent) % setup.loop.frames.size();
         sent_at.push_back(Clock::now());
@@ -154,13 +177,23 @@ int run(const std::vector<std::string>& argv) {
       };
       request();
       if (outstanding > 1) request();  // two: the node renders f+1 while f is encoded and sent
+      // The latency phase's first request, once every frame in flight has arrived (also when
+      // that happened before the phase opened).
+      auto open_phase_one = [&](Clock::time_point now) {
+        if (phase_one && phase_one_first == UINT32_MAX && arrived == sent) {
+          phase_one_first = sent;
+          phase_one_start = now;
+          request();
+        }
+      };
       protocol::Limits lim;
       auto last = Clock::now();
       while (!stop) {
-        auto msg = ws.receive(200);
+        auto msg = ws.receive(phase_one ? 20 : 200);
         if (!msg) {
+          open_phase_one(Clock::now());
           if (ws.closed()) return fail("connection closed after " + std::to_string(got) + " frames");
-          if (Clock::now() - last > std::chrono::seconds(120))
+          if (!phase_one_over && Clock::now() - last > std::chrono::seconds(120))
             return fail("no frame for 120 s after " + std::to_string(got) + " frames");
           continue;
         }
@@ -173,6 +206,22 @@ int run(const std::vector<std::string>& argv) {
           auto* f = std::get_if<protocol::Frame>(&r);
           if (!f) continue;
           last = now;
+          ++arrived;
+          if (phase_one) {  // the latency phase: one request at a time, once those in flight are in
+            if (phase_one_over) continue;
+            if (f->frame >= phase_one_first && f->frame < sent_at.size()) {
+              one_outstanding[size_t(ci)].push_back(
+                  {std::chrono::duration<double, std::milli>(now - sent_at[f->frame]).count(), f->timings.rendering_ms});
+              if (now - phase_one_start >= std::chrono::duration<double>(latency_seconds)) {
+                phase_one_over = true;
+                ++phase_one_done;
+                continue;
+              }
+            }
+            if (phase_one_first == UINT32_MAX) open_phase_one(now);
+            else if (arrived == sent) request();
+            continue;
+          }
           if (frames_wanted > 0 && got >= warmup + frames_wanted) continue;  // requested ahead: not counted
           if (got == 0) upload_ms[size_t(ci)] = std::chrono::duration<double, std::milli>(now - t_up).count();
           const double latency =
@@ -181,6 +230,10 @@ int run(const std::vector<std::string>& argv) {
           if (++got == warmup && !counted_ready) {
             counted_ready = true;
             ++ready;
+          }
+          if (got == 1 && !go) {
+            ++streaming;
+            while (!go && !stop) std::this_thread::sleep_for(std::chrono::milliseconds(2));
           }
           if (frames_wanted > 0 && got == warmup + frames_wanted) {
             ++complete;
@@ -197,11 +250,26 @@ int run(const std::vector<std::string>& argv) {
   std::vector<std::thread> ts;
   for (int c = 0; c < clients; ++c) ts.emplace_back(client_main, c);
   // The common window: opens when every client streams, lasts --seconds.
+  if (!on_streaming.empty()) {
+    while (streaming < clients && finished == 0) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    if (finished == 0) {
+      const int rc = std::system(on_streaming.c_str());
+      if (rc != 0) {
+        std::lock_guard<std::mutex> l(mu);
+        errors.push_back("--on-streaming command failed (status " + std::to_string(rc) + ")");
+      }
+    }
+    go = true;
+  }
   while (ready < clients && finished == 0) std::this_thread::sleep_for(std::chrono::milliseconds(10));
   const auto w0 = Clock::now();
   while (finished == 0 && (frames_wanted > 0 ? complete < clients : Clock::now() - w0 < std::chrono::duration<double>(seconds)))
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   const auto w1 = Clock::now();
+  if (latency_seconds > 0) {
+    phase_one = true;
+    while (finished == 0 && phase_one_done < clients) std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
   stop = true;
   for (auto& t : ts) t.join();
   if (server) server->stop();
@@ -242,6 +310,17 @@ int run(const std::vector<std::string>& argv) {
   std::vector<double> node_bytes;
   for (auto& st : last_stats)
     if (st.frames) node_bytes.push_back(double(st.bytes_sent) / st.frames);
+  std::string one_json = "null";
+  if (latency_seconds > 0) {
+    std::vector<double> lat, ren;
+    for (auto& v : one_outstanding)
+      for (auto& [l, r] : v) lat.push_back(l), ren.push_back(r);
+    char b[256];
+    std::snprintf(b, sizeof b,
+                  "{\"frames\": %zu, \"median_latency_ms\": %.3f, \"p90_latency_ms\": %.3f, \"median_rendering_ms\": %.3f}",
+                  lat.size(), median(lat), percentile(lat, 0.9), median(ren));
+    one_json = b;
+  }
   double total_fps = 0;
   std::string per;
   for (size_t i = 0; i < fps.size(); ++i) {
@@ -253,11 +332,11 @@ int run(const std::vector<std::string>& argv) {
               "\"median_rendering_ms\": %.3f, \"median_kernel_ms\": %.3f, \"median_sat_ms\": %.3f, "
               "\"median_tiling_ms\": %.3f, \"median_encode_ms\": %.3f, \"median_pipeline_ms\": %.3f, "
               "\"median_latency_ms\": %.3f, \"p90_latency_ms\": %.3f, "
-              "\"median_bytes\": %.0f, \"node_bytes_per_frame\": %.0f, \"median_upload_ms\": %.1f, \"errors\": %zu, \"outstanding\": %d, \"scene\": %s, "
+              "\"median_bytes\": %.0f, \"node_bytes_per_frame\": %.0f, \"median_upload_ms\": %.1f, \"errors\": %zu, \"outstanding\": %d, \"one_outstanding\": %s, \"scene\": %s, "
               "\"triangles\": %zu, \"node\": \"%s\", \"tls\": %s, \"cpu\": %s, \"threads\": %d}\n",
               clients, display.c_str(), quality, W, H, ao, window_s, all.size(), per.c_str(), total_fps, median(rendering),
               median(kernel), median(sat), median(tiling), median(encode), median(pipeline), median(latency),
-              percentile(latency, 0.9), median(bytes), median(node_bytes), median(upload_ms), errors.size(), outstanding,
+              percentile(latency, 0.9), median(bytes), median(node_bytes), median(upload_ms), errors.size(), outstanding, one_json.c_str(),
               json_str(setup.scene_path).c_str(), setup.loaded.scene.triangle_count(), server ? "in-process" : "external",
               tls ? json_str(tls_sessions[0].empty() ? "yes" : tls_sessions[0]).c_str() : "false",
               json_str(cpu_model()).c_str(), threads);

@@ -297,6 +297,43 @@ TEST_CASE("tessera loadtest --frames: exactly the frames after the warm-up, numb
   CHECK(run_tessera("loadtest --scene " + kScene + "/scene.gltf --camera-loop " + kScene + "/camera-loop.json --frames -1").rc != 0);
 }
 
+TEST_CASE("tessera loadtest --latency-seconds: a phase with one request outstanding after the window", "[loadtest]") {
+  const std::string base = "loadtest --scene " + kScene + "/scene.gltf --camera-loop " + kScene +
+                           "/camera-loop.json --size 64 36 --warmup 2 --threads 1";
+  Run r = run_tessera(base + " --frames 3 --latency-seconds 1");
+  REQUIRE(r.rc == 0);
+  const json& summary = r.lines.back();
+  REQUIRE(summary.contains("summary"));
+  CHECK(summary["frames_in_window"].get<int>() == 3);  // the phase adds no frames to the window
+  CHECK(summary["outstanding"].get<int>() == 2);
+  const json& one = summary["one_outstanding"];
+  REQUIRE(one.is_object());
+  CHECK(one["frames"].get<int>() >= 1);
+  // One frame at a time: its latency is at least its own rendering.
+  CHECK(one["median_latency_ms"].get<double>() >= one["median_rendering_ms"].get<double>());
+  Run plain = run_tessera(base + " --frames 2");
+  REQUIRE(plain.rc == 0);
+  CHECK(plain.lines.back()["one_outstanding"].is_null());
+  Run single = run_tessera(base + " --frames 2 --outstanding 1");
+  REQUIRE(single.rc == 0);
+  CHECK(single.lines.back()["outstanding"].get<int>() == 1);
+  CHECK(run_tessera(base + " --outstanding 3").rc != 0);
+  CHECK(run_tessera(base + " --latency-seconds -1").rc != 0);
+}
+
+TEST_CASE("tessera loadtest --on-streaming: the command runs once the scene is up, and its failure counts", "[loadtest]") {
+  const std::string base = "loadtest --scene " + kScene + "/scene.gltf --camera-loop " + kScene +
+                           "/camera-loop.json --size 64 36 --threads 1 --frames 2";
+  const std::string flag = "/tmp/tessera_test_on_streaming_" + std::to_string(getpid());
+  std::remove(flag.c_str());
+  Run r = run_tessera(base + " --warmup 2 --on-streaming 'touch " + flag + "'");
+  REQUIRE(r.rc == 0);
+  CHECK(r.lines.back()["frames_in_window"].get<int>() == 2);
+  CHECK(std::remove(flag.c_str()) == 0);  // it ran
+  CHECK(run_tessera(base + " --warmup 2 --on-streaming false").rc != 0);
+  CHECK(run_tessera(base + " --warmup 1 --on-streaming true").rc != 0);  // a counted frame asked before it
+}
+
 TEST_CASE("tessera quality: a refining still gains PSNR sample by sample, the reference is cached, fixed mode lists its AO rays",
           "[quality]") {
   const std::string cache = "/tmp/tessera_test_quality_" + std::to_string(getpid());

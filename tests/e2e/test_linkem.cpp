@@ -266,6 +266,60 @@ TEST_CASE("UDP across an emulated link loses the share of datagrams asked for", 
   CHECK(counter(out, "a_to_b", "lost") + forwarded == counter(out, "a_to_b", "packets"));
 }
 
+TEST_CASE("An open link shapes only from SIGUSR1 on", "[linkem]") {
+  Namespaces ns;
+  REQUIRE(ns.ok);
+  Link link(ns, {"--rtt-ms", "40", "--open-until-signal"});
+  std::atomic<bool> listening{false};
+  std::thread echo([&] {  // in B: echoes bytes until the client closes
+    if (!enter(ns.b)) return;
+    const int s = socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+    const int one = 1;
+    setsockopt(s, SOL_SOCKET, SO_REUSEADDR, &one, sizeof one);
+    auto sa = address(kB, kPort);
+    if (bind(s, reinterpret_cast<sockaddr*>(&sa), sizeof sa) != 0 || listen(s, 1) != 0) return void(close(s));
+    listening = true;
+    const int c = accept(s, nullptr, nullptr);
+    close(s);
+    setsockopt(c, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
+    char ch;
+    while (recv(c, &ch, 1, 0) == 1 && send(c, &ch, 1, 0) == 1) {
+    }
+    close(c);
+  });
+  std::vector<double> before, after;
+  std::thread client([&] {
+    if (!enter(ns.a)) return;
+    while (!listening) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    const int c = socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+    auto sa = address(kB, kPort);
+    if (connect(c, reinterpret_cast<sockaddr*>(&sa), sizeof sa) != 0) return void(close(c));
+    const int one = 1;
+    setsockopt(c, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
+    auto rtt = [&] {
+      char ch = 'p';
+      const auto t = Clock::now();
+      if (send(c, &ch, 1, 0) != 1 || recv(c, &ch, 1, MSG_WAITALL) != 1) return -1.0;
+      return std::chrono::duration<double, std::milli>(Clock::now() - t).count();
+    };
+    for (int i = 0; i < 5; ++i) before.push_back(rtt());
+    link.p->signal(SIGUSR1);
+    for (int i = 0; i < 250 && link.p->out().find("\"shaped\"") == std::string::npos; ++i)
+      std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    for (int i = 0; i < 5; ++i) after.push_back(rtt());
+    close(c);
+  });
+  client.join();
+  echo.join();
+  const std::string out = link.stop();
+  INFO(out);
+  CHECK(out.find("\"shaped\"") != std::string::npos);
+  REQUIRE(before.size() == 5);
+  REQUIRE(after.size() == 5);
+  for (double r : before) CHECK((r >= 0 && r < 20.0));
+  for (double r : after) CHECK(r >= 40.0);
+}
+
 TEST_CASE("linkem refuses a namespace that does not exist, with the reason", "[linkem]") {
   Process p({TESSERA_BINARY, "linkem", "--ns", "tlkt-no-such-ns", "tlkt-nor-this", "--addr", kA, kB});
   auto st = p.wait(10000);
