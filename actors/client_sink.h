@@ -40,8 +40,9 @@ class ClientSink {
   // The link has lately been saturated: bytes waited in the kernel for it most of the time
   // (net/link_meter.h), so frames wait for it there even if none waits in the node. Any thread.
   virtual bool link_saturated() const { return false; }
-  // One JPEG for the session's MJPEG streams (multipart/x-mixed-replace on HTTP).
-  virtual void send_mjpeg(std::shared_ptr<const std::vector<uint8_t>> jpeg) = 0;
+  // One JPEG for the session's MJPEG streams (multipart/x-mixed-replace on HTTP), the picture
+  // of the client's frame `frame` (its part's X-Tessera-Frame header).
+  virtual void send_mjpeg(std::shared_ptr<const std::vector<uint8_t>> jpeg, uint32_t frame) = 0;
   // Ends the connection after a fatal protocol error (the session has sent the error).
   virtual void close(const std::string& reason) = 0;
   // The session token (names the MJPEG endpoint /mjpeg/<token>); may be empty.

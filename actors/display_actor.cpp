@@ -139,7 +139,7 @@ void send_encoded(display_state& st, EncodedFrame& ef) {
     // with its timings and an empty payload.
     auto jpeg = std::make_shared<std::vector<uint8_t>>(ef.message.begin() + ef.header_bytes, ef.message.end());
     bytes = jpeg->size();
-    st.sink->send_mjpeg(std::move(jpeg));
+    st.sink->send_mjpeg(std::move(jpeg), f.frame);
     protocol::encode_frame_header(f, 0, header);
     st.sink->send_frame(std::move(header));
   } else {

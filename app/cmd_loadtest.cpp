@@ -1,7 +1,7 @@
 // tessera loadtest --scene S.gltf --camera-loop L.json [--clients N] [--display jpeg|s3tc|mjpeg|h264]
 //                  [--seconds S | --frames F] [--warmup K] [--size W H] [--ao A] [--quality Q] [--host H --port P [--token T]] [--threads T]
 //                  [--tls [--tls-ca F] | --tls-cert C --tls-key K] [--outstanding 1|2] [--latency-seconds L]
-//                  [--on-streaming CMD]
+//                  [--on-streaming CMD] [--request-hz R]
 // Uploads the scene from N simultaneous WebSocket clients; each replays the camera loop with two
 // render requests outstanding (or one: --outstanding 1). Once every client has received K frames (all connected and
 // streaming), a common window of S seconds opens; the frames each client receives inside it
@@ -22,6 +22,7 @@
 #include "app/common.h"
 #include "app/node_config.h"
 #include "protocol/scene_records.h"
+#include "net/http.h"
 #include "net/server.h"
 #include "net/ws_client.h"
 
@@ -46,12 +47,14 @@ int run(const std::vector<std::string>& argv) {
               "                 [--seconds S | --frames F] [--warmup K] [--size W H] [--ao A] [--quality Q]\n"
               "                 [--host H --port P [--token T]] [--threads T]\n"
               "                 [--tls [--tls-ca F] | --tls-cert C --tls-key K] [--outstanding 1|2] [--latency-seconds L]\n"
-              "                 [--on-streaming CMD]\n"
+              "                 [--on-streaming CMD] [--request-hz R]\n"
               "Frames per second over a common window of S seconds (default 20) that opens once every client\n"
               "has received K frames (default 2). --frames F: the window closes instead once every client has\n"
               "received F frames after its K warm-up frames (frame numbers K..K+F-1, the camera loop's frames\n"
               "of those indices), so runs on different trees render the same frames. mjpeg: frames counted from the WebSocket's Frame records\n"
-              "(timings, empty payload); the JPEG goes to /mjpeg/NAME, which nobody reads here. --token: the access\n"
+              "(timings, empty payload); the JPEGs go to /mjpeg/NAME, which each client also reads (not with --tls):\n"
+              "the summary's mjpeg_stream has the parts shown, their bytes and their latency (from the request of\n"
+              "the frame a part's X-Tessera-Frame names to the part's end). --token: the access\n"
               "token for a node that asks for one (tessera token; sent as ?access_token=). --tls: wss:// to the node at\n"
               "--port (its certificate verified against --tls-ca F when given). --tls-cert/--tls-key: the in-process\n"
               "node serves WSS with them, and the clients connect over TLS. latency_ms: from sending a frame's camera\n"
@@ -63,7 +66,10 @@ int run(const std::vector<std::string>& argv) {
               "summary's \"one_outstanding\" has that phase's latency (the scene is uploaded once for both).\n"
               "--on-streaming CMD: once every client has its first frame (the scene is uploaded), the clients wait\n"
               "while CMD runs (sh -c), then go on; with --warmup 2 or more, so no counted frame was asked for\n"
-              "before it. A bench shapes its link there (bench/display_network.sh).");
+              "before it. A bench shapes its link there (bench/display_network.sh). --request-hz R: each client sends\n"
+              "the next camera and render request every 1/R s whatever arrives, as a browser does during a drag\n"
+              "(a late tick sends one request, not a burst); the node renders the newest and merges the others\n"
+              "(the summary's node_dropped), and latency_ms is from a frame's own request to the frame.");
     return 0;
   }
   int threads = 0;
@@ -74,9 +80,11 @@ int run(const std::vector<std::string>& argv) {
   const double seconds = double(args.integer("--seconds", 20));
   const int warmup = int(args.integer("--warmup", 2));
   const int frames_wanted = int(args.integer("--frames", 0));
-  const int outstanding = int(args.integer("--outstanding", 2));
+  const long outstanding_arg = args.integer("--outstanding", -1);  // -1: not given
+  const int outstanding = outstanding_arg < 0 ? 2 : int(outstanding_arg);
   const double latency_seconds = args.number("--latency-seconds", 0);
   const std::string on_streaming = args.str("--on-streaming");
+  const double request_hz = args.number("--request-hz", 0);
   const int ao = int(args.integer("--ao", 0));
   const int quality = int(args.integer("--quality", 85));
   std::string host = args.str("--host", "127.0.0.1");
@@ -90,8 +98,11 @@ int run(const std::vector<std::string>& argv) {
   if (!tls_cert.empty()) tls = true;
   if (clients < 1 || clients > 64 || seconds < 1 || warmup < 1 || frames_wanted < 0)
     throw std::invalid_argument("--clients 1..64, --seconds >= 1, --warmup >= 1, --frames >= 0");
-  if (outstanding < 1 || outstanding > 2) throw std::invalid_argument("--outstanding must be 1 or 2");
+  if (outstanding_arg != -1 && (outstanding_arg < 1 || outstanding_arg > 2)) throw std::invalid_argument("--outstanding must be 1 or 2");
   if (!(latency_seconds >= 0 && latency_seconds <= 3600)) throw std::invalid_argument("--latency-seconds must be 0..3600");
+  if (!(request_hz >= 0 && request_hz <= 1000)) throw std::invalid_argument("--request-hz must be 0..1000");
+  if (request_hz > 0 && (latency_seconds > 0 || outstanding_arg != -1))
+    throw std::invalid_argument("--request-hz sends requests on a clock: not with --outstanding or --latency-seconds");
   if (!on_streaming.empty() && warmup < 2) throw std::invalid_argument("--on-streaming needs --warmup 2 or more");
   if (display != "jpeg" && display != "s3tc" && display != "mjpeg" && display != "h264")
     throw std::invalid_argument("--display must be jpeg, s3tc, mjpeg or h264");
@@ -136,12 +147,24 @@ int run(const std::vector<std::string>& argv) {
   std::atomic<bool> go{on_streaming.empty()};
   std::atomic<int> phase_one_done{0};
   std::vector<std::vector<std::pair<double, double>>> one_outstanding(static_cast<size_t>(clients));
+  // MJPEG without TLS: each client also reads its session's stream (/mjpeg/loadtestN) as a
+  // browser's <img> would, and the parts (arrival, frame number, bytes) are what it was shown.
+  struct Part {
+    Clock::time_point at;
+    long frame;
+    size_t bytes;
+  };
+  const bool read_stream = display == "mjpeg" && !tls;
+  std::vector<std::vector<Part>> parts(static_cast<size_t>(clients));
+  std::vector<std::vector<Clock::time_point>> sent_times(static_cast<size_t>(clients));  // by frame number
+  std::vector<uint32_t> phase_one_firsts(static_cast<size_t>(clients), UINT32_MAX);
   auto client_main = [&](int ci) {
     WsClient ws;
     if (tls) ws.use_tls(tls_ca);
     std::string err;
     bool counted_ready = false;
-    std::vector<Clock::time_point> sent_at;  // by frame number
+    auto& sent_at = sent_times[size_t(ci)];  // by frame number
+    std::thread reader;
     auto fail = [&](const std::string& e) {
       std::lock_guard<std::mutex> l(mu);
       errors.push_back("client " + std::to_string(ci) + ": " + e);
@@ -176,12 +199,23 @@ int run(const std::vector<std::string>& argv) {
         ++sent;
       };
       request();
-      if (outstanding > 1) request();  // two: the node renders f+1 while f is encoded and sent
+      if (outstanding > 1 && request_hz == 0) request();  // two: the node renders f+1 while f is encoded and sent
+      // --request-hz: the next request's time (a late tick sends one, then keeps the period).
+      const auto period = std::chrono::duration_cast<Clock::duration>(
+          std::chrono::duration<double>(request_hz > 0 ? 1.0 / request_hz : 1.0));
+      auto next_request = Clock::now() + period;
+      auto tick = [&] {
+        const auto now = Clock::now();
+        if (request_hz == 0 || now < next_request || !go) return;
+        request();
+        next_request = std::max(next_request + period, now);
+      };
       // The latency phase's first request, once every frame in flight has arrived (also when
       // that happened before the phase opened).
       auto open_phase_one = [&](Clock::time_point now) {
         if (phase_one && phase_one_first == UINT32_MAX && arrived == sent) {
           phase_one_first = sent;
+          phase_one_firsts[size_t(ci)] = sent;
           phase_one_start = now;
           request();
         }
@@ -189,7 +223,12 @@ int run(const std::vector<std::string>& argv) {
       protocol::Limits lim;
       auto last = Clock::now();
       while (!stop) {
-        auto msg = ws.receive(phase_one ? 20 : 200);
+        int wait_ms = phase_one ? 20 : 200;
+        if (request_hz > 0)
+          wait_ms = int(std::clamp<int64_t>(
+              std::chrono::duration_cast<std::chrono::milliseconds>(next_request - Clock::now()).count() + 1, 1, 200));
+        auto msg = ws.receive(wait_ms);
+        tick();
         if (!msg) {
           open_phase_one(Clock::now());
           if (ws.closed()) return fail("connection closed after " + std::to_string(got) + " frames");
@@ -207,6 +246,22 @@ int run(const std::vector<std::string>& argv) {
           if (!f) continue;
           last = now;
           ++arrived;
+          if (read_stream && !reader.joinable()) {  // the session (and so its stream) exists now
+            const std::string target =
+                "/mjpeg/loadtest" + std::to_string(ci) + (token.empty() ? "" : "?access_token=" + token);
+            reader = std::thread([&, ci, target] {
+              std::string e;
+              auto& mine = parts[size_t(ci)];
+              const bool ok = http::read_mjpeg_stream(
+                  host, uint16_t(port), target,
+                  [&](std::vector<uint8_t>&& p, long frame) {
+                    mine.push_back(Part{Clock::now(), frame, p.size()});
+                    return true;
+                  },
+                  [&] { return bool(stop); }, &e);
+              if (!ok) fail("MJPEG stream: " + e);
+            });
+          }
           if (phase_one) {  // the latency phase: one request at a time, once those in flight are in
             if (phase_one_over) continue;
             if (f->frame >= phase_one_first && f->frame < sent_at.size()) {
@@ -239,13 +294,14 @@ int run(const std::vector<std::string>& argv) {
             ++complete;
             continue;
           }
-          request();
+          if (request_hz == 0) request();
         }
       }
     };
     body();
     ++finished;
     ws.close();
+    if (reader.joinable()) reader.join();
   };
   std::vector<std::thread> ts;
   for (int c = 0; c < clients; ++c) ts.emplace_back(client_main, c);
@@ -308,8 +364,12 @@ int run(const std::vector<std::string>& argv) {
   // Bytes per frame as the node counts them (Stats): for MJPEG the JPEG parts, which the
   // WebSocket's Frame records do not carry.
   std::vector<double> node_bytes;
-  for (auto& st : last_stats)
+  uint64_t node_frames = 0, node_dropped = 0;
+  for (auto& st : last_stats) {
     if (st.frames) node_bytes.push_back(double(st.bytes_sent) / st.frames);
+    node_frames += st.frames;
+    node_dropped += st.dropped;
+  }
   std::string one_json = "null";
   if (latency_seconds > 0) {
     std::vector<double> lat, ren;
@@ -320,6 +380,33 @@ int run(const std::vector<std::string>& argv) {
                   "{\"frames\": %zu, \"median_latency_ms\": %.3f, \"p90_latency_ms\": %.3f, \"median_rendering_ms\": %.3f}",
                   lat.size(), median(lat), percentile(lat, 0.9), median(ren));
     one_json = b;
+  }
+  std::string stream_json = "null";
+  if (read_stream) {
+    std::vector<double> lat, one_lat, sizes;
+    size_t in_window = 0;
+    for (int c = 0; c < clients; ++c) {
+      const auto& sent = sent_times[size_t(c)];
+      for (const Part& p : parts[size_t(c)]) {
+        if (p.frame < 0 || size_t(p.frame) >= sent.size()) continue;
+        const double ms = std::chrono::duration<double, std::milli>(p.at - sent[size_t(p.frame)]).count();
+        if (p.at >= w0 && p.at < w1) {
+          ++in_window;
+          lat.push_back(ms);
+          sizes.push_back(double(p.bytes));
+        } else if (p.at >= w1 && uint32_t(p.frame) >= phase_one_firsts[size_t(c)]) {
+          one_lat.push_back(ms);
+        }
+      }
+    }
+    char b[512];
+    std::snprintf(b, sizeof b,
+                  "{\"parts_in_window\": %zu, \"fps\": %.3f, \"median_bytes\": %.0f, \"median_latency_ms\": %.3f, "
+                  "\"p90_latency_ms\": %.3f, \"one_outstanding_parts\": %zu, \"one_outstanding_median_latency_ms\": %.3f, "
+                  "\"one_outstanding_p90_latency_ms\": %.3f}",
+                  in_window, window_s > 0 ? double(in_window) / window_s : 0.0, median(sizes), median(lat),
+                  percentile(lat, 0.9), one_lat.size(), median(one_lat), percentile(one_lat, 0.9));
+    stream_json = b;
   }
   double total_fps = 0;
   std::string per;
@@ -332,11 +419,12 @@ int run(const std::vector<std::string>& argv) {
               "\"median_rendering_ms\": %.3f, \"median_kernel_ms\": %.3f, \"median_sat_ms\": %.3f, "
               "\"median_tiling_ms\": %.3f, \"median_encode_ms\": %.3f, \"median_pipeline_ms\": %.3f, "
               "\"median_latency_ms\": %.3f, \"p90_latency_ms\": %.3f, "
-              "\"median_bytes\": %.0f, \"node_bytes_per_frame\": %.0f, \"median_upload_ms\": %.1f, \"errors\": %zu, \"outstanding\": %d, \"one_outstanding\": %s, \"scene\": %s, "
+              "\"median_bytes\": %.0f, \"node_bytes_per_frame\": %.0f, \"median_upload_ms\": %.1f, \"errors\": %zu, \"outstanding\": %d, \"request_hz\": %g, \"node_frames\": %llu, \"node_dropped\": %llu, \"one_outstanding\": %s, \"mjpeg_stream\": %s, \"scene\": %s, "
               "\"triangles\": %zu, \"node\": \"%s\", \"tls\": %s, \"cpu\": %s, \"threads\": %d}\n",
               clients, display.c_str(), quality, W, H, ao, window_s, all.size(), per.c_str(), total_fps, median(rendering),
               median(kernel), median(sat), median(tiling), median(encode), median(pipeline), median(latency),
-              percentile(latency, 0.9), median(bytes), median(node_bytes), median(upload_ms), errors.size(), outstanding, one_json.c_str(),
+              percentile(latency, 0.9), median(bytes), median(node_bytes), median(upload_ms), errors.size(), request_hz > 0 ? 0 : outstanding, request_hz, (unsigned long long)node_frames,
+              (unsigned long long)node_dropped, one_json.c_str(), stream_json.c_str(),
               json_str(setup.scene_path).c_str(), setup.loaded.scene.triangle_count(), server ? "in-process" : "external",
               tls ? json_str(tls_sessions[0].empty() ? "yes" : tls_sessions[0]).c_str() : "false",
               json_str(cpu_model()).c_str(), threads);

@@ -10,6 +10,9 @@
 #   LATENCY_SECONDS, loadtest --latency-seconds: camera and render request sent to frame
 #   received, nothing queued ahead), and its bound, the issue's RTT + rendering + 30 ms, with
 #   that phase's median rendering time.
+# REQUEST_HZ=R: instead, each client asks for a frame every 1/R s whatever arrives (loadtest
+# --request-hz, as the web client does during a drag), and latency_2_ms is from a frame's own
+# request to the frame, with the requests the node merged into newer frames (node_dropped).
 # Each run uploads the scene on an open link, and the link is shaped once the first frame has
 # arrived (loadtest --on-streaming; the warm-up frames then cross the shaped link): uploading a
 # 26 MB scene would take 40 s at 5 Mbit/s, and minutes at 1% loss and 100 ms.
@@ -19,8 +22,10 @@
 # - linkem: `tessera linkem` (app/cmd_linkem.cpp), a TUN device in each namespace and the same
 #   model in user space, for kernels without sch_netem (this project's VMs);
 # - tbf: a veth pair shaped with tbf, bandwidth only (the RTT and loss rows are skipped).
-# MJPEG's frames travel on HTTP, which nobody reads here: its row measures the WebSocket's Frame
-# records.
+# MJPEG's pictures travel on the session's HTTP stream, which loadtest reads as a browser's <img>
+# would: its row counts the parts that arrived and times each from the request of the frame it
+# shows (the part's X-Tessera-Frame header), while the WebSocket carries the requests and each
+# frame's record.
 #
 # Needs root and iproute2's ip (and tc, or /dev/net/tun); exits 77 (skipped) without them.
 # Usage: bench/display_network.sh [TESSERA] [SECONDS]   (default build/app/tessera, 10 s a run)
@@ -31,7 +36,7 @@ cd "$(dirname "$0")/.."
 BIN=$(realpath "${1:-build/app/tessera}"); SECS=${2:-10}; LSECS=${LATENCY_SECONDS:-$SECS}
 S=${SCENE:-../shared/scenes/living-room}; SIZE=${SIZE:-1280 720}; AO=${AO:-0}
 DISPLAYS=${DISPLAYS:-jpeg s3tc mjpeg h264}; RATES=${RATES:-5 20 100}; RTTS=${RTTS:-10 50 100}; LOSSES=${LOSSES:-0 1}
-LINK=${LINK:-auto}
+LINK=${LINK:-auto}; REQUEST_HZ=${REQUEST_HZ:-0}
 skip() { echo "SKIP: $*"; exit 77; }
 [[ $(id -u) == 0 ]] || skip "needs root (network namespaces, tc or TUN devices)"
 command -v ip > /dev/null || skip "needs iproute2's ip"
@@ -112,12 +117,13 @@ open_link "${RATES%% *}" "${RTTS%% *}" 0
 for _ in $(seq 50); do ip netns exec "$ns_b" bash -c "exec 3<>/dev/tcp/$addr_a/$port" 2> /dev/null && break; sleep 0.2; done
 
 isa=AVX2; grep -qw avx512f /proc/cpuinfo && isa=AVX-512
-echo "{\"load_start\": \"$(cut -d' ' -f1-3 /proc/loadavg)\", \"isa\": \"$isa\", \"cores\": $(nproc), \"link\": \"$LINK\", \"scene\": \"$S\", \"size\": \"$SIZE\", \"ao\": $AO, \"seconds\": $SECS, \"latency_seconds\": $LSECS}"
+echo "{\"load_start\": \"$(cut -d' ' -f1-3 /proc/loadavg)\", \"isa\": \"$isa\", \"cores\": $(nproc), \"link\": \"$LINK\", \"scene\": \"$S\", \"size\": \"$SIZE\", \"ao\": $AO, \"seconds\": $SECS, \"latency_seconds\": $LSECS, \"request_hz\": $REQUEST_HZ}"
 [[ $LINK == tbf ]] && echo "{\"note\": \"no sch_netem and no /dev/net/tun: bandwidth shaped with tbf, no delay or loss (RTT is the veth's, ~0.05 ms)\"}"
+pacing="--latency-seconds $LSECS"; [[ $REQUEST_HZ != 0 ]] && pacing="--request-hz $REQUEST_HZ"
 loadtest() {  # DISPLAY: loadtest's summary line
   ip netns exec "$ns_b" "$BIN" loadtest --host $addr_a --port "$port" --scene "$S/scene.gltf" \
     --camera-loop "$S/camera-loop.json" --size $SIZE --ao "$AO" --display "$1" --seconds "$SECS" \
-    --warmup 3 --latency-seconds "$LSECS" --on-streaming "$shape_cmd" 2> /dev/null | grep '"summary": true'
+    --warmup 3 $pacing --on-streaming "$shape_cmd" 2> /dev/null | grep '"summary": true'
 }
 for rate in $RATES; do
   for rtt in $RTTS; do
@@ -129,6 +135,10 @@ for rate in $RATES; do
         python3 -c 'import json,sys
 d = json.loads(sys.argv[5]) if sys.argv[5] else {}
 o = d.get("one_outstanding") or {}
+m = d.get("mjpeg_stream")
+if m:  # what the stream showed, not the WebSocket records
+    d.update({"fps_total": m["fps"], "median_latency_ms": m["median_latency_ms"], "p90_latency_ms": m["p90_latency_ms"]})
+    o = dict(o, median_latency_ms=m["one_outstanding_median_latency_ms"], p90_latency_ms=m["one_outstanding_p90_latency_ms"])
 shaped = sys.argv[7] != "tbf"
 rtt = float(sys.argv[3]) if shaped else None
 bound = (rtt or 0) + o["median_rendering_ms"] + 30 if o.get("frames") else None
@@ -140,7 +150,8 @@ print(json.dumps({"display": sys.argv[1], "mbit_s": float(sys.argv[2]), "rtt_ms"
   "latency_ms": o.get("median_latency_ms"), "p90_latency_ms": o.get("p90_latency_ms"),
   "latency_rendering_ms": o.get("median_rendering_ms"), "latency_bound_ms": bound,
   "within_bound": (o["median_latency_ms"] <= bound) if o.get("frames") else None,
-  "latency_frames": o.get("frames"), "errors": d.get("errors", "no summary")}))' \
+  "latency_frames": o.get("frames"), "node_frames": d.get("node_frames"), "node_dropped": d.get("node_dropped"),
+  "errors": d.get("errors", "no summary")}))' \
           "$d" "$rate" "$rtt" "$loss" "$line" "" "$LINK"
       done
     done

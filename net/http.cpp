@@ -432,18 +432,50 @@ bool fetch_url(const std::string& url, uint64_t max_bytes, std::vector<uint8_t>&
 
 bool read_mjpeg(const std::string& host, uint16_t port, const std::string& target, size_t parts,
                 std::vector<std::vector<uint8_t>>& out, std::string* error, int timeout_ms, const ClientTls& tls) {
+  const auto deadline = Clock::now() + std::chrono::milliseconds(timeout_ms);
+  const bool ok = read_mjpeg_stream(
+      host, port, target,
+      [&](std::vector<uint8_t>&& part, long) {
+        out.push_back(std::move(part));
+        return out.size() < parts;
+      },
+      [&] { return Clock::now() >= deadline; }, error, timeout_ms, tls);
+  if (ok && out.size() < parts) {
+    if (error) *error = "timed out after " + std::to_string(out.size()) + " parts";
+    return false;
+  }
+  return ok;
+}
+
+bool read_mjpeg_stream(const std::string& host, uint16_t port, const std::string& target,
+                       const std::function<bool(std::vector<uint8_t>&& part, long frame)>& on_part,
+                       const std::function<bool()>& stop, std::string* error, int connect_timeout_ms,
+                       const ClientTls& tls) {
   auto fail = [&](const std::string& e) {
     if (error) *error = e;
     return false;
   };
-  auto deadline = Clock::now() + std::chrono::milliseconds(timeout_ms);
   Stream stream;
-  if (!stream.open(host, port, tls, deadline, error)) return false;
+  if (!stream.open(host, port, tls, Clock::now() + std::chrono::milliseconds(connect_timeout_ms), error)) return false;
   if (!stream.write_all(request_text(host, target))) return fail("cannot send the request");
   std::string buf;
+  // One read of at most 200 ms: false with `stopped` when stop() says so, false when the stream
+  // ended or failed.
+  bool stopped = false;
+  auto more = [&] {
+    while (true) {
+      if (stop()) {
+        stopped = true;
+        return false;
+      }
+      const auto until = Clock::now() + std::chrono::milliseconds(200);
+      if (stream.read_some(buf, until)) return true;
+      if (Clock::now() < until) return false;  // ended or failed before the time was up
+    }
+  };
   size_t he;
   while ((he = buf.find("\r\n\r\n")) == std::string::npos)
-    if (!stream.read_some(buf, deadline)) return fail("no response header");
+    if (!more()) return stopped || fail("no response header");
   std::string head = buf.substr(0, he + 2);
   if (std::atoi(buf.c_str() + buf.find(' ') + 1) != 200) return fail("status: " + head.substr(0, head.find('\r')));
   std::string ct = header_value(head, "content-type");
@@ -451,19 +483,20 @@ bool read_mjpeg(const std::string& host, uint16_t port, const std::string& targe
   if (ct.find("multipart/x-mixed-replace") != 0 || bp == std::string::npos) return fail("content type: " + ct);
   std::string boundary = "--" + ct.substr(bp + 9);
   buf.erase(0, he + 4);
-  while (out.size() < parts) {
+  for (size_t n = 0;; ++n) {
     size_t b, ph;
     while ((b = buf.find(boundary)) == std::string::npos || (ph = buf.find("\r\n\r\n", b)) == std::string::npos)
-      if (!stream.read_some(buf, deadline)) return fail("stream ended after " + std::to_string(out.size()) + " parts");
+      if (!more()) return stopped || fail("stream ended after " + std::to_string(n) + " parts");
     std::string part_head = buf.substr(b + boundary.size(), ph + 2 - b - boundary.size());
     long len = std::atol(header_value(part_head, "content-length").c_str());
     if (len <= 0) return fail("part without Content-Length");
+    const std::string frame = header_value(part_head, "x-tessera-frame");
     while (buf.size() < ph + 4 + size_t(len))
-      if (!stream.read_some(buf, deadline)) return fail("part truncated");
-    out.emplace_back(buf.begin() + long(ph + 4), buf.begin() + long(ph + 4 + size_t(len)));
+      if (!more()) return stopped || fail("part truncated");
+    std::vector<uint8_t> part(buf.begin() + long(ph + 4), buf.begin() + long(ph + 4 + size_t(len)));
     buf.erase(0, ph + 4 + size_t(len));
+    if (!on_part(std::move(part), frame.empty() ? -1 : std::atol(frame.c_str()))) return true;
   }
-  return true;
 }
 
 }  // namespace tessera::http

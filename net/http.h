@@ -3,6 +3,7 @@
 // without path traversal, MIME types, session tokens, and a minimal blocking HTTP client
 // for tests and the load test (POSIX sockets).
 #include <cstdint>
+#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
@@ -93,5 +94,15 @@ bool fetch_url(const std::string& url, uint64_t max_bytes, std::vector<uint8_t>&
 bool read_mjpeg(const std::string& host, uint16_t port, const std::string& target, size_t parts,
                 std::vector<std::vector<uint8_t>>& out, std::string* error, int timeout_ms = 10000,
                 const ClientTls& tls = {});
+
+// Reads a multipart/x-mixed-replace stream part by part: on_part gets each part's bytes and
+// the frame number of its X-Tessera-Frame header (-1 without one; docs/protocol.md) as soon as
+// the part is in. Returns true once on_part returns false or stop() is true (asked at least
+// every 200 ms), false and *error when the connection fails, the answer is not such a stream,
+// or it ends. The connection is made within connect_timeout_ms.
+bool read_mjpeg_stream(const std::string& host, uint16_t port, const std::string& target,
+                       const std::function<bool(std::vector<uint8_t>&& part, long frame)>& on_part,
+                       const std::function<bool()>& stop, std::string* error, int connect_timeout_ms = 10000,
+                       const ClientTls& tls = {});
 
 }  // namespace tessera::http

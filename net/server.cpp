@@ -48,13 +48,15 @@ struct MjpegStream : std::enable_shared_from_this<MjpegStream<Config>> {
   std::atomic<size_t>* live = nullptr;  // the server's count of open streams
   bool writing = false, dead = false;
   std::shared_ptr<const std::vector<uint8_t>> current, pending;
+  uint32_t pending_frame = 0;  // the client's frame number of `pending` (X-Tessera-Frame)
   std::string part_header;
   std::string extra_headers;  // further header lines of the response ("Name: value\r\n" each)
   static constexpr const char* kBoundary = "tesseraframe";
 
-  void push(std::shared_ptr<const std::vector<uint8_t>> jpeg) {
+  void push(std::shared_ptr<const std::vector<uint8_t>> jpeg, uint32_t frame) {
     if (dead) return;
     pending = std::move(jpeg);
+    pending_frame = frame;
     if (!writing) write_next();
   }
   // Each part ends with the next boundary: a browser shows a part of a multipart stream only
@@ -65,7 +67,7 @@ struct MjpegStream : std::enable_shared_from_this<MjpegStream<Config>> {
     pending.reset();
     writing = true;
     part_header = std::string("Content-Type: image/jpeg\r\nContent-Length: ") + std::to_string(current->size()) +
-                  "\r\n\r\n";
+                  "\r\nX-Tessera-Frame: " + std::to_string(pending_frame) + "\r\n\r\n";
     static const std::string part_end = std::string("\r\n--") + kBoundary + "\r\n";
     std::vector<asio::const_buffer> bufs{asio::buffer(part_header), asio::buffer(*current), asio::buffer(part_end)};
     auto self = this->shared_from_this();
@@ -208,7 +210,8 @@ struct Endpoint final : Server::Impl, std::enable_shared_from_this<Endpoint<Conf
   bool poll_armed = false;
   std::set<std::string> tokens;
   std::map<std::string, std::vector<std::shared_ptr<MjpegStream<Config>>>> mjpeg;
-  std::map<std::string, std::shared_ptr<const std::vector<uint8_t>>> last_mjpeg;  // a viewer that opens late starts with it
+  // A viewer that opens late starts with the session's last JPEG (and its frame number).
+  std::map<std::string, std::pair<std::shared_ptr<const std::vector<uint8_t>>, uint32_t>> last_mjpeg;
   std::set<connection_hdl, std::owner_less<connection_hdl>> pending_opens;  // validated, not yet opened
   // Admission (net/admission.h): WebSocket connections per client address, counted from the
   // upgrade until they close, and each counted connection's address.
@@ -335,16 +338,16 @@ struct Sink : ClientSink {
   uint32_t link_kbps() const override {
     return steady_ns() - link_ns.load() > LinkMeter::kStaleNs ? 0 : link.load();
   }
-  void send_mjpeg(std::shared_ptr<const std::vector<uint8_t>> jpeg) override {
+  void send_mjpeg(std::shared_ptr<const std::vector<uint8_t>> jpeg, uint32_t frame) override {
     auto t = tok;
-    post([t, jpeg](Impl& i) {
+    post([t, jpeg, frame](Impl& i) {
       if (!i.tokens.count(t)) return;  // the session's client has gone
-      i.last_mjpeg[t] = jpeg;
+      i.last_mjpeg[t] = {jpeg, frame};
       auto it = i.mjpeg.find(t);
       if (it == i.mjpeg.end()) return;
       auto& v = it->second;
       v.erase(std::remove_if(v.begin(), v.end(), [](auto& s) { return s->dead; }), v.end());
-      for (auto& s : v) s->push(jpeg);
+      for (auto& s : v) s->push(jpeg, frame);
     });
   }
   void close(const std::string& reason) override {
@@ -717,7 +720,7 @@ void Endpoint<Config>::on_http(connection_hdl h) {
     ++viewers;
     mjpeg[token].push_back(s);
     s->start();
-    if (auto last = last_mjpeg.find(token); last != last_mjpeg.end()) s->push(last->second);
+    if (auto last = last_mjpeg.find(token); last != last_mjpeg.end()) s->push(last->second.first, last->second.second);
     return;
   }
   if (path == "/ws") {

@@ -38,7 +38,7 @@ struct RecordingSink : ClientSink {
     std::lock_guard<std::mutex> l(mu);
     for (auto& x : r.value()) records.push_back(std::move(x));
   }
-  void send_mjpeg(std::shared_ptr<const std::vector<uint8_t>>) override { ++mjpeg; }
+  void send_mjpeg(std::shared_ptr<const std::vector<uint8_t>>, uint32_t) override { ++mjpeg; }
   void close(const std::string&) override { ++closes; }
   std::string token() const override { return "testtoken"; }
   template <class T>

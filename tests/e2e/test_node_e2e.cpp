@@ -142,6 +142,17 @@ TEST_CASE("An MJPEG viewer that opens after the last frame starts with that fram
   const Image got = decode_jpeg(parts[0]);
   CHECK(compare(got, direct_render(40, 0, 2)).psnr >= 30.0);
   CHECK(compare(got, direct_render(0, 0, 1)).psnr < compare(got, direct_render(40, 0, 2)).psnr);
+  // Its part names the frame it shows (X-Tessera-Frame), as read part by part.
+  long shown = -1;
+  const auto t0 = std::chrono::steady_clock::now();
+  REQUIRE(http::read_mjpeg_stream(
+      "127.0.0.1", node.port(), "/mjpeg/" + token,
+      [&](std::vector<uint8_t>&&, long frame) {
+        shown = frame;
+        return false;
+      },
+      [&] { return std::chrono::steady_clock::now() - t0 > std::chrono::seconds(10); }, &err));
+  CHECK(shown == 2);
   // The stream goes on with the frames rendered after it opened.
   parts.clear();
   auto reader = std::async(std::launch::async, [&] {
