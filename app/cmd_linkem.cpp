@@ -10,9 +10,11 @@
 // sees a real link: its round trips, its losses (and retransmits them), its rate.
 //
 // Prints one JSON line {"linkem": "ready", ...} once both devices are up, and on SIGINT or SIGTERM
-// one line of counters per direction. --open-until-signal: the link forwards at once (no rate,
-// delay or loss) until SIGUSR1, then shapes as asked: a bench uploads its scene, then measures
-// frames on the shaped link (loadtest --on-streaming). Needs CAP_NET_ADMIN and CAP_SYS_ADMIN (setns) and
+// one line of counters per direction. --open-until-signal: the link has its delay but no rate
+// limit and no loss until SIGUSR1, then shapes as asked: a bench uploads its scene, then
+// measures frames on the shaped link (loadtest --on-streaming). The delay is there from the
+// start because TCP keeps the least round-trip time it has seen (BBR's model of the link is
+// built on it): a link that was 0 ms and then 50 ms would fool it for seconds. Needs CAP_NET_ADMIN and CAP_SYS_ADMIN (setns) and
 // /dev/net/tun. Used by bench/display_network.sh and tests/e2e/test_linkem.cpp.
 #include <arpa/inet.h>
 #include <fcntl.h>
@@ -53,8 +55,9 @@ const char* kHelp =
     "R Mbit/s (default 0: no limit), then T/2 ms of delay (default 0), and lost with probability P%\n"
     "(default 0), in each direction. MTU M (default 1500). --seed S: the loss draws (default 1).\n"
     "Prints {\"linkem\": \"ready\", ...} once the devices are up; runs until SIGINT or SIGTERM, then\n"
-    "prints each direction's counters (of the shaped link). --open-until-signal: no rate, delay or loss\n"
-    "until SIGUSR1 (then {\"linkem\": \"shaped\"}). Needs root (CAP_NET_ADMIN, CAP_SYS_ADMIN) and /dev/net/tun.\n";
+    "prints each direction's counters (of the shaped link). --open-until-signal: the delay but no rate limit\n"
+    "and no loss until SIGUSR1 (then {\"linkem\": \"shaped\"}). Needs root (CAP_NET_ADMIN, CAP_SYS_ADMIN) and\n"
+    "/dev/net/tun.\n";
 
 volatile sig_atomic_t g_stop = 0, g_shape = 0;
 void on_signal(int) { g_stop = 1; }
@@ -217,7 +220,8 @@ int run(const std::vector<std::string>& argv) {
 
   LinkParams pb = p;
   pb.seed = p.seed * 0x9E3779B97F4A7C15ull + 1;  // the other direction's own loss draws
-  const LinkParams open{};
+  LinkParams open;
+  open.delay_ms = p.delay_ms;
   Direction dirs[2] = {{"a_to_b", fa, fb, LinkDirection(open_first ? open : p), {}, 0, 0, 0},
                        {"b_to_a", fb, fa, LinkDirection(open_first ? open : pb), {}, 0, 0, 0}};
   if (!open_first) g_shape = 0;

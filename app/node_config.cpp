@@ -114,6 +114,9 @@ NodeConfig::NodeConfig() {
   custom_options_.add(string_option(token_file, "tessera", "token-file", "static access tokens, one per line; a token is then required"));
   custom_options_.add(string_option(tls_cert, "tessera", "tls-cert", "PEM certificate (chain) of the port: HTTPS and WSS only (with tls-key)"));
   custom_options_.add(string_option(tls_key, "tessera", "tls-key", "PEM private key of tls-cert"));
+  custom_options_.add(string_option(tcp_congestion, "tessera", "tcp-congestion",
+                                    "TCP congestion control of the port's connections, e.g. bbr (docs/operations.md); "
+                                    "empty: the system's default"));
   custom_options_.add(string_option(cluster_host, "tessera", "cluster-host", "address of the cluster port (0.0.0.0: all interfaces)"));
   custom_options_.add(string_option(name, "tessera", "name", "this node's name in node lists and logs (default host:cluster-port)"));
   custom_options_.add(string_option(cluster_tls_cert, "tessera", "cluster-tls-cert",
@@ -318,6 +321,8 @@ ServerOptions NodeConfig::server_options() const {
     throw std::invalid_argument("tessera.hsts-max-age needs TLS (tessera.tls-cert and tessera.tls-key): browsers ignore "
                                 "Strict-Transport-Security over plain HTTP (behind a TLS proxy, set it at the proxy)");
   o.hsts_max_age = uint32_t(hsts_max_age);
+  if (tcp_congestion.size() > 15) throw std::invalid_argument("tessera.tcp-congestion: at most 15 characters");
+  o.tcp_congestion = tcp_congestion;
   if (http_redirect_port < 0 || http_redirect_port > 65535)
     throw std::invalid_argument("tessera.http-redirect-port must be in 0..65535 (0: off)");
   if (http_redirect_port > 0) {

@@ -46,6 +46,7 @@ struct NodeConfig : caf::actor_system_config {
   std::string token_file;   // static access tokens, one per line ("": none)
   std::string tls_cert;     // PEM certificate (chain) of HTTPS/WSS on the port ("": plain HTTP)
   std::string tls_key;      // its PEM private key
+  std::string tcp_congestion;  // TCP congestion control of the port's connections ("": the system's)
   int hsts_max_age = 0;        // with TLS: Strict-Transport-Security max-age in seconds (0: not sent)
   int http_redirect_port = 0;  // with TLS: plain HTTP here redirects to https (0: off)
   std::vector<std::string> allowed_origins{"self", "loopback"};  // page origins ("*": any)

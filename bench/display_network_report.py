@@ -1,9 +1,11 @@
 #!/usr/bin/env python3
 """Tables and a plot from bench/display_network.sh's JSON lines.
 
-Usage: bench/display_network_report.py LINES.jsonl [PLOT.png]
+Usage: bench/display_network_report.py LINES.jsonl [MORE.jsonl ...] [PLOT.png]
 Prints the markdown tables (one row per link and display) and, with gnuplot installed and a
 PLOT path given, draws frames/s and input-to-frame latency per link, one curve per display.
+A row of a later file replaces the row of the same link and display of an earlier one (say, a
+second run of one display); each file's conditions are printed.
 """
 import json
 import os
@@ -15,10 +17,20 @@ NAMES = {"jpeg": "JPEG q85", "s3tc": "S3TC", "mjpeg": "MJPEG*", "h264": "H.264"}
 
 
 def main():
-    lines = [json.loads(l) for l in open(sys.argv[1]) if l.strip()]
-    head = next(l for l in lines if "load_start" in l)
-    end = next((l for l in lines if "load_end" in l), {})
-    rows = [l for l in lines if "display" in l]
+    files = [a for a in sys.argv[1:] if a.endswith(".jsonl")]
+    plot = next((a for a in sys.argv[1:] if a.endswith(".png")), None)
+    rows, runs = [], []
+    for path in files:
+        lines = [json.loads(l) for l in open(path) if l.strip()]
+        runs.append((path, next(l for l in lines if "load_start" in l), next((l for l in lines if "load_end" in l), {})))
+        for r in (l for l in lines if "display" in l):
+            key = (r["mbit_s"], r["rtt_ms"], r["loss_percent"], r["display"])
+            at = next((i for i, o in enumerate(rows) if (o["mbit_s"], o["rtt_ms"], o["loss_percent"], o["display"]) == key), None)
+            if at is None:
+                rows.append(r)
+            else:
+                rows[at] = r
+    _, head, end = runs[0]
     hz = head.get("request_hz", 0)
     if hz:  # a browser-like client: requests on a clock, no one-request phase
         print(f"Link: {head['link']}; scene {head['scene']}, {head['size'].replace(' ', 'x')}, AO {head['ao']}; a frame "
@@ -32,10 +44,12 @@ def main():
                   f"| {r['fps']:.1f} | {r['bytes_per_frame']:,.0f} | {r['latency_2_ms']:,.0f} ({r['p90_latency_2_ms']:,.0f}) "
                   f"| {r['node_dropped']} | {r['node_frames']} |")
         return
-    print(f"Link: {head['link']}; scene {head['scene']}, {head['size'].replace(' ', 'x')}, AO {head['ao']}; "
-          f"{head['seconds']} s windows and {head['latency_seconds']} s of one-request latency per row; "
-          f"{head['isa']}, {head['cores']} cores, load {head['load_start']} at the start and "
-          f"{end.get('load_end', '?')} at the end.\n")
+    for path, h, e in runs:
+        shown = sorted({r["display"] for r in rows if r in [json.loads(l) for l in open(path) if "display" in l]})
+        print(f"`{os.path.basename(path)}` ({', '.join(NAMES.get(d, d) for d in shown)} rows): link {h['link']}; "
+              f"scene {h['scene']}, {h['size'].replace(' ', 'x')}, AO {h['ao']}; {h['seconds']} s windows and "
+              f"{h['latency_seconds']} s of one-request latency per row; {h['isa']}, {h['cores']} cores, load "
+              f"{h['load_start']} at the start and {e.get('load_end', 'not recorded')} at the end.\n")
     print("| Mbit/s | RTT ms | loss % | display | frames/s | bytes per frame | encode ms | latency ms (p90), 2 outstanding "
           "| latency ms (p90), 1 outstanding | transfer ms | bound: RTT + rendering + 30 | within | rest ms |")
     print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
@@ -51,7 +65,7 @@ def main():
               f"| {fmt(r['fps'])} | {fmt(r['bytes_per_frame'], 0)} | {fmt(r['encode_ms'])} "
               f"| {fmt(r['latency_2_ms'], 0)} ({fmt(r['p90_latency_2_ms'], 0)}) | {fmt(r['latency_ms'], 0)} ({fmt(r['p90_latency_ms'], 0)}) "
               f"| {fmt(transfer, 0)} | {fmt(r['latency_bound_ms'], 0)} | {within} | {fmt(rest, 0)} |")
-    if len(sys.argv) < 3:
+    if not plot:
         return
     links = []
     for r in rows:
@@ -77,7 +91,7 @@ def main():
         bound = f"'{data}' using 1:5:xtic(2) with lines dashtype 2 lc rgb 'black' title 'RTT + rendering + 30 ms (JPEG)'"
         script = f"""
 set terminal pngcairo size 1400,900 font ',10'
-set output '{sys.argv[2]}'
+set output '{plot}'
 set multiplot layout 2,1 title 'Displays over emulated links ({head['link']}): {os.path.basename(head['scene'])}, {head['size'].replace(' ', 'x')}; x: Mbit/s / RTT ms / loss %'
 set xtics rotate by -45
 set grid

@@ -287,8 +287,11 @@ class Stream {
 
  private:
   bool wait(bool for_write, Clock::time_point deadline) {
-    auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - Clock::now()).count();
-    if (left <= 0) return false;
+    // Rounded up: a wait that times out ends at the deadline, not before it (read_mjpeg_stream
+    // tells a timeout from a closed stream by the time).
+    const auto left_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(deadline - Clock::now()).count();
+    if (left_ns <= 0) return false;
+    const long long left = (left_ns + 999'999) / 1'000'000;
     pollfd p{fd_, short(for_write ? POLLOUT : POLLIN), 0};
     return ::poll(&p, 1, int(left)) > 0;
   }

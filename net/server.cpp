@@ -17,6 +17,10 @@
 
 #include <netinet/in.h>
 #include <netinet/tcp.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstring>
 #include <sys/socket.h>
 
 #include <caf/all.hpp>
@@ -126,6 +130,21 @@ constexpr uint16_t kCloseBadToken = 4401;
 // TCP_NOTSENT_LOWAT of WebSocket connections (see on_open): at 1 Mbit/s 32 KiB is 0.26 s of
 // latency; at 1 Gbit/s the network thread has ~0.13 ms to refill it (it is woken at half).
 constexpr int kNotSentLowat = 32 << 10;
+
+// Throws unless this kernel lets the node's TCP connections use congestion control `name`.
+void check_congestion_control(const std::string& name) {
+  const int fd = ::socket(AF_INET, SOCK_STREAM, 0);
+  if (fd < 0) throw std::runtime_error("tessera.tcp-congestion: cannot make a socket to check it");
+  const int r = ::setsockopt(fd, IPPROTO_TCP, TCP_CONGESTION, name.data(), socklen_t(name.size()));
+  const int err = errno;
+  ::close(fd);
+  if (r == 0) return;
+  std::string available;
+  std::ifstream in("/proc/sys/net/ipv4/tcp_available_congestion_control");
+  std::getline(in, available);
+  throw std::runtime_error("tessera.tcp-congestion '" + name + "' cannot be used here (" + std::strerror(err) +
+                           "; this kernel offers: " + (available.empty() ? "unknown" : available) + ")");
+}
 
 // The client's address (remote) or the address it connected to, as text ("" when the socket
 // is gone).
@@ -796,9 +815,13 @@ void Endpoint<Config>::start() {
   i.poll = std::make_unique<asio::steady_timer>(i.ws.get_io_service());
   i.ws.set_max_message_size(i.settings->limits.max_message_bytes);
   i.ws.set_max_http_body_size(64 * 1024);
+  if (!i.opts.tcp_congestion.empty()) check_congestion_control(i.opts.tcp_congestion);
   i.ws.set_tcp_post_init_handler([&i](connection_hdl h) {
     asio::error_code ec;
-    i.ws.get_con_from_hdl(h)->get_raw_socket().set_option(asio::ip::tcp::no_delay(true), ec);
+    auto& socket = i.ws.get_con_from_hdl(h)->get_raw_socket();
+    socket.set_option(asio::ip::tcp::no_delay(true), ec);
+    const std::string& cc = i.opts.tcp_congestion;
+    if (!cc.empty()) ::setsockopt(socket.native_handle(), IPPROTO_TCP, TCP_CONGESTION, cc.data(), socklen_t(cc.size()));
   });
   i.ws.set_validate_handler([&i](connection_hdl h) { return i.on_validate(h); });
   i.ws.set_open_handler([&i](connection_hdl h) { i.on_open(h); });

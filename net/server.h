@@ -43,6 +43,9 @@ struct ServerOptions {
   // redirect to https://HOST:port/... and serves nothing else (0: any free port, see
   // Server::redirect_port()); none: no such listener. Without TLS start() refuses it.
   std::optional<uint16_t> http_redirect_port;
+  // TCP congestion control of every connection on the port (TCP_CONGESTION: "bbr", "cubic",
+  // ...; docs/operations.md); empty: the system's default. start() refuses one the kernel lacks.
+  std::string tcp_congestion;
 };
 
 class Server {
