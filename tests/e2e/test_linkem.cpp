@@ -93,6 +93,38 @@ constexpr const char* kA = "10.216.0.1";
 constexpr const char* kB = "10.216.0.2";
 constexpr uint16_t kPort = 5017;
 
+// A TCP connection in this thread's namespace: accept_one() in B takes one on kB:kPort
+// (`listening` set once it listens), connect_tcp() in A makes one once `listening` is set. Both
+// with TCP_NODELAY; -1 when it fails.
+int accept_one(std::atomic<bool>& listening) {
+  const int s = socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  const int one = 1;
+  setsockopt(s, SOL_SOCKET, SO_REUSEADDR, &one, sizeof one);
+  auto sa = address(kB, kPort);
+  if (bind(s, reinterpret_cast<sockaddr*>(&sa), sizeof sa) != 0 || listen(s, 1) != 0) {
+    close(s);
+    return -1;
+  }
+  listening = true;
+  const int c = accept(s, nullptr, nullptr);
+  close(s);
+  if (c >= 0) setsockopt(c, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
+  return c;
+}
+
+int connect_tcp(const std::atomic<bool>& listening) {
+  for (int i = 0; i < 1000 && !listening; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  const int c = socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  auto sa = address(kB, kPort);
+  if (connect(c, reinterpret_cast<sockaddr*>(&sa), sizeof sa) != 0) {
+    close(c);
+    return -1;
+  }
+  const int one = 1;
+  setsockopt(c, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
+  return c;
+}
+
 // `tessera linkem` between the namespaces, started and ready (its first line), stopped with
 // SIGTERM by stop(), which returns all it printed.
 struct Link {
@@ -143,17 +175,8 @@ TEST_CASE("TCP across an emulated link sees its round-trip time and its rate", "
   std::string server_error;
   std::thread server([&] {  // in B: answers 10 pings, then sends kBulk bytes
     if (!enter(ns.b)) return void(server_error = "setns b");
-    const int s = socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
-    const int one = 1;
-    setsockopt(s, SOL_SOCKET, SO_REUSEADDR, &one, sizeof one);
-    auto sa = address(kB, kPort);
-    if (bind(s, reinterpret_cast<sockaddr*>(&sa), sizeof sa) != 0 || listen(s, 1) != 0)
-      return void(server_error = "bind/listen");
-    listening = true;
-    const int c = accept(s, nullptr, nullptr);
-    close(s);
-    if (c < 0) return void(server_error = "accept");
-    setsockopt(c, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
+    const int c = accept_one(listening);
+    if (c < 0) return void(server_error = "listen/accept");
     char ch;
     for (int i = 0; i < 10; ++i)
       if (recv(c, &ch, 1, MSG_WAITALL) != 1 || send(c, &ch, 1, 0) != 1) return void(server_error = "ping");
@@ -170,12 +193,8 @@ TEST_CASE("TCP across an emulated link sees its round-trip time and its rate", "
   double bulk_s = 0;
   std::thread client([&] {  // in A
     if (!enter(ns.a)) return;
-    for (int i = 0; i < 1000 && !listening; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
-    const int c = socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
-    auto sa = address(kB, kPort);
-    if (connect(c, reinterpret_cast<sockaddr*>(&sa), sizeof sa) != 0) return void(close(c));
-    const int one = 1;
-    setsockopt(c, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
+    const int c = connect_tcp(listening);
+    if (c < 0) return;
     char ch = 'p';
     for (int i = 0; i < 10; ++i) {
       const auto t = Clock::now();
@@ -275,15 +294,8 @@ TEST_CASE("An open link has its delay, and its rate only from SIGUSR1 on", "[lin
   std::atomic<bool> listening{false};
   std::thread echo([&] {  // in B: echoes bytes until the client closes
     if (!enter(ns.b)) return;
-    const int s = socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
-    const int one = 1;
-    setsockopt(s, SOL_SOCKET, SO_REUSEADDR, &one, sizeof one);
-    auto sa = address(kB, kPort);
-    if (bind(s, reinterpret_cast<sockaddr*>(&sa), sizeof sa) != 0 || listen(s, 1) != 0) return void(close(s));
-    listening = true;
-    const int c = accept(s, nullptr, nullptr);
-    close(s);
-    setsockopt(c, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
+    const int c = accept_one(listening);
+    if (c < 0) return;
     char buf[65536];
     for (ssize_t n; (n = recv(c, buf, sizeof buf, 0)) > 0;)
       if (send(c, buf, size_t(n), 0) != n) break;
@@ -292,12 +304,8 @@ TEST_CASE("An open link has its delay, and its rate only from SIGUSR1 on", "[lin
   double rtt_before = -1, bulk_before = -1, bulk_after = -1;
   std::thread client([&] {
     if (!enter(ns.a)) return;
-    for (int i = 0; i < 1000 && !listening; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(5));
-    const int c = socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
-    auto sa = address(kB, kPort);
-    if (connect(c, reinterpret_cast<sockaddr*>(&sa), sizeof sa) != 0) return void(close(c));
-    const int one = 1;
-    setsockopt(c, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
+    const int c = connect_tcp(listening);
+    if (c < 0) return;
     // Seconds for `n` bytes to go there and back (sent whole, then read whole).
     auto echo_s = [&](size_t n) {
       std::vector<char> data(n, 'x');
