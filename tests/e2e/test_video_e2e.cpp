@@ -366,8 +366,11 @@ TEST_CASE("A client on a slow link gets a stream fitted to it with bounded laten
   // node renders and encodes several times slower, so the link does not bound every frame and
   // the law probes above it (9-15 frames in the second half under ASan, means of 1.16x and
   // 1.28x the link): there the check is that the target fell well below the ceiling (7.8x).
+  // The highest target may be the law's probe beyond the best throughput of the last 10 s, 10%
+  // a second for 5 s (1.1^5 = 1.61x); in the Release suite beside other tests on 2 cores it
+  // reached 769 and 785 kbit/s (1.50x and 1.53x) while the mean stayed at 0.71-0.79x.
   const bool sanitized = time_scale() > 1;
-  CHECK(late_max <= link_kbps * (sanitized ? 2.0 : 1.5));
+  CHECK(late_max <= link_kbps * (sanitized ? 2.0 : 1.65));
   CHECK(late_min >= kH264MinKbps);
   CHECK(late_mean >= link_kbps * 0.4);
   CHECK(late_mean <= link_kbps * (sanitized ? 1.75 : 1.25));
