@@ -390,8 +390,8 @@ TEST_CASE("A client asking 30 times a second across a slow link gets the newest 
       // the kernel's 32 KiB not yet sent (130 ms), the link's queue (64 KiB: 260 ms, which TCP
       // fills) and its own transfer: about 0.75 s; measured 0.65-0.93 s median and 1.3-1.4 s p90
       // on the 2-core VM (with BBR misled by an open phase without delay, since fixed). Were
-      // frames queued in the node, the
-      // client's 30 requests a second against the link's 7-8 frames would add seconds.
+      // frames queued in the node, the client's 30 requests a second against the link's 7-8
+      // frames would add seconds.
       const double p90 = number(summary, "p90_latency_ms");
       CHECK(p90 < 2000 + 3 * rendering);
       // And it does not grow: the last frames of the window are no later than the first.
