@@ -139,11 +139,11 @@ m = d.get("mjpeg_stream")
 if m:  # what the stream showed, not the WebSocket records
     d.update({"fps_total": m["fps"], "median_latency_ms": m["median_latency_ms"], "p90_latency_ms": m["p90_latency_ms"]})
     o = dict(o, median_latency_ms=m["one_outstanding_median_latency_ms"], p90_latency_ms=m["one_outstanding_p90_latency_ms"])
-shaped = sys.argv[7] != "tbf"
+shaped = sys.argv[6] != "tbf"
 rtt = float(sys.argv[3]) if shaped else None
 bound = (rtt or 0) + o["median_rendering_ms"] + 30 if o.get("frames") else None
 print(json.dumps({"display": sys.argv[1], "mbit_s": float(sys.argv[2]), "rtt_ms": rtt,
-  "loss_percent": float(sys.argv[4]) if shaped else None, "link": sys.argv[7], "fps": d.get("fps_total"),
+  "loss_percent": float(sys.argv[4]) if shaped else None, "link": sys.argv[6], "fps": d.get("fps_total"),
   "bytes_per_frame": d.get("node_bytes_per_frame"), "encode_ms": d.get("median_encode_ms"),
   "pipeline_ms": d.get("median_pipeline_ms"), "rendering_ms": d.get("median_rendering_ms"),
   "latency_2_ms": d.get("median_latency_ms"), "p90_latency_2_ms": d.get("p90_latency_ms"),
@@ -152,7 +152,7 @@ print(json.dumps({"display": sys.argv[1], "mbit_s": float(sys.argv[2]), "rtt_ms"
   "within_bound": (o["median_latency_ms"] <= bound) if o.get("frames") else None,
   "latency_frames": o.get("frames"), "node_frames": d.get("node_frames"), "node_dropped": d.get("node_dropped"),
   "errors": d.get("errors", "no summary")}))' \
-          "$d" "$rate" "$rtt" "$loss" "$line" "" "$LINK"
+          "$d" "$rate" "$rtt" "$loss" "$line" "$LINK"
       done
     done
   done

@@ -19,7 +19,7 @@ NAMES = {"jpeg": "JPEG q85", "s3tc": "S3TC", "mjpeg": "MJPEG*", "h264": "H.264"}
 def main():
     files = [a for a in sys.argv[1:] if a.endswith(".jsonl")]
     plot = next((a for a in sys.argv[1:] if a.endswith(".png")), None)
-    rows, runs = [], []
+    rows, runs, source = [], [], []  # source[i]: the file rows[i] came from
     for path in files:
         lines = [json.loads(l) for l in open(path) if l.strip()]
         runs.append((path, next(l for l in lines if "load_start" in l), next((l for l in lines if "load_end" in l), {})))
@@ -28,8 +28,10 @@ def main():
             at = next((i for i, o in enumerate(rows) if (o["mbit_s"], o["rtt_ms"], o["loss_percent"], o["display"]) == key), None)
             if at is None:
                 rows.append(r)
+                source.append(path)
             else:
                 rows[at] = r
+                source[at] = path
     _, head, end = runs[0]
     hz = head.get("request_hz", 0)
     if hz:  # a browser-like client: requests on a clock, no one-request phase
@@ -45,7 +47,7 @@ def main():
                   f"| {r['node_dropped']} | {r['node_frames']} |")
         return
     for path, h, e in runs:
-        shown = sorted({r["display"] for r in rows if r in [json.loads(l) for l in open(path) if "display" in l]})
+        shown = sorted({r["display"] for r, p in zip(rows, source) if p == path})
         print(f"`{os.path.basename(path)}` ({', '.join(NAMES.get(d, d) for d in shown)} rows): link {h['link']}; "
               f"scene {h['scene']}, {h['size'].replace(' ', 'x')}, AO {h['ao']}; {h['seconds']} s windows and "
               f"{h['latency_seconds']} s of one-request latency per row; {h['isa']}, {h['cores']} cores, load "

@@ -10,6 +10,8 @@
 #include <algorithm>
 #include <cctype>
 #include <chrono>
+#include <cstdint>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 
@@ -498,7 +500,11 @@ bool read_mjpeg_stream(const std::string& host, uint16_t port, const std::string
       if (!more()) return stopped || fail("part truncated");
     std::vector<uint8_t> part(buf.begin() + long(ph + 4), buf.begin() + long(ph + 4 + size_t(len)));
     buf.erase(0, ph + 4 + size_t(len));
-    if (!on_part(std::move(part), frame.empty() ? -1 : std::atol(frame.c_str()))) return true;
+    // A frame number the client can look up, else -1 (absent, not a number, out of range).
+    char* end = nullptr;
+    const long n_frame = frame.empty() ? -1 : std::strtol(frame.c_str(), &end, 10);
+    const bool valid = !frame.empty() && end && *end == '\0' && n_frame >= 0 && n_frame <= long(UINT32_MAX);
+    if (!on_part(std::move(part), valid ? n_frame : -1)) return true;
   }
 }
 

@@ -96,7 +96,6 @@ namespace {
 // ---------------------------------------------------------------------------------------
 
 struct SrgbLut {
-  std::array<float, 256> to_linear;
   // A texel channel (16 bits) for each 8-bit value: decoded from sRGB, or as it is (x 257).
   std::array<uint32_t, 256> texel_linear, texel_plain;
   // The inverse of texel_linear: for each 16-bit linear value, the sRGB code whose decoded value
@@ -104,9 +103,9 @@ struct SrgbLut {
   std::array<uint8_t, 65536> code_of_linear;
   SrgbLut() {
     for (int i = 0; i < 256; ++i) {
-      float c = i / 255.0f;
-      to_linear[i] = c <= 0.04045f ? c / 12.92f : std::pow((c + 0.055f) / 1.055f, 2.4f);
-      texel_linear[size_t(i)] = uint32_t(std::lround(to_linear[size_t(i)] * 65535.0f));
+      const float c = i / 255.0f;
+      const float linear = c <= 0.04045f ? c / 12.92f : std::pow((c + 0.055f) / 1.055f, 2.4f);
+      texel_linear[size_t(i)] = uint32_t(std::lround(linear * 65535.0f));
       texel_plain[size_t(i)] = uint32_t(i) * 257;
     }
     size_t code = 0;

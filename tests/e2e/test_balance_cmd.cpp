@@ -321,6 +321,20 @@ TEST_CASE("tessera loadtest --latency-seconds: a phase with one request outstand
   CHECK(run_tessera(base + " --latency-seconds -1").rc != 0);
 }
 
+TEST_CASE("tessera linkem and tessera.tcp-congestion refuse values no link or kernel has, before touching anything",
+          "[linkem]") {
+  // Checked before any namespace or device is opened, so this needs no root.
+  const std::string base = "linkem --ns tlk-no-a tlk-no-b --addr 10.9.0.1 10.9.0.2";
+  for (const std::string bad : {" --mbit -1", " --mbit nan", " --rtt-ms -4", " --rtt-ms 1e9", " --loss-percent 101",
+                                " --loss-percent -1", " --queue-kb -1", " --mtu 100", " --mtu 70000",
+                                " --dev 0123456789abcdefg", " --seed x", " --bogus 1"})
+    CHECK(run_tessera(base + bad).rc == 1);
+  CHECK(run_tessera("linkem --ns tlk-no-a tlk-no-b --addr 10.9.0.1 not-an-address").rc == 1);
+  CHECK(run_tessera("linkem --ns tlk-no-a --addr 10.9.0.1 10.9.0.2").rc == 1);  // one namespace
+  CHECK(run_tessera("serve --port 0 --tessera.tcp-congestion=nosuch").rc != 0);
+  CHECK(run_tessera("serve --port 0 --tessera.tcp-congestion=averyveryverylongname").rc != 0);
+}
+
 TEST_CASE("tessera loadtest --on-streaming: the command runs once the scene is up, and its failure counts", "[loadtest]") {
   const std::string base = "loadtest --scene " + kScene + "/scene.gltf --camera-loop " + kScene +
                            "/camera-loop.json --size 64 36 --threads 1 --frames 2";

@@ -6,6 +6,7 @@
 // Needs root (namespaces, TUN devices), iproute2's `ip` and /dev/net/tun. Without them, or with
 // TESSERA_NO_NETNS=1, it prints why and exits 77 (CTest: skipped).
 #include <catch2/catch.hpp>
+#include <nlohmann/json.hpp>
 
 #include "tests/catch_runner.h"
 
@@ -23,7 +24,6 @@
 #include <atomic>
 #include <chrono>
 #include <cstdio>
-#include <cmath>
 #include <cstdlib>
 #include <memory>
 #include <string>
@@ -149,12 +149,21 @@ struct Link {
   }
 };
 
+using json = nlohmann::json;
+
+// The JSON lines a command printed (a line that is not JSON fails the test).
+std::vector<json> json_lines(const std::string& out) {
+  std::vector<json> v;
+  for (size_t at = 0, nl; (nl = out.find('\n', at)) != std::string::npos; at = nl + 1)
+    if (nl > at) v.push_back(json::parse(out.substr(at, nl - at)));
+  return v;
+}
+
+// linkem's counter `key` of one direction (-1 when it printed none).
 long counter(const std::string& out, const std::string& direction, const std::string& key) {
-  auto at = out.find("\"direction\": \"" + direction + "\"");
-  if (at == std::string::npos) return -1;
-  at = out.find("\"" + key + "\": ", at);
-  if (at == std::string::npos) return -1;
-  return std::strtol(out.c_str() + at + key.size() + 4, nullptr, 10);
+  for (const json& j : json_lines(out))
+    if (j.value("direction", "") == direction) return j.at(key).get<long>();
+  return -1;
 }
 
 }  // namespace
@@ -333,13 +342,6 @@ TEST_CASE("An open link has its delay, and its rate only from SIGUSR1 on", "[lin
   CHECK(bulk_after >= 0.75);  // 1 Mbit/s each way: 0.8 s, the two directions overlapping
 }
 
-// A JSON number after "key": in a line (loadtest's summary); NaN when absent.
-double number(const std::string& line, const std::string& key) {
-  auto at = line.find("\"" + key + "\": ");
-  if (at == std::string::npos) return std::nan("");
-  return std::strtod(line.c_str() + at + key.size() + 4, nullptr);
-}
-
 TEST_CASE("A client asking 30 times a second across a slow link gets the newest frames, without latency building up",
           "[linkem][backpressure]") {
   // The node in A, `tessera loadtest` in B asking for a frame every 33 ms (as the web client
@@ -372,19 +374,19 @@ TEST_CASE("A client asking 30 times a second across a slow link gets the newest 
       INFO(lt.err());
       REQUIRE(st);
       CHECK(WEXITSTATUS(*st) == 0);
-      const std::string& out = lt.out();
-      const auto at = out.find("\"summary\": true");
-      REQUIRE(at != std::string::npos);
-      const std::string summary = out.substr(at);
-      INFO(summary);
-      CHECK(number(summary, "errors") == 0);
-      const double fps = number(summary, "fps_total"), bytes = number(summary, "median_bytes");
-      const double rendering = number(summary, "median_rendering_ms");
+      const std::vector<json> lines = json_lines(lt.out());
+      REQUIRE(!lines.empty());
+      const json& summary = lines.back();
+      INFO(summary.dump());
+      REQUIRE(summary.value("summary", false));
+      CHECK(summary.at("errors").get<int>() == 0);
+      const double fps = summary.at("fps_total").get<double>(), bytes = summary.at("median_bytes").get<double>();
+      const double rendering = summary.at("median_rendering_ms").get<double>();
       CHECK(fps > 0.5 / scale);
       // What arrived fits the link (2 Mbit/s, its packets' headers included).
       CHECK(fps * bytes * 8 < 2.2e6);
       // Requests the node merged into newer frames: the client asked for 30 a second.
-      CHECK(number(summary, "node_dropped") > 0);
+      CHECK(summary.at("node_dropped").get<int>() > 0);
       // The latency bound. Along the path a frame may wait for: the request ahead of it (33 ms),
       // its rendering, the frame on the connection before it (a 32 KB frame crosses in 130 ms),
       // the kernel's 32 KiB not yet sent (130 ms), the link's queue (64 KiB: 260 ms, which TCP
@@ -392,12 +394,11 @@ TEST_CASE("A client asking 30 times a second across a slow link gets the newest 
       // on the 2-core VM (with BBR misled by an open phase without delay, since fixed). Were
       // frames queued in the node, the client's 30 requests a second against the link's 7-8
       // frames would add seconds.
-      const double p90 = number(summary, "p90_latency_ms");
+      const double p90 = summary.at("p90_latency_ms").get<double>();
       CHECK(p90 < 2000 + 3 * rendering);
       // And it does not grow: the last frames of the window are no later than the first.
-      std::vector<double> lat;
-      for (size_t p = 0; (p = out.find("\"latency_ms\": ", p)) != std::string::npos && p < at; ++p)
-        lat.push_back(std::strtod(out.c_str() + p + 14, nullptr));
+      std::vector<double> lat;  // the window's frames, in order
+      for (size_t i = 0; i + 1 < lines.size(); ++i) lat.push_back(lines[i].at("latency_ms").get<double>());
       REQUIRE(lat.size() >= 4);
       const size_t q = lat.size() / 4;
       std::vector<double> first(lat.begin(), lat.begin() + long(q)), last(lat.end() - long(q), lat.end());
