@@ -235,7 +235,9 @@ export class RemoteBackend {
   // show it (tried), so the newest frame would stay hidden until another one comes. After
   // the last frame of a change the client therefore asks for one more (identical) frame,
   // which pushes the previous one out; and while the stream has shown nothing (it connected
-  // after the first frames went out) it asks again, at most 20 times. A node that refines
+  // after the first frames went out) it asks again, at most 20 times; if by then it shows a
+  // picture (the frame before, pushed out by this one), this frame still needs its push, so it
+  // is flushed as if it had come after the stream showed. A node that refines
   // stills (or follows a scaled frame with its full-resolution still) sends refined frames
   // after a requested one, which push it out: then the client asks only when none has come
   // within half a second, and never after a refined frame (a request would start the still
@@ -245,7 +247,7 @@ export class RemoteBackend {
     clearTimeout(this.flushTimer);
     if (f.refined) return;
     if (!this.frameView.showing && (this.mjpegRetries = (this.mjpegRetries || 0) + 1) <= 20) {
-      setTimeout(() => { if (!this.frameView.showing) ch.requestRender(); }, 150);
+      this.flushTimer = setTimeout(() => (this.frameView.showing ? this.flushMjpeg(f) : ch.requestRender()), 150);
       return;
     }
     const flush = () => {
