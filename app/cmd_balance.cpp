@@ -48,7 +48,14 @@ const char* kHelp =
     "reprojected (the last frame's cost carried into this frame's camera with each packet's first\n"
     "hit, lb/reproject.h; its rows also give reproject_ms, filled packets and whether it was a cut),\n"
     "whole_task. --predictor both (the default) balances every node count twice, once with each,\n"
-    "on the same frames and the same single-node reference, so the two compare within one run.\n";
+    "on the same frames and the same single-node reference, so the two compare within one run.\n"
+    "Judged on the reference's own cost map (no node renders, so neither their sum against the\n"
+    "single kernel nor the noise in the largest of N kernels): map_efficiency, the tiling's ideal\n"
+    "time over the largest share of the reference map (the prediction and the tiler);\n"
+    "map_efficiency_again, the same on the second reference (their difference is this figure's own\n"
+    "noise); map_oracle_efficiency, the tiling made from the reference map itself (the tiler's\n"
+    "bound); map_self_efficiency, the tiling made from the second reference (what timing noise\n"
+    "alone leaves of a prediction from the very same frame). Summaries give medians and minima.\n";
 
 double ms_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
@@ -75,7 +82,29 @@ struct Cluster {
   double coeff_sum = 0;
   std::unique_ptr<SatArray> prev;
   std::vector<double> effs, balances;
+  std::vector<double> map_effs, oracle_effs, self_effs, map_noise;  // per counted frame (map_efficiency)
 };
+
+// The efficiency a tiling would reach if every packet cost what it cost in the frame's
+// single-node reference (its per-packet map `truth`): the ideal time over the slowest node's
+// share of that map. It leaves out what the node renders measure beside the tiling (their sum
+// against the single kernel, and timing noise in the largest of N kernels), so it is the
+// prediction and the tiler alone.
+double map_efficiency(const Sat& truth, const std::vector<Rect>& tasks, const std::vector<double>& coeff, double coeff_sum) {
+  double worst = 0;
+  for (size_t i = 0; i < tasks.size() && i < coeff.size(); ++i) worst = std::max(worst, double(truth.cost(tasks[i])) / coeff[i]);
+  return worst > 0 ? (double(truth.total()) / coeff_sum) / worst : 0;
+}
+
+// The map efficiency of the tiling made from `predicted`, a map of the whole frame: with the
+// reference map itself, the tiler's own bound (a perfect prediction); with the frame's second
+// reference, what timing noise alone leaves of a prediction from the very same frame.
+double tiled_from(const CostMap& predicted, const Sat& truth, Rect space, const std::vector<double>& coeff, double coeff_sum) {
+  SatArray own(space);
+  own.add(Sat::from_cost_map(predicted));
+  own.finalize();
+  return map_efficiency(truth, tile(&own, space, coeff), coeff, coeff_sum);
+}
 
 std::string list_json(const std::vector<double>& v, const char* fmt) {
   std::string s = "[";
@@ -181,6 +210,9 @@ int run(const std::vector<std::string>& argv) {
     render_min(rt, {0, 0, scene.width(), scene.height()}, settings, reps, again);
     const double noise_eff = std::min(single.kernel_ms, again.kernel_ms) / std::max(1e-9, std::max(single.kernel_ms, again.kernel_ms));
     if (f > 0) noise_effs.push_back(noise_eff);
+    if (single.cost.packets != space || again.cost.packets != space)
+      throw std::runtime_error("the reference render's cost map does not cover the frame's packets");
+    const Sat truth = Sat::from_cost_map(single.cost), truth_again = Sat::from_cost_map(again.cost);
 
     for (size_t ci = 0; ci < clusters.size(); ++ci) {
       Cluster& cl = clusters[ci];
@@ -245,17 +277,30 @@ int run(const std::vector<std::string>& argv) {
         cl.effs.push_back(eff);
         cl.balances.push_back(bal);
       }
+      // The same tiling judged on the reference map, on the second reference (the difference is
+      // this instrument's own noise); the tiler's bound; the second reference as the prediction.
+      const double map_eff = map_efficiency(truth, tasks, cl.coeff, cl.coeff_sum);
+      const double map_eff_again = map_efficiency(truth_again, tasks, cl.coeff, cl.coeff_sum);
+      const double oracle_eff = tiled_from(single.cost, truth, space, cl.coeff, cl.coeff_sum);
+      const double self_eff = tiled_from(again.cost, truth, space, cl.coeff, cl.coeff_sum);
+      if (f > 0) {
+        cl.map_effs.push_back(map_eff);
+        cl.oracle_effs.push_back(oracle_eff);
+        cl.self_effs.push_back(self_eff);
+        cl.map_noise.push_back(std::abs(map_eff - map_eff_again));
+      }
       double kern_sum = std::accumulate(kern.begin(), kern.end(), 0.0, [&, i = size_t(0)](double s, double v) mutable {
         return s + v * cl.coeff[i++];
       });
       std::printf("{\"frame\": %zu, \"nodes\": %ld, \"whole_task\": %s, \"single_kernel_ms\": %.3f, \"node_kernel_ms\": %s, "
                   "\"node_kernel_sum_ratio\": %.4f, \"efficiency\": %.4f, \"balance\": %.4f, \"sat_ms\": %.3f, "
                   "\"tiling_ms\": %.4f, \"predictor\": \"%s\", \"reproject_ms\": %.3f, \"reproject_filled\": %lld, "
-                  "\"reproject_cut\": %s, \"noise_floor_efficiency\": %.4f}\n",
+                  "\"reproject_cut\": %s, \"noise_floor_efficiency\": %.4f, \"map_efficiency\": %.4f, "
+                  "\"map_efficiency_again\": %.4f, \"map_oracle_efficiency\": %.4f, \"map_self_efficiency\": %.4f}\n",
                   k, cl.nodes, whole_task ? "true" : "false", single.kernel_ms, list_json(kern, "%.3f").c_str(),
                   single.kernel_ms > 0 ? kern_sum / single.kernel_ms : 0, eff, bal, sat_ms, tiling_ms,
                   predictor_name(cl, f, whole_task), reproject_ms, (long long)rs.filled,
-                  cl.reproject && f > 0 && rs.cut ? "true" : "false", noise_eff);
+                  cl.reproject && f > 0 && rs.cut ? "true" : "false", noise_eff, map_eff, map_eff_again, oracle_eff, self_eff);
       std::fflush(stdout);
       if (draw) {
         draw_tiling(frame_img, tasks, pl);
@@ -263,7 +308,7 @@ int run(const std::vector<std::string>& argv) {
       }
     }
   }
-  std::vector<double> means, medians;
+  std::vector<double> means, medians, map_medians;
   std::string rows = "[";  // which node count and predictor each entry of the lists below is
   for (const Cluster& cl : clusters)
     rows += (rows.size() > 1 ? ", " : "") + std::string("\"") + std::to_string(cl.nodes) +
@@ -276,20 +321,26 @@ int run(const std::vector<std::string>& argv) {
     double hi = cl.effs.empty() ? 0 : *std::max_element(cl.effs.begin(), cl.effs.end());
     means.push_back(mean_eff);
     medians.push_back(median(cl.effs));
+    map_medians.push_back(median(cl.map_effs));
+    const auto min_of = [](const std::vector<double>& v) { return v.empty() ? 0.0 : *std::min_element(v.begin(), v.end()); };
+    const double map_noise_max = cl.map_noise.empty() ? 0.0 : *std::max_element(cl.map_noise.begin(), cl.map_noise.end());
     std::printf("{\"nodes_summary\": true, \"nodes\": %ld, \"predictor\": \"%s\", \"whole_task\": %s, \"coefficients\": %s, \"frames_counted\": %zu, "
                 "\"mean_efficiency\": %.4f, \"median_efficiency\": %.4f, \"min_efficiency\": %.4f, \"max_efficiency\": %.4f, "
-                "\"mean_balance\": %.4f}\n",
+                "\"mean_balance\": %.4f, \"median_map_efficiency\": %.4f, \"min_map_efficiency\": %.4f, "
+                "\"median_map_oracle_efficiency\": %.4f, \"min_map_oracle_efficiency\": %.4f, \"median_map_self_efficiency\": %.4f, "
+                "\"min_map_self_efficiency\": %.4f, \"map_noise_max\": %.4f}\n",
                 cl.nodes, cl.reproject ? "reprojected" : "previous_frame", whole_task ? "true" : "false",
                 list_json(cl.coeff, "%g").c_str(), cl.effs.size(), mean_eff,
-                medians.back(), lo, hi, mean_bal);
+                medians.back(), lo, hi, mean_bal, map_medians.back(), min_of(cl.map_effs), median(cl.oracle_effs),
+                min_of(cl.oracle_effs), median(cl.self_effs), min_of(cl.self_effs), map_noise_max);
   }
   std::printf("{\"summary\": true, \"scene\": %s, \"nodes\": %s, \"frames\": %ld, \"step\": %ld, \"whole_task\": %s, "
               "\"coefficients\": %s, \"rows\": %s, \"mean_efficiency\": %s, \"median_efficiency\": %s, "
-              "\"reps\": %ld, \"width\": %d, \"height\": %d, \"ao\": %d, \"depth\": %d, \"cpu\": %s, \"isa\": %s, \"packet\": \"%dx%d\", "
+              "\"median_map_efficiency\": %s, \"reps\": %ld, \"width\": %d, \"height\": %d, \"ao\": %d, \"depth\": %d, \"cpu\": %s, \"isa\": %s, \"packet\": \"%dx%d\", "
               "\"threads\": %d, \"noise_floor_median_efficiency\": %.4f, \"noise_floor_min_efficiency\": %.4f}\n",
               json_str(setup.scene_path).c_str(), list_json(node_list, "%g").c_str(), frames, step, whole_task ? "true" : "false",
               json_str(coeff_arg.empty() ? "equal" : coeff_arg).c_str(), rows.c_str(), list_json(means, "%.4f").c_str(),
-              list_json(medians, "%.4f").c_str(), reps, scene.width(), scene.height(), settings.ao_samples, settings.max_depth,
+              list_json(medians, "%.4f").c_str(), list_json(map_medians, "%.4f").c_str(), reps, scene.width(), scene.height(), settings.ao_samples, settings.max_depth,
               json_str(cpu_model()).c_str(), json_str(isa_name(pl)).c_str(), pl.w, pl.h, threads, median(noise_effs),
               noise_effs.empty() ? 0.0 : *std::min_element(noise_effs.begin(), noise_effs.end()));
   return 0;

@@ -72,6 +72,7 @@ TEST_CASE("tessera balance: per-frame lines per node count, consistent efficienc
       CHECK(l["width"] == 64);
       CHECK(l["cpu"].is_string());
       CHECK(l["reps"] == 3);
+      CHECK(l["median_map_efficiency"].size() == 6);
       CHECK(l.contains("threads"));
     } else if (l.value("nodes_summary", false)) {
       CHECK(l["predictor"] == (node_summaries % 2 ? "reprojected" : "previous_frame"));
@@ -83,6 +84,15 @@ TEST_CASE("tessera balance: per-frame lines per node count, consistent efficienc
       for (int i = 0; i < n; ++i) CHECK(c[size_t(i)] == (i % 2 ? 2.0 : 1.0));  // the pattern cycles
       CHECK(l["min_efficiency"] <= l["median_efficiency"]);
       CHECK(l["median_efficiency"] <= l["max_efficiency"]);
+      for (const char* k : {"map", "map_oracle", "map_self"}) {
+        INFO(k);
+        const double lo = l[std::string("min_") + k + "_efficiency"], med = l[std::string("median_") + k + "_efficiency"];
+        CHECK(lo > 0);
+        CHECK(lo <= med);
+        CHECK(med <= 1.0);
+      }
+      CHECK(double(l["map_noise_max"]) >= 0);
+      CHECK(double(l["map_noise_max"]) < 1);
     } else {
       ++frames;
       int n = l["nodes"];
@@ -119,6 +129,14 @@ TEST_CASE("tessera balance: per-frame lines per node count, consistent efficienc
       // ASan build beside another test on 2 cores, even as the best of 3.)
       CHECK(double(l["noise_floor_efficiency"]) <= 1.0);
       CHECK(double(l["noise_floor_efficiency"]) > 0.25);
+      // The tiling judged on the reference's own cost map: no node's share of a map can be
+      // below the mean, so at most 1; exactly 1 for one node, whatever the timings.
+      for (const char* k : {"map_efficiency", "map_efficiency_again", "map_oracle_efficiency", "map_self_efficiency"}) {
+        INFO(k);
+        CHECK(double(l[k]) > 0);
+        CHECK(double(l[k]) <= 1.0);
+        if (n == 1) CHECK(double(l[k]) == 1.0);
+      }
       if (n == 1) {
         CHECK(l["balance"] == 1.0);
         CHECK(eff > 0.25);  // the reference against a re-render of itself
