@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdarg>
 #include <cstdio>
 #include <numeric>
 
@@ -49,13 +50,14 @@ const char* kHelp =
     "hit, lb/reproject.h; its rows also give reproject_ms, filled packets and whether it was a cut),\n"
     "whole_task. --predictor both (the default) balances every node count twice, once with each,\n"
     "on the same frames and the same single-node reference, so the two compare within one run.\n"
-    "Judged on the reference's own cost map (no node renders, so neither their sum against the\n"
-    "single kernel nor the noise in the largest of N kernels): map_efficiency, the tiling's ideal\n"
-    "time over the largest share of the reference map (the prediction and the tiler);\n"
-    "map_efficiency_again, the same on the second reference (their difference is this figure's own\n"
-    "noise); map_oracle_efficiency, the tiling made from the reference map itself (the tiler's\n"
-    "bound); map_self_efficiency, the tiling made from the second reference (what timing noise\n"
-    "alone leaves of a prediction from the very same frame). Summaries give medians and minima.\n";
+    "Judged on cost maps of the frame instead of node kernels (so neither the nodes' sum against\n"
+    "the single kernel nor the noise in the largest of N kernels counts): two reference maps, each\n"
+    "packet's best over one reference and the tasks of every other row (rows 0, 2, ... and 1, 3,\n"
+    "...). map_efficiency: the tiling's ideal time over its largest share of the first map (the\n"
+    "prediction and the tiler); map_efficiency_again: the same on the second (the difference is\n"
+    "this figure's own noise); map_oracle_efficiency: the tiling made from the first map itself\n"
+    "(the tiler's bound); map_self_efficiency: the tiling made from the second map (what timing\n"
+    "noise alone leaves of a prediction from the very same frame). Summaries: medians, minima.\n";
 
 double ms_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
@@ -81,6 +83,8 @@ struct Cluster {
   std::vector<double> coeff;
   double coeff_sum = 0;
   std::unique_ptr<SatArray> prev;
+  std::vector<Rect> tasks;  // this frame's tiling
+  std::string line;         // this frame's JSON line so far (the map figures come last)
   std::vector<double> effs, balances;
   std::vector<double> map_effs, oracle_effs, self_effs, map_noise;  // per counted frame (map_efficiency)
 };
@@ -104,6 +108,31 @@ double tiled_from(const CostMap& predicted, const Sat& truth, Rect space, const 
   own.add(Sat::from_cost_map(predicted));
   own.finalize();
   return map_efficiency(truth, tile(&own, space, coeff), coeff, coeff_sum);
+}
+
+std::string format(const char* fmt, ...) __attribute__((format(printf, 1, 2)));
+std::string format(const char* fmt, ...) {
+  va_list a, b;
+  va_start(a, fmt);
+  va_copy(b, a);
+  const int n = std::vsnprintf(nullptr, 0, fmt, a);
+  va_end(a);
+  std::string s(size_t(std::max(n, 0)) + 1, '\0');
+  std::vsnprintf(s.data(), s.size(), fmt, b);
+  va_end(b);
+  s.resize(size_t(std::max(n, 0)));
+  return s;
+}
+
+// dst = min(dst, src) packet by packet over src's packets (inside dst's).
+void take_min(CostMap& dst, const CostMap& src) {
+  const Rect& b = src.packets;
+  if (!dst.packets.contains(b) || src.cost.size() != size_t(b.area())) throw std::logic_error("a task's cost map outside the frame's");
+  for (int32_t y = b.y0; y < b.y1; ++y)
+    for (int32_t x = b.x0; x < b.x1; ++x) {
+      uint32_t& c = dst.cost[size_t(y - dst.packets.y0) * size_t(dst.packets.width()) + size_t(x - dst.packets.x0)];
+      c = std::min(c, src.at(x, y));
+    }
 }
 
 std::string list_json(const std::vector<double>& v, const char* fmt) {
@@ -212,7 +241,11 @@ int run(const std::vector<std::string>& argv) {
     if (f > 0) noise_effs.push_back(noise_eff);
     if (single.cost.packets != space || again.cost.packets != space)
       throw std::runtime_error("the reference render's cost map does not cover the frame's packets");
-    const Sat truth = Sat::from_cost_map(single.cost), truth_again = Sat::from_cost_map(again.cost);
+    // The frame's two reference maps for the map figures: the per-packet minimum over the
+    // first reference and the renders of clusters 0, 2, 4, ..., and over the second reference
+    // and clusters 1, 3, 5, ...: every packet's best of several renders spread over the
+    // frame's whole measurement, in two independent halves.
+    CostMap pool[2] = {single.cost, again.cost};
 
     for (size_t ci = 0; ci < clusters.size(); ++ci) {
       Cluster& cl = clusters[ci];
@@ -248,6 +281,7 @@ int run(const std::vector<std::string>& argv) {
         const double c = cl.coeff[size_t(i)];
         TaskResult r;
         render_min(rt, px, settings, reps, r);
+        take_min(pool[ci % 2], r.cost);
         kern[size_t(i)] = r.kernel_ms / c;
         if (draw) blit(frame_img, r.image, px.x0, px.y0);
         if (cl.reproject) copy_task(r, cl.last_cost, cl.last_points);
@@ -277,36 +311,43 @@ int run(const std::vector<std::string>& argv) {
         cl.effs.push_back(eff);
         cl.balances.push_back(bal);
       }
-      // The same tiling judged on the reference map, on the second reference (the difference is
-      // this instrument's own noise); the tiler's bound; the second reference as the prediction.
-      const double map_eff = map_efficiency(truth, tasks, cl.coeff, cl.coeff_sum);
-      const double map_eff_again = map_efficiency(truth_again, tasks, cl.coeff, cl.coeff_sum);
-      const double oracle_eff = tiled_from(single.cost, truth, space, cl.coeff, cl.coeff_sum);
-      const double self_eff = tiled_from(again.cost, truth, space, cl.coeff, cl.coeff_sum);
+      double kern_sum = std::accumulate(kern.begin(), kern.end(), 0.0, [&, i = size_t(0)](double s, double v) mutable {
+        return s + v * cl.coeff[i++];
+      });
+      cl.tasks = std::move(tasks);
+      cl.line = format("{\"frame\": %zu, \"nodes\": %ld, \"whole_task\": %s, \"single_kernel_ms\": %.3f, \"node_kernel_ms\": %s, "
+                  "\"node_kernel_sum_ratio\": %.4f, \"efficiency\": %.4f, \"balance\": %.4f, \"sat_ms\": %.3f, "
+                  "\"tiling_ms\": %.4f, \"predictor\": \"%s\", \"reproject_ms\": %.3f, \"reproject_filled\": %lld, "
+                  "\"reproject_cut\": %s, \"noise_floor_efficiency\": %.4f",
+                  k, cl.nodes, whole_task ? "true" : "false", single.kernel_ms, list_json(kern, "%.3f").c_str(),
+                  single.kernel_ms > 0 ? kern_sum / single.kernel_ms : 0, eff, bal, sat_ms, tiling_ms,
+                  predictor_name(cl, f, whole_task), reproject_ms, (long long)rs.filled,
+                  cl.reproject && f > 0 && rs.cut ? "true" : "false", noise_eff);
+      if (draw) {
+        draw_tiling(frame_img, cl.tasks, pl);
+        write_png(png, frame_img);
+      }
+    }
+    // Every tiling of the frame judged on the pooled reference maps: on the first (on the
+    // second too: the difference is this figure's own noise); the tiler's bound; the second
+    // pool as the prediction of the first.
+    const Sat truth = Sat::from_cost_map(pool[0]), truth_again = Sat::from_cost_map(pool[1]);
+    for (Cluster& cl : clusters) {
+      const double map_eff = map_efficiency(truth, cl.tasks, cl.coeff, cl.coeff_sum);
+      const double map_eff_again = map_efficiency(truth_again, cl.tasks, cl.coeff, cl.coeff_sum);
+      const double oracle_eff = tiled_from(pool[0], truth, space, cl.coeff, cl.coeff_sum);
+      const double self_eff = tiled_from(pool[1], truth, space, cl.coeff, cl.coeff_sum);
       if (f > 0) {
         cl.map_effs.push_back(map_eff);
         cl.oracle_effs.push_back(oracle_eff);
         cl.self_effs.push_back(self_eff);
         cl.map_noise.push_back(std::abs(map_eff - map_eff_again));
       }
-      double kern_sum = std::accumulate(kern.begin(), kern.end(), 0.0, [&, i = size_t(0)](double s, double v) mutable {
-        return s + v * cl.coeff[i++];
-      });
-      std::printf("{\"frame\": %zu, \"nodes\": %ld, \"whole_task\": %s, \"single_kernel_ms\": %.3f, \"node_kernel_ms\": %s, "
-                  "\"node_kernel_sum_ratio\": %.4f, \"efficiency\": %.4f, \"balance\": %.4f, \"sat_ms\": %.3f, "
-                  "\"tiling_ms\": %.4f, \"predictor\": \"%s\", \"reproject_ms\": %.3f, \"reproject_filled\": %lld, "
-                  "\"reproject_cut\": %s, \"noise_floor_efficiency\": %.4f, \"map_efficiency\": %.4f, "
-                  "\"map_efficiency_again\": %.4f, \"map_oracle_efficiency\": %.4f, \"map_self_efficiency\": %.4f}\n",
-                  k, cl.nodes, whole_task ? "true" : "false", single.kernel_ms, list_json(kern, "%.3f").c_str(),
-                  single.kernel_ms > 0 ? kern_sum / single.kernel_ms : 0, eff, bal, sat_ms, tiling_ms,
-                  predictor_name(cl, f, whole_task), reproject_ms, (long long)rs.filled,
-                  cl.reproject && f > 0 && rs.cut ? "true" : "false", noise_eff, map_eff, map_eff_again, oracle_eff, self_eff);
-      std::fflush(stdout);
-      if (draw) {
-        draw_tiling(frame_img, tasks, pl);
-        write_png(png, frame_img);
-      }
+      std::printf("%s, \"map_efficiency\": %.4f, \"map_efficiency_again\": %.4f, \"map_oracle_efficiency\": %.4f, "
+                  "\"map_self_efficiency\": %.4f}\n",
+                  cl.line.c_str(), map_eff, map_eff_again, oracle_eff, self_eff);
     }
+    std::fflush(stdout);
   }
   std::vector<double> means, medians, map_medians;
   std::string rows = "[";  // which node count and predictor each entry of the lists below is
