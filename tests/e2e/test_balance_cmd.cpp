@@ -201,6 +201,37 @@ TEST_CASE("tessera balance rejects bad options", "[balance]") {
   CHECK(run_tessera("balance --scene " + kScene + "/scene.gltf --nodes 2").rc != 0);  // no camera loop
 }
 
+TEST_CASE("tessera speedprobe: the fastest unit, ordered percentiles, window speeds, bad values refused", "[speedprobe]") {
+  Run r = run_tessera("speedprobe --seconds 1 --unit-ms 0.2");
+  REQUIRE(r.rc == 0);
+  REQUIRE(r.lines.size() == 1);
+  const json& l = r.lines[0];
+  CHECK(l["speedprobe"] == true);
+  CHECK(double(l["seconds"]) >= 1.0);
+  CHECK(l["units"] > 100);  // about 5,000 units of 0.2 ms; fewer only on a machine that ran something else
+  const double best = l["best_ms"];
+  CHECK(best > 0);
+  CHECK(best <= double(l["p10_ms"]));
+  CHECK(double(l["p10_ms"]) <= double(l["p50_ms"]));
+  CHECK(double(l["p50_ms"]) <= double(l["p90_ms"]));
+  CHECK(double(l["p90_ms"]) <= double(l["p99_ms"]));
+  CHECK(double(l["p99_ms"]) <= double(l["max_ms"]));
+  CHECK(double(l["median_speed"]) == Approx(best / double(l["p50_ms"])).epsilon(0.01));
+  CHECK(l["windows"] >= 3);
+  // A window's speed is the fastest unit over its mean unit: at most 1.
+  CHECK(double(l["window_speed_min"]) > 0);
+  CHECK(double(l["window_speed_min"]) <= double(l["window_speed_median"]));
+  CHECK(double(l["window_speed_median"]) <= double(l["window_speed_max"]));
+  CHECK(double(l["window_speed_max"]) <= 1.0);
+  CHECK(double(l["cpu_over_wall"]) > 0);
+  CHECK(double(l["cpu_over_wall"]) <= 1.05);
+  CHECK(l["steady"].is_boolean());
+  for (const char* bad : {"--seconds 0", "--seconds x", "--unit-ms 0", "--unit-ms 1000", "--bogus"}) {
+    INFO(bad);
+    CHECK(run_tessera(std::string("speedprobe ") + bad).rc != 0);
+  }
+}
+
 TEST_CASE("tessera threadbench: three schedules, identical images, a summary with the conditions", "[threadbench]") {
   Run r = run_tessera("threadbench " + base_args(2) + " --reps 1");
   REQUIRE(r.rc == 0);
