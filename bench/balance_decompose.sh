@@ -25,6 +25,10 @@ if [ $TABLE_ONLY = 0 ]; then
     for rep in $(seq 1 "$REPEATS"); do
       name="pavilion shared loop ${size/ /x}"
       echo "== $name, repeat $rep: $(uptime)" >&2
+      # How steadily the machine ran one thread just before (tessera speedprobe, docs/testing.md).
+      $T speedprobe --seconds 5 |
+        python3 -c "import json,sys; [print(json.dumps(dict(json.loads(l), run='$name', repeat=$rep))) for l in sys.stdin]" \
+        >> "$out/balance-decompose.jsonl"
       # shellcheck disable=SC2086
       $T balance --scene "$S/pavilion/scene.gltf" --camera-loop "$S/pavilion/camera-loop.json" --size $size --ao 2 \
          --frames "$F" --nodes 2,8,16 --threads 1 --reps 3 --predictor both |
@@ -56,7 +60,8 @@ conds = None
 for run in runs:
     md += ["## " + run, "", "| nodes | predictor | measured | tiler bound | noise only | prediction | renders' sum | instrument |",
            "|---|---|---|---|---|---|---|---|"]
-    lines = [r for r in rows if r["run"] == run]
+    lines = [r for r in rows if r["run"] == run and not r.get("speedprobe")]
+    probes = [r for r in rows if r["run"] == run and r.get("speedprobe")]
     reps = sorted({r["repeat"] for r in lines})
     keys = []
     for r in lines:
@@ -82,6 +87,12 @@ for run in runs:
         md.append("Conditions: %dx%d, %s, %s packets, %s; noise floor (the reference against itself) %s; load at each run's end %s." % (
             s[0]["width"], s[0]["height"], s[0]["cpu"], s[0]["packet"], s[0]["isa"],
             " / ".join(pct(x["noise_floor_median_efficiency"]) for x in s), " / ".join(x["load"] for x in s)))
+        if probes:
+            md[-1] += (" `tessera speedprobe --seconds 5` just before each run: median unit at %s of the fastest, "
+                       "250 ms windows at %s (min-median); steady: %s." % (
+                " / ".join("%.2f" % p["median_speed"] for p in probes),
+                " / ".join("%.2f-%.2f" % (p["window_speed_min"], p["window_speed_median"]) for p in probes),
+                " / ".join(str(p["steady"]).lower() for p in probes)))
         md.append("")
 open(os.path.join(out, "balance-decompose.md"), "w").write("\n".join(md))
 print("\n".join(md))
