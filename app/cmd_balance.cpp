@@ -89,11 +89,10 @@ struct Cluster {
   std::vector<double> map_effs, oracle_effs, self_effs, map_noise;  // per counted frame (map_efficiency)
 };
 
-// The efficiency a tiling would reach if every packet cost what it cost in the frame's
-// single-node reference (its per-packet map `truth`): the ideal time over the slowest node's
-// share of that map. It leaves out what the node renders measure beside the tiling (their sum
-// against the single kernel, and timing noise in the largest of N kernels), so it is the
-// prediction and the tiler alone.
+// The efficiency a tiling would reach if every packet cost what a reference map of the frame
+// says (`truth`, as a SAT): the ideal time over the slowest node's share of that map. It leaves
+// out what the node renders measure beside the tiling (their sum against the single kernel,
+// and timing noise in the largest of N kernels), so it is the prediction and the tiler alone.
 double map_efficiency(const Sat& truth, const std::vector<Rect>& tasks, const std::vector<double>& coeff, double coeff_sum) {
   double worst = 0;
   for (size_t i = 0; i < tasks.size() && i < coeff.size(); ++i) worst = std::max(worst, double(truth.cost(tasks[i])) / coeff[i]);
@@ -101,8 +100,8 @@ double map_efficiency(const Sat& truth, const std::vector<Rect>& tasks, const st
 }
 
 // The map efficiency of the tiling made from `predicted`, a map of the whole frame: with the
-// reference map itself, the tiler's own bound (a perfect prediction); with the frame's second
-// reference, what timing noise alone leaves of a prediction from the very same frame.
+// reference map itself, the tiler's own bound (a perfect prediction); with the frame's other
+// reference map, what timing noise alone leaves of a prediction from the very same frame.
 double tiled_from(const CostMap& predicted, const Sat& truth, Rect space, const std::vector<double>& coeff, double coeff_sum) {
   SatArray own(space);
   own.add(Sat::from_cost_map(predicted));
