@@ -1,5 +1,6 @@
 // Frame actor (frame_protocol.h): tiler -> root subtree -> recovery -> display, one frame at a time.
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cstring>
 #include <memory>
@@ -38,6 +39,8 @@ struct DenoiseJob {
   Image image;          // the frame shown: denoised, or the plain average
   double estimate_db = 0, ms = 0;
   bool denoised = false;
+  bool stopped = false;  // the frame was abandoned while it was denoised (`stop` raised)
+  std::shared_ptr<std::atomic<bool>> stop = std::make_shared<std::atomic<bool>>(false);
   std::string error;
 };
 
@@ -45,10 +48,13 @@ struct DenoiseJob {
 void run_denoise(DenoiseJob& j) {
   const auto t0 = std::chrono::steady_clock::now();
   try {
-    DenoisedStep step = denoise_step(j.acc, j.dn->guides, j.dn->ao, j.below_db);
+    DenoiseOptions options;
+    options.stop = j.stop.get();
+    DenoisedStep step = denoise_step(j.acc, j.dn->guides, j.dn->ao, j.below_db, options);
     j.image = std::move(step.image);
     j.estimate_db = step.estimate_db;
     j.denoised = step.denoised;
+    j.stopped = step.stopped;
   } catch (const std::exception& e) {
     j.error = e.what();
   }
@@ -78,6 +84,7 @@ struct frame_state {
   // since its sample 0, composed here, where the tiles of all nodes meet.
   Accumulation acc;
   std::unique_ptr<Denoising> dn;  // FrameStart::denoise: the still's denoising (none: plain)
+  std::shared_ptr<std::atomic<bool>> denoise_stop;  // the denoising in flight stops when raised (cancel)
   uint32_t cancelled = 0;       // the last frame the session abandoned (cancel)
   int64_t cancelled_ns = 0;     // when its notice came (steady_ns)
   static inline const char* name = "tessera.frame";
@@ -190,6 +197,8 @@ void add_sample(self_ptr self, const std::vector<TileResult>& tiles) {
     st.dn->ao.add(st.dn->guides);
 }
 
+void abandon(self_ptr self, const std::vector<TileResult>& tiles, const char* stage);
+
 // Estimates and denoises the still's average on a worker of its own (it takes about as long as
 // a sample, and would hold one of CAF's few scheduler threads), then shows the frame. The
 // still's state moves into the job and back: the session starts no frame before this one is
@@ -200,6 +209,7 @@ void denoise_and_show(self_ptr self) {
   job->acc = std::move(st.acc);
   job->dn = std::move(st.dn);
   job->below_db = st.settings->denoise_below_db;
+  st.denoise_stop = job->stop;
   auto work = [job](caf::event_based_actor* a) -> caf::behavior {
     return {[=](denoise_atom) {
       a->quit();
@@ -213,8 +223,11 @@ void denoise_and_show(self_ptr self) {
     auto& st = self->state;
     st.acc = std::move(job->acc);
     st.dn = std::move(job->dn);
+    st.denoise_stop.reset();
     FrameMeta& meta = st.cur.meta;
     if (error.empty()) error = job->error;
+    // Abandoned while it was denoised: the sample is in the average, its picture is not shown.
+    if (error.empty() && job->stopped && st.dn) return abandon(self, {}, "denoising");
     if (!error.empty() || !st.dn) {  // a fault of this node, not the client's: the still goes on plainly
       log(self, Event(Ev::error, "denoising failed, the still is averaged plainly: " + error));
       st.dn.reset();
@@ -303,8 +316,8 @@ void finish_frame(self_ptr self, std::vector<TileResult>&& tiles, std::vector<do
 
 // The frame in flight was abandoned (cancel): answered, and nothing of it averaged, shown or
 // given to the tiler (whose next tasks come from the last complete frame's SATs).
-// `stage`: where the frame was when it was abandoned (tiling or rendering; a sample being
-// denoised is shown: 0 of 47 abandoned samples were, docs/results/web.md).
+// `stage`: where the frame was when it was abandoned: tiling, rendering, or denoising (then
+// the sample is already in the average; only its picture is not shown).
 void abandon(self_ptr self, const std::vector<TileResult>& tiles, const char* stage) {
   auto& st = self->state;
   size_t stopped = 0;
@@ -455,6 +468,7 @@ frame_actor::behavior_type frame_impl(self_ptr self, std::shared_ptr<const NodeS
         if (seq != st.cur.meta.seq || !st.cur.meta.refined || !st.done.pending() || st.cancelled == seq) return;
         st.cancelled = seq;
         st.cancelled_ns = steady_ns();
+        if (st.denoise_stop) st.denoise_stop->store(true, std::memory_order_relaxed);  // rendered, being denoised
         self->send(st.a.subtree, cancel_atom::value, seq);
       },
       [=](render_atom, FrameStart& fs) -> caf::result<uint32_t> {

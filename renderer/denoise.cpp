@@ -223,6 +223,7 @@ std::vector<float> denoise(const std::vector<float>& mean, const std::vector<flo
 
   const PassCode code = pass_code(o.baseline);
   for (int it = 0; it < o.iterations; ++it) {
+    if (o.stop && o.stop->load(std::memory_order_relaxed)) return {};
     const int32_t step = int32_t(1) << it;
     // The value and distance weights' scales per pixel: the pixel's noise (its variance
     // blurred over 3x3) and its distance gradient over the taps' spacing.
@@ -284,13 +285,25 @@ double estimated_psnr_db(const std::vector<float>& mean, const std::vector<float
 
 DenoisedStep denoise_step(const Accumulation& acc, const std::vector<float>& guides, const StillAo& ao,
                           double below_db, const DenoiseOptions& options) {
-  const std::vector<float> mean = acc.mean(), var = ao.variance_of_mean(guides);
   DenoisedStep out;
+  const auto stopped = [&] { return options.stop && options.stop->load(std::memory_order_relaxed); };
+  if (stopped()) {
+    out.stopped = true;
+    return out;
+  }
+  const std::vector<float> mean = acc.mean(), var = ao.variance_of_mean(guides);
   out.estimate_db = estimated_psnr_db(mean, guides, var, acc.width(), acc.height(), acc.srgb());
   out.denoised = out.estimate_db < below_db;
-  out.image = out.denoised ? Accumulation::encode(denoise(mean, guides, ao.mean(), var, acc.width(), acc.height(), options),
-                                                  acc.width(), acc.height(), acc.srgb())
-                           : acc.average();
+  if (!out.denoised) {
+    out.image = acc.average();
+    return out;
+  }
+  const std::vector<float> filtered = denoise(mean, guides, ao.mean(), var, acc.width(), acc.height(), options);
+  if (filtered.empty() && stopped()) {
+    out.stopped = true;
+    return out;
+  }
+  out.image = Accumulation::encode(filtered, acc.width(), acc.height(), acc.srgb());
   return out;
 }
 

@@ -16,6 +16,7 @@
 //   variance over their count (StillAo), from the 3x3 neighbourhood's spread while there are
 //   fewer than kSpatialVarianceBelow samples. Where the samples agree the filter keeps the
 //   edges of the occlusion, and it smooths less as samples accumulate.
+#include <atomic>
 #include <cstdint>
 #include <vector>
 
@@ -36,6 +37,9 @@ struct DenoiseOptions {
   float sigma_distance = 1.0f;  // distance difference, in units of the local distance gradient
   bool baseline = false;        // the SSE2 copy of the pixel loops whatever the CPU (every copy
                                 // gives the same bits: tests compare them)
+  // Read before each pass: once raised, denoise() returns an empty vector and denoise_step a
+  // step with `stopped` and no image (a still whose frame was abandoned).
+  const std::atomic<bool>* stop = nullptr;
 };
 
 // A still's AO open fractions at its primary hits, per pixel, over its samples.
@@ -97,6 +101,7 @@ struct DenoisedStep {
   Image image;
   double estimate_db = 0;
   bool denoised = false;
+  bool stopped = false;  // DenoiseOptions::stop was raised: no image
 };
 DenoisedStep denoise_step(const Accumulation& acc, const std::vector<float>& guides, const StillAo& ao,
                           double below_db, const DenoiseOptions& options = {});

@@ -589,6 +589,60 @@ CAF_TEST(a still is denoised until the estimate of its plain average reaches the
   CAF_CHECK(plain_since);
 }
 
+CAF_TEST(a render request while a sample of a still is denoised stops the denoising and that picture is not shown) {
+  settings->refine_samples = 16;
+  settings->denoise_below_db = 99;  // denoised to its end
+  auto mu = std::make_shared<std::mutex>();
+  auto abandoned = std::make_shared<std::vector<Event>>();
+  settings->log = [mu, abandoned](const Event& e) {
+    std::lock_guard<std::mutex> lock(*mu);
+    if (e.kind == Ev::abandoned) abandoned->push_back(e);
+  };
+  client(corner_session());
+  client({RenderRequest{1}});
+  // Step until the denoising worker of one of the still's samples has its request waiting
+  // (the sample rendered and averaged, its picture not yet made).
+  auto denoise_waiting = [&] {
+    for (caf::resumable* job : sched.jobs) {
+      auto* a = dynamic_cast<caf::scheduled_actor*>(job);
+      const caf::mailbox_element* e = a ? a->peek_at_next_mailbox_element() : nullptr;
+      if (e && e->content().match_elements<caf::atom_value>() &&
+          e->content().get_as<caf::atom_value>(0) == caf::atom("denoise"))
+        return true;
+    }
+    return false;
+  };
+  bool waiting = false;
+  for (int i = 0; i < 100000 && !(waiting = denoise_waiting()); ++i)
+    if (!sched.try_run_once()) break;
+  CAF_REQUIRE(waiting);
+  const auto before = sink->all<Frame>();
+  CAF_REQUIRE(!before.empty());
+  const uint32_t shown_samples = before.back().samples;
+  // The request reaches the session, which abandons the still's sample in flight, before the
+  // worker runs: the worker finds its stop raised.
+  client({RenderRequest{2}});
+  deliver_client();
+  expect((cancel_atom, uint32_t), from(session).to(frame));
+  run();
+  {
+    std::lock_guard<std::mutex> lock(*mu);
+    CAF_REQUIRE_EQUAL(abandoned->size(), 1u);
+    const Json* stage = abandoned->front().field("stage");
+    CAF_REQUIRE(stage);
+    CAF_CHECK_EQUAL(stage->as_string(), "denoising");
+  }
+  // After the pictures shown before the request, the next frame is frame 2's first: the
+  // denoised sample of frame 1 never went out.
+  const auto after = sink->all<Frame>();
+  CAF_REQUIRE_GREATER(after.size(), before.size());
+  CAF_CHECK_EQUAL(after[before.size()].frame, 2u);
+  CAF_CHECK_EQUAL(after[before.size()].samples, 1u);
+  for (size_t i = before.size(); i < after.size(); ++i) CAF_CHECK_EQUAL(after[i].frame, 2u);
+  CAF_CHECK_LESS(shown_samples, 16u);
+  CAF_CHECK_EQUAL(sink->all<ErrorReply>().size(), 0u);
+}
+
 CAF_TEST(a still is averaged plainly once its estimate passes the threshold and when denoising is off) {
   settings->refine_samples = 6;
   std::vector<ClientRecord> recs = tiny_scene();  // the fixture's, and the corner

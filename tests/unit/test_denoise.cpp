@@ -4,6 +4,7 @@
 // is, and a denoised 4-sample still is closer to the converged one than the plain average.
 #include <catch2/catch.hpp>
 
+#include <atomic>
 #include <cmath>
 #include <cstring>
 #include <random>
@@ -297,6 +298,21 @@ TEST_CASE("denoise: a 4-sample still comes closer to the converged one than its 
   const double db_plain = compare(plain, ref).psnr, db_denoised = compare(denoised, ref).psnr;
   INFO("PSNR against 128 samples: 4 samples " << db_plain << " dB, denoised " << db_denoised << " dB");
   CHECK(db_denoised > db_plain + 3);
+
+  // The frame actor's step, with a stop flag (raised when the still's frame is abandoned):
+  // lowered, the same bits; raised, nothing filtered and no image.
+  std::atomic<bool> stop{false};
+  DenoiseOptions o;
+  o.stop = &stop;
+  const DenoisedStep go = denoise_step(acc, first, ao, 99.0, o);
+  CHECK(!go.stopped);
+  CHECK(go.denoised);
+  CHECK(go.image.rgba == denoised.rgba);
+  stop = true;
+  CHECK(denoise(acc.mean(), first, ao.mean(), ao.variance_of_mean(first), W, H, o).empty());
+  const DenoisedStep halted = denoise_step(acc, first, ao, 99.0, o);
+  CHECK(halted.stopped);
+  CHECK(halted.image.rgba.empty());
 }
 
 TEST_CASE("StillAo::add_open adds what add adds of the same sample", "[denoise]") {
