@@ -317,7 +317,8 @@ void finish_frame(self_ptr self, std::vector<TileResult>&& tiles, std::vector<do
 // The frame in flight was abandoned (cancel): answered, and nothing of it averaged, shown or
 // given to the tiler (whose next tasks come from the last complete frame's SATs).
 // `stage`: where the frame was when it was abandoned: tiling, rendering, or denoising (then
-// the sample is already in the average; only its picture is not shown).
+// the sample is already in the average and its SATs with the tiler; only its picture is not
+// shown).
 void abandon(self_ptr self, const std::vector<TileResult>& tiles, const char* stage) {
   auto& st = self->state;
   size_t stopped = 0;
