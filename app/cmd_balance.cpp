@@ -6,7 +6,6 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <cstdarg>
 #include <cstdio>
 #include <numeric>
 
@@ -107,20 +106,6 @@ double tiled_from(const CostMap& predicted, const Sat& truth, Rect space, const 
   own.add(Sat::from_cost_map(predicted));
   own.finalize();
   return map_efficiency(truth, tile(&own, space, coeff), coeff, coeff_sum);
-}
-
-std::string format(const char* fmt, ...) __attribute__((format(printf, 1, 2)));
-std::string format(const char* fmt, ...) {
-  va_list a, b;
-  va_start(a, fmt);
-  va_copy(b, a);
-  const int n = std::vsnprintf(nullptr, 0, fmt, a);
-  va_end(a);
-  std::string s(size_t(std::max(n, 0)) + 1, '\0');
-  std::vsnprintf(s.data(), s.size(), fmt, b);
-  va_end(b);
-  s.resize(size_t(std::max(n, 0)));
-  return s;
 }
 
 // dst = min(dst, src) packet by packet over src's packets (inside dst's).

@@ -34,7 +34,6 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
-#include <cstdarg>
 #include <cstdio>
 #include <cstring>
 #include <fstream>
@@ -716,16 +715,6 @@ struct ProcStats {
   double trimmed_mb = -1;  // --trim-probe: RSS after malloc_trim(0) in the node (-1: not probed)
 };
 
-std::string fmt(const char* f, ...) __attribute__((format(printf, 1, 2)));
-std::string fmt(const char* f, ...) {
-  char buf[4096];
-  va_list ap;
-  va_start(ap, f);
-  std::vsnprintf(buf, sizeof buf, f, ap);
-  va_end(ap);
-  return buf;
-}
-
 const char* kHelp =
     "tessera soak [--topology single|cluster] [--seconds S] [--clients N] [--scene S.gltf --camera-loop L.json]\n"
     "             [--size W H] [--frames-per-session F] [--alone-seconds A] [--drain-seconds D]\n"
@@ -877,7 +866,7 @@ int run(const std::vector<std::string>& argv_in) {
         ps[i].peak_mb = std::max(ps[i].peak_mb, s.rss_mb);
         ps[i].peak_threads = std::max(ps[i].peak_threads, s.threads);
       }
-      procs += fmt("%s{\"name\": \"%s\", \"pid\": %d, \"alive\": %s, \"rss_mb\": %.1f, \"threads\": %d}", i ? ", " : "",
+      procs += format("%s{\"name\": \"%s\", \"pid\": %d, \"alive\": %s, \"rss_mb\": %.1f, \"threads\": %d}", i ? ", " : "",
                    nodes[i]->name().c_str(), int(nodes[i]->pid()), alive ? "true" : "false", s.rss_mb, s.threads);
     }
     if (print)
@@ -1052,21 +1041,21 @@ int run(const std::vector<std::string>& argv_in) {
         if (!line.empty()) last_words = line.substr(0, 400);
       auto at = nodes[i]->died_at();
       failures.push_back(nodes[i]->name() + " died (" + ended + ")" +
-                         (at ? fmt(" %.1f s into the run", std::chrono::duration<double>(*at - t0).count()) : ""));
+                         (at ? format(" %.1f s into the run", std::chrono::duration<double>(*at - t0).count()) : ""));
       std::fprintf(stderr, "--- %s died (%s); stderr tail:\n%s\n", nodes[i]->name().c_str(), ended.c_str(),
                    nodes[i]->err_tail(2000).c_str());
     } else {
       if (ps[i].after_drain_mb > ps[i].baseline_mb + tolerance(i))
-        failures.push_back(fmt("%s RSS %.1f MiB after the drain (never-reader connected), baseline %.1f + %.1f",
+        failures.push_back(format("%s RSS %.1f MiB after the drain (never-reader connected), baseline %.1f + %.1f",
                                nodes[i]->name().c_str(), ps[i].after_drain_mb, ps[i].baseline_mb, tolerance(i)));
       if (ps[i].final_mb > ps[i].baseline_mb + tolerance(i))
-        failures.push_back(fmt("%s RSS %.1f MiB at the end, baseline %.1f + %.1f", nodes[i]->name().c_str(),
+        failures.push_back(format("%s RSS %.1f MiB at the end, baseline %.1f + %.1f", nodes[i]->name().c_str(),
                                ps[i].final_mb, ps[i].baseline_mb, tolerance(i)));
       if (ps[i].final_threads > ps[i].baseline_threads + tol_threads)
-        failures.push_back(fmt("%s has %d threads at the end, baseline %d + %d", nodes[i]->name().c_str(),
+        failures.push_back(format("%s has %d threads at the end, baseline %d + %d", nodes[i]->name().c_str(),
                                ps[i].final_threads, ps[i].baseline_threads, tol_threads));
     }
-    procs += fmt("%s{\"name\": \"%s\", \"alive\": %s, \"ended\": %s, \"last_words\": %s, \"baseline_rss_mb\": %.1f, \"peak_rss_mb\": %.1f, "
+    procs += format("%s{\"name\": \"%s\", \"alive\": %s, \"ended\": %s, \"last_words\": %s, \"baseline_rss_mb\": %.1f, \"peak_rss_mb\": %.1f, "
                  "\"after_drain_rss_mb\": %.1f, \"final_rss_mb\": %.1f, \"trimmed_rss_mb\": %.1f, \"tolerance_mb\": %.1f, "
                  "\"drain_return_s\": %.1f, \"final_return_s\": %.1f, \"baseline_threads\": %d, \"peak_threads\": %d, "
                  "\"after_drain_threads\": %d, \"final_threads\": %d}",
@@ -1081,12 +1070,12 @@ int run(const std::vector<std::string>& argv_in) {
   for (auto& n : nodes) {
     const bool was_alive = n->alive();
     const bool clean = was_alive && n->stop(10000);
-    shutdown += fmt("%s\"%s\": %s", shutdown.empty() ? "" : ", ", n->name().c_str(),
+    shutdown += format("%s\"%s\": %s", shutdown.empty() ? "" : ", ", n->name().c_str(),
                     json_str(!was_alive ? "dead" : clean ? n->how_it_ended() : "killed after 10 s").c_str());
   }
   std::string kinds_json;
   for (auto& [name, k] : per_kind)
-    kinds_json += fmt("%s\"%s\": {\"sent\": %llu, \"error_reply\": %llu, \"closed\": %llu, \"frame\": %llu, "
+    kinds_json += format("%s\"%s\": {\"sent\": %llu, \"error_reply\": %llu, \"closed\": %llu, \"frame\": %llu, "
                       "\"silent\": %llu}",
                       kinds_json.empty() ? "" : ", ", name.c_str(), (unsigned long long)k.sent,
                       (unsigned long long)k.error_reply, (unsigned long long)k.closed, (unsigned long long)k.frame,

@@ -1,6 +1,8 @@
 #include "app/common.h"
 
 #include <algorithm>
+#include <cstdarg>
+#include <cstdio>
 #include <cmath>
 #include <cstdint>
 #include <cstdlib>
@@ -143,6 +145,19 @@ double median(std::vector<double> v) {
   std::sort(v.begin(), v.end());
   size_t n = v.size();
   return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+std::string format(const char* fmt, ...) {
+  va_list a, b;
+  va_start(a, fmt);
+  va_copy(b, a);
+  const int n = std::max(std::vsnprintf(nullptr, 0, fmt, a), 0);
+  va_end(a);
+  std::string s(size_t(n) + 1, '\0');
+  std::vsnprintf(s.data(), s.size(), fmt, b);
+  va_end(b);
+  s.resize(size_t(n));
+  return s;
 }
 
 double percentile(std::vector<double> v, double q) {

@@ -53,5 +53,7 @@ std::string json_str(const std::string& s);
 double median(std::vector<double> v);
 // The value below which a fraction q of v lies (nearest rank; 0 when empty).
 double percentile(std::vector<double> v, double q);
+// printf into a std::string of whatever length the result has.
+std::string format(const char* fmt, ...) __attribute__((format(printf, 1, 2)));
 
 }  // namespace tessera::app
