@@ -4,8 +4,6 @@
 // so on a quiet machine they all take about as long as the fastest: how far the percentiles
 // and the 250 ms windows fall below it is how far any timing on this machine can move with
 // nothing changed in the code. Prints one JSON line.
-#include <time.h>
-
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -17,6 +15,7 @@
 #include "app/args.h"
 #include "app/command.h"
 #include "app/common.h"
+#include "renderer/disturbance.h"
 
 namespace tessera::app {
 namespace {
@@ -36,12 +35,6 @@ double seconds_now() {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 
-double thread_cpu_seconds() {
-  timespec t{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
-  return double(t.tv_sec) + double(t.tv_nsec) * 1e-9;
-}
-
 // The unit: n steps of a dependent multiply-add chain (latency-bound: no memory, no vector
 // width, the same on every ISA). The result is returned so that the loop is kept.
 double unit(long n, double seed) {
@@ -55,13 +48,6 @@ std::string loadavg() {
   std::string a;
   in >> a;
   return a.empty() ? "unknown" : a;
-}
-
-double percentile(std::vector<double> v, double p) {
-  if (v.empty()) return 0;
-  const size_t k = std::min(v.size() - 1, size_t(p * double(v.size() - 1) + 0.5));
-  std::nth_element(v.begin(), v.begin() + long(k), v.end());
-  return v[k];
 }
 
 int run(const std::vector<std::string>& argv) {
@@ -89,14 +75,15 @@ int run(const std::vector<std::string>& argv) {
 
   std::vector<double> units;  // seconds each
   units.reserve(size_t(seconds * 1e3 / unit_ms * 2) + 16);
-  const double cpu0 = thread_cpu_seconds(), start = seconds_now();
+  const uint64_t cpu0 = thread_cpu_ns();
+  const double start = seconds_now();
   for (double now = start; now - start < seconds;) {
     const double t0 = now;
     sink = unit(steps, sink);
     now = seconds_now();
     units.push_back(now - t0);
   }
-  const double wall = seconds_now() - start, cpu = thread_cpu_seconds() - cpu0;
+  const double wall = seconds_now() - start, cpu = double(thread_cpu_ns() - cpu0) * 1e-9;
   const double best = *std::min_element(units.begin(), units.end());
   // Windows of about 250 ms: their speed is best x units / their time.
   std::vector<double> windows;
@@ -122,7 +109,7 @@ int run(const std::vector<std::string>& argv) {
       "\"steady\": %s, \"load_before\": %s, \"load_after\": %s, \"cpu\": %s, \"checksum\": %.3f}\n",
       wall, units.size(), steps, best * 1e3, percentile(units, 0.1) * 1e3, p50 * 1e3, percentile(units, 0.9) * 1e3,
       percentile(units, 0.99) * 1e3, *std::max_element(units.begin(), units.end()) * 1e3, best / p50, windows.size(), w_min,
-      percentile(windows, 0.5), w_max, wall > 0 ? cpu / wall : 0, steady ? "true" : "false", json_str(load_before).c_str(),
+      median(windows), w_max, wall > 0 ? cpu / wall : 0, steady ? "true" : "false", json_str(load_before).c_str(),
       json_str(loadavg()).c_str(), json_str(cpu_model()).c_str(), sink);
   return 0;
 }
