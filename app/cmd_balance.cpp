@@ -98,16 +98,6 @@ double map_efficiency(const Sat& truth, const std::vector<Rect>& tasks, const st
   return worst > 0 ? (double(truth.total()) / coeff_sum) / worst : 0;
 }
 
-// The map efficiency of the tiling made from `predicted`, a map of the whole frame: with the
-// reference map itself, the tiler's own bound (a perfect prediction); with the frame's other
-// reference map, what timing noise alone leaves of a prediction from the very same frame.
-double tiled_from(const CostMap& predicted, const Sat& truth, Rect space, const std::vector<double>& coeff, double coeff_sum) {
-  SatArray own(space);
-  own.add(Sat::from_cost_map(predicted));
-  own.finalize();
-  return map_efficiency(truth, tile(&own, space, coeff), coeff, coeff_sum);
-}
-
 // dst = min(dst, src) packet by packet over src's packets (inside dst's).
 void take_min(CostMap& dst, const CostMap& src) {
   const Rect& b = src.packets;
@@ -313,14 +303,21 @@ int run(const std::vector<std::string>& argv) {
       }
     }
     // Every tiling of the frame judged on the pooled reference maps: on the first (on the
-    // second too: the difference is this figure's own noise); the tiler's bound; the second
-    // pool as the prediction of the first.
-    const Sat truth = Sat::from_cost_map(pool[0]), truth_again = Sat::from_cost_map(pool[1]);
+    // second too: the difference is this figure's own noise). And two tilings made from them:
+    // from the first, the tiler's bound (a perfect prediction); from the second, what timing
+    // noise alone leaves of a prediction from the very same frame. One SAT array per map,
+    // shared by every row.
+    SatArray pooled[2] = {SatArray(space), SatArray(space)};
+    for (int m = 0; m < 2; ++m) {
+      pooled[m].add(Sat::from_cost_map(pool[m]));
+      pooled[m].finalize();
+    }
+    const Sat &truth = pooled[0].entries()[0].sat, &truth_again = pooled[1].entries()[0].sat;
     for (Cluster& cl : clusters) {
       const double map_eff = map_efficiency(truth, cl.tasks, cl.coeff, cl.coeff_sum);
       const double map_eff_again = map_efficiency(truth_again, cl.tasks, cl.coeff, cl.coeff_sum);
-      const double oracle_eff = tiled_from(pool[0], truth, space, cl.coeff, cl.coeff_sum);
-      const double self_eff = tiled_from(pool[1], truth, space, cl.coeff, cl.coeff_sum);
+      const double oracle_eff = map_efficiency(truth, tile(&pooled[0], space, cl.coeff), cl.coeff, cl.coeff_sum);
+      const double self_eff = map_efficiency(truth, tile(&pooled[1], space, cl.coeff), cl.coeff, cl.coeff_sum);
       if (f > 0) {
         cl.map_effs.push_back(map_eff);
         cl.oracle_effs.push_back(oracle_eff);
@@ -342,12 +339,12 @@ int run(const std::vector<std::string>& argv) {
   for (const Cluster& cl : clusters) {
     double mean_eff = cl.effs.empty() ? 0 : std::accumulate(cl.effs.begin(), cl.effs.end(), 0.0) / double(cl.effs.size());
     double mean_bal = cl.balances.empty() ? 0 : std::accumulate(cl.balances.begin(), cl.balances.end(), 0.0) / double(cl.balances.size());
-    double lo = cl.effs.empty() ? 0 : *std::min_element(cl.effs.begin(), cl.effs.end());
+    const auto min_of = [](const std::vector<double>& v) { return v.empty() ? 0.0 : *std::min_element(v.begin(), v.end()); };
+    double lo = min_of(cl.effs);
     double hi = cl.effs.empty() ? 0 : *std::max_element(cl.effs.begin(), cl.effs.end());
     means.push_back(mean_eff);
     medians.push_back(median(cl.effs));
     map_medians.push_back(median(cl.map_effs));
-    const auto min_of = [](const std::vector<double>& v) { return v.empty() ? 0.0 : *std::min_element(v.begin(), v.end()); };
     const double map_noise_max = cl.map_noise.empty() ? 0.0 : *std::max_element(cl.map_noise.begin(), cl.map_noise.end());
     std::printf("{\"nodes_summary\": true, \"nodes\": %ld, \"predictor\": \"%s\", \"whole_task\": %s, \"coefficients\": %s, \"frames_counted\": %zu, "
                 "\"mean_efficiency\": %.4f, \"median_efficiency\": %.4f, \"min_efficiency\": %.4f, \"max_efficiency\": %.4f, "
