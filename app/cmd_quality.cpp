@@ -11,6 +11,7 @@
 #include "app/command.h"
 #include "app/common.h"
 #include "renderer/accumulation.h"
+#include "renderer/adaptive.h"
 #include "renderer/denoise.h"
 #include "renderer/raytracer.h"
 
@@ -19,7 +20,7 @@ namespace {
 
 const char* kHelp =
     "tessera quality --scene S.gltf --camera-loop L.json [--frame K] [--size W H] [--threads T]\n"
-    "                [--mode fixed|progressive|progressive+denoise] [--seconds S] [--ao N] [--depth D]\n"
+    "                [--mode fixed|progressive|progressive+denoise|adaptive] [--seconds S] [--ao N] [--depth D]\n"
     "                [--ao-list 1,2,4,8,16,32] [--max-samples M]\n"
     "                [--reference-samples R] [--reference-ao A] [--cache DIR]\n"
     "Image quality against render time, as PSNR against a converged reference: the average of R\n"
@@ -36,6 +37,12 @@ const char* kHelp =
     "  more), the others count in the time. The denoising counts in the time.\n"
     "  --denoise-iterations K (default 5) sets its passes, --denoise-sigma S (default 4) its value\n"
     "  weight; --denoise-from S (default 2, the node's rule) the first sample denoised.\n"
+    "  adaptive: the progressive still refined adaptively (renderer/adaptive.h): every packet's\n"
+    "  first --adaptive-uniform U samples (default 4), then rounds that each render the packets\n"
+    "  where a sample lowers the error most per unit of time, --adaptive-round F (default 0.125) of\n"
+    "  a whole sample's cost a round, until every packet has --max-samples or an error out of\n"
+    "  sight (--adaptive-done E, default 0.25, in 8-bit steps squared). \"samples\" is then the\n"
+    "  mean over the pixels (the work in whole samples), the step the round.\n"
     "--write-png F writes the last image measured (the last step's average, or the last fixed frame).\n"
     "One JSON line per step (samples, elapsed_ms, psnr_db), then a summary line with\n"
     "seconds_to_psnr for 30, 35 and 40 dB (null: not reached), the step that reached each level\n"
@@ -154,11 +161,18 @@ int run(const std::vector<std::string>& argv) {
   denoise_options.sigma_value = float(args.number("--denoise-sigma", denoise_options.sigma_value));
   const double denoise_below_db = args.number("--denoise-below-db", kDenoiseBelowDb);
   const long denoise_from = args.integer("--denoise-from", 2);
+  AdaptiveOptions adaptive;
+  adaptive.uniform = uint32_t(args.integer("--adaptive-uniform", adaptive.uniform));
+  adaptive.round_cost = args.number("--adaptive-round", adaptive.round_cost);
+  adaptive.done_below = args.number("--adaptive-done", adaptive.done_below);
   args.finish();
   if (denoise_from < 1 || denoise_from > 4) throw std::invalid_argument("--denoise-from must be in 1..4");
   const bool denoised = mode == "progressive+denoise";
-  if (mode != "fixed" && mode != "progressive" && !denoised)
-    throw std::invalid_argument("--mode must be fixed, progressive or progressive+denoise");
+  if (mode != "fixed" && mode != "progressive" && !denoised && mode != "adaptive")
+    throw std::invalid_argument("--mode must be fixed, progressive, progressive+denoise or adaptive");
+  if (adaptive.uniform < 2 || adaptive.uniform > 65536) throw std::invalid_argument("--adaptive-uniform must be in 2..65536");
+  if (!(adaptive.round_cost > 0 && adaptive.round_cost <= 1)) throw std::invalid_argument("--adaptive-round must be in (0, 1]");
+  if (!(adaptive.done_below >= 0 && adaptive.done_below <= 1e6)) throw std::invalid_argument("--adaptive-done must be in 0..1e6");
   if (denoise_options.iterations < 0 || denoise_options.iterations > 10)
     throw std::invalid_argument("--denoise-iterations must be in 0..10");
   if (!(denoise_options.sigma_value > 0) || !std::isfinite(denoise_options.sigma_value))
@@ -251,6 +265,42 @@ int run(const std::vector<std::string>& argv) {
       samples = 1;
       std::printf("{\"mode\": \"fixed\", \"ao\": %d, \"samples\": 1, \"elapsed_ms\": %.1f, \"psnr_db\": %.3f}\n", n,
                   t * 1e3, db);
+      std::fflush(stdout);
+    }
+  } else if (mode == "adaptive") {
+    // Round after round; rendering, accumulating and planning count as time (not the PSNR).
+    AdaptiveStill still;
+    still.reset(W, H, rt.packet_layout(), srgb, uint32_t(max_samples), adaptive);
+    RenderSettings s = base;
+    s.ao_samples = ao;
+    s.radiance = true;
+    TaskResult r;
+    while (elapsed_s < seconds && !still.converged()) {
+      using clock = std::chrono::steady_clock;
+      const auto ms = [](clock::time_point a, clock::time_point b) { return std::chrono::duration<double, std::milli>(b - a).count(); };
+      const auto t0 = clock::now();
+      s.packet_samples = still.plan().data();
+      if (still.converged()) break;
+      const auto t1 = clock::now();
+      rt.render(full, s, r);
+      const auto t2 = clock::now();
+      still.add(r.radiance, &r.cost);
+      const auto t3 = clock::now();
+      const Image avg = still.average();
+      const auto t4 = clock::now();
+      const double dt = std::chrono::duration<double>(t4 - t0).count();
+      elapsed_s += dt;
+      step_ms.push_back(dt * 1e3);
+      const double db = finite_db(compare(avg, ref).psnr);
+      if (!png_out.empty()) write_png(png_out, avg);
+      levels.see(db, elapsed_s, long(still.rounds()));
+      last_db = db;
+      samples = still.rounds();
+      std::printf("{\"mode\": \"adaptive\", \"ao\": %d, \"round\": %u, \"samples\": %.3f, \"packets\": %zu, "
+                  "\"plan_ms\": %.1f, \"render_ms\": %.1f, \"add_ms\": %.1f, \"average_ms\": %.1f, "
+                  "\"elapsed_ms\": %.1f, \"psnr_db\": %.3f}\n",
+                  ao, still.rounds(), still.mean_samples(), still.planned(), ms(t0, t1), ms(t1, t2), ms(t2, t3),
+                  ms(t3, t4), elapsed_s * 1e3, db);
       std::fflush(stdout);
     }
   } else {

@@ -51,7 +51,14 @@ struct RenderSettings {
   // frame (docs/renderer.md). None: the task always runs to its end. The ray tracer only.
   const std::atomic<uint32_t>* cancel_through = nullptr;
   uint32_t cancel_frame = 0;
+  // Adaptive refinement (renderer/adaptive.h): per packet of the whole image (row by row,
+  // packet_space(width, height).width() a row), the progressive sample that packet renders
+  // instead of `sample`, or kSkipPacket: not rendered (its pixels, radiance and guides left as
+  // zeros, its cost 0). None: every packet renders `sample`. The ray tracer only.
+  const uint32_t* packet_samples = nullptr;
 };
+
+constexpr uint32_t kSkipPacket = 0xFFFFFFFFu;
 
 constexpr int kGuideFloats = 8;  // TaskResult::guides: nx, ny, nz, distance, ambient r, g, b, open
 

@@ -455,9 +455,30 @@ TEST_CASE("tessera quality: a refining still gains PSNR sample by sample, the re
   REQUIRE(plain_after.lines.size() == 4);
   CHECK(!plain_after.lines[1]["denoised"].get<bool>());
   for (size_t i = 0; i < 3; ++i) CHECK(plain_after.lines[i]["psnr_db"].get<double>() == p.lines[i]["psnr_db"].get<double>());
+  // Adaptive: the first 4 rounds are the plain samples 1-4 (every packet alike), then rounds of
+  // part of the packets, each line with its work in mean samples per pixel.
+  Run a = run_tessera(base + " --mode adaptive --max-samples 16 --seconds 60");
+  REQUIRE(a.rc == 0);
+  REQUIRE(a.lines.size() >= 6);
+  for (size_t i = 0; i < 4; ++i) {
+    CHECK(a.lines[i]["samples"].get<double>() == double(i + 1));
+    CHECK(a.lines[i]["psnr_db"].get<double>() == p.lines[i]["psnr_db"].get<double>());
+  }
+  double prev = 4;
+  for (size_t i = 4; i + 1 < a.lines.size(); ++i) {
+    const double work = a.lines[i]["samples"].get<double>();
+    CHECK(work > prev);
+    CHECK(work < prev + 1);  // a round renders part of the packets (an eighth of their cost)
+    prev = work;
+  }
+  CHECK(a.lines.back()["summary"].get<bool>());
+  CHECK(a.lines.back()["mode"].get<std::string>() == "adaptive");
   for (const char* bad : {"--mode x", "--seconds 0", "--max-samples 0", "--reference-samples 70000", "--ao -1",
                           "--denoise-iterations 11", "--mode progressive+denoise --denoise-sigma 0",
-                          "--denoise-below-db 100", "--denoise-from 0", "--denoise-from 5"}) {
+                          "--denoise-below-db 100", "--denoise-from 0", "--denoise-from 5",
+                          "--mode adaptive --adaptive-uniform 1", "--mode adaptive --adaptive-round 0",
+                          "--mode adaptive --adaptive-round 1.5", "--mode adaptive --adaptive-done -1",
+                          "--mode adaptive --adaptive-round nan"}) {
     INFO(bad);
     CHECK(run_tessera(base + " " + bad).rc != 0);
   }

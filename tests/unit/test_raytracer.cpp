@@ -7,10 +7,12 @@
 #include <catch2/catch.hpp>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <map>
 #include <stdexcept>
 #include <thread>
 #include <tuple>
@@ -1630,4 +1632,65 @@ TEST_CASE("AO on a scene without sky or ambient light is reported as changing no
   rt.sync(scene, w);
   rt.render({0, 0, 32, 32}, with_ao, c);
   CHECK(c.rays.ao > 0);
+}
+
+// Adaptive refinement (RenderSettings::packet_samples, renderer/adaptive.h): each packet renders
+// the sample the plan gives it, exactly as a whole render of that sample would, and a skipped
+// packet traces nothing and leaves zeros.
+TEST_CASE("a packet plan renders each packet's own sample as a whole render of it would and skips the others",
+          "[raytracer][adaptive]") {
+  const int W = 61, H = 37;  // not multiples of the packet: the last packets are partial
+  Scene scene = busy_scene(W, H);
+  for (PacketLayout layout : {PacketLayout{4, 4}, PacketLayout{4, 2}, PacketLayout{2, 2}}) {
+    CAPTURE(layout.w, layout.h);
+    RayTracer rt(layout);
+    std::vector<std::string> warnings;
+    rt.sync(scene, warnings);
+    RenderSettings s = busy_settings();
+    s.radiance = true;
+    s.guides = true;
+    const Rect ps = packet_space(W, H, layout);
+    // Whole renders of samples 0, 1 and 5.
+    std::map<uint32_t, TaskResult> whole;
+    for (uint32_t k : {0u, 1u, 5u}) {
+      s.sample = k;
+      rt.render({0, 0, W, H}, s, whole[k]);
+    }
+    // A plan that mixes them and skips every fourth packet.
+    std::vector<uint32_t> plan(size_t(ps.area()));
+    for (size_t i = 0; i < plan.size(); ++i) plan[i] = i % 4 == 3 ? kSkipPacket : std::array<uint32_t, 3>{0, 1, 5}[i % 3];
+    s.sample = 9;  // overridden by the plan everywhere
+    s.packet_samples = plan.data();
+    // Tasks that do not start at the origin read the plan at absolute packet coordinates.
+    for (Rect task : {Rect{0, 0, W, H}, Rect{9, 5, 45, 33}}) {
+      CAPTURE(task.x0, task.y0);
+      TaskResult r;
+      rt.render(task, s, r);
+      uint64_t primary = 0;
+      for (int y = task.y0; y < task.y1; ++y)
+        for (int x = task.x0; x < task.x1; ++x) {
+          const uint32_t k = plan[size_t(y / layout.h) * size_t(ps.width()) + size_t(x / layout.w)];
+          const size_t at = size_t(y - task.y0) * size_t(task.width()) + size_t(x - task.x0);
+          const size_t full = size_t(y) * size_t(W) + size_t(x);
+          if (k == kSkipPacket) {
+            CHECK(std::memcmp(r.image.pixel(x - task.x0, y - task.y0), "\0\0\0\0", 4) == 0);
+            CHECK(r.radiance[at * 3] == 0.0f);
+            CHECK(r.guides[at * kGuideFloats + 3] == -1.0f);  // what a task's untouched pixel holds
+            continue;
+          }
+          ++primary;
+          const TaskResult& w = whole.at(k);
+          CHECK(std::memcmp(r.image.pixel(x - task.x0, y - task.y0), w.image.pixel(x, y), 4) == 0);
+          for (int c = 0; c < 3; ++c) CHECK(r.radiance[at * 3 + size_t(c)] == w.radiance[full * 3 + size_t(c)]);
+          for (int g = 0; g < kGuideFloats; ++g)
+            CHECK(r.guides[at * kGuideFloats + size_t(g)] == w.guides[full * kGuideFloats + size_t(g)]);
+        }
+      CHECK(r.rays.primary == primary);
+      for (int py = r.cost.packets.y0; py < r.cost.packets.y1; ++py)
+        for (int pxx = r.cost.packets.x0; pxx < r.cost.packets.x1; ++pxx) {
+          const bool skipped = plan[size_t(py) * size_t(ps.width()) + size_t(pxx)] == kSkipPacket;
+          CHECK((r.cost.at(pxx, py) == 0) == skipped);
+        }
+    }
+  }
 }
