@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <stdexcept>
 
 #include "lb/sat.h"
 #include "renderer/renderer.h"
@@ -25,7 +26,35 @@ RenderTask task_of(const RenderBatch& b, const Rect& pixels) {
   t.radiance = b.radiance;
   t.hit_points = b.hit_points;
   t.guides = b.guides;
+  if (!b.plan.empty() && !pixels.empty()) {
+    t.plan_blocks = intersect(b.plan_blocks, plan_blocks_of(pixels));
+    t.plan = crop_plan(b.plan_blocks, b.plan, t.plan_blocks);
+  }
   return t;
+}
+
+std::string check_plan(const Rect& blocks, const std::vector<uint32_t>& plan, int32_t width, int32_t height,
+                       const Rect& pixels) {
+  if (plan.empty()) return {};
+  if (blocks.x0 < 0 || blocks.y0 < 0 || !plan_blocks_of({0, 0, width, height}).contains(blocks) || blocks.empty())
+    return "a plan of blocks outside the frame's blocks";
+  if (plan.size() != uint64_t(blocks.area()))
+    return "a plan of " + std::to_string(plan.size()) + " entries for " + std::to_string(blocks.area()) + " blocks";
+  if (!blocks.contains(plan_blocks_of(pixels))) return "a plan of blocks that does not cover its task";
+  return {};
+}
+
+std::vector<uint32_t> crop_plan(const Rect& blocks, const std::vector<uint32_t>& plan, const Rect& to) {
+  if (to.empty()) return {};
+  if (!blocks.contains(to) || plan.size() != uint64_t(blocks.area()))
+    throw std::invalid_argument("crop_plan: a part outside the plan");
+  std::vector<uint32_t> out;
+  out.reserve(size_t(to.area()));
+  for (int32_t y = to.y0; y < to.y1; ++y) {
+    const auto row = plan.begin() + long(size_t(y - blocks.y0) * size_t(blocks.width()) + size_t(to.x0 - blocks.x0));
+    out.insert(out.end(), row, row + to.width());
+  }
+  return out;
 }
 
 std::string check_tile(const TileResult& t, uint32_t frame, const Rect& expected, PacketLayout layout, int32_t width,
@@ -156,6 +185,11 @@ std::string check_batch(const RenderBatch& b, const protocol::Limits& lim) {
     if (!t.empty() && !frame.contains(t))
       return "task [" + std::to_string(t.x0) + "," + std::to_string(t.y0) + "," + std::to_string(t.x1) + "," +
              std::to_string(t.y1) + "] outside the frame " + std::to_string(b.width) + "x" + std::to_string(b.height);
+  if (!b.plan.empty()) {
+    if (!b.radiance) return "a plan of blocks for a frame that is no sample of a still";
+    for (const Rect& t : b.tasks)
+      if (std::string why = check_plan(b.plan_blocks, b.plan, b.width, b.height, t); !why.empty()) return why;
+  }
   return {};
 }
 

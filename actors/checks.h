@@ -37,8 +37,15 @@ std::string check_open(const OpenRequest& req);
 // inside the frame. (The task count is checked against the node list by the subtree.)
 std::string check_batch(const RenderBatch& b, const protocol::Limits& limits);
 
-// The task of one node in a batch.
+// The task of one node in a batch (with its part of the batch's plan of blocks).
 RenderTask task_of(const RenderBatch& b, const Rect& pixels);
+
+// A plan of blocks (RenderTask::plan, adaptive refinement) over `blocks`: one entry a block,
+// inside the frame's blocks, covering the blocks of `pixels` (empty: no task). Empty plans pass.
+std::string check_plan(const Rect& blocks, const std::vector<uint32_t>& plan, int32_t width, int32_t height,
+                       const Rect& pixels);
+// The part of a plan over `blocks` that covers `to` (in blocks, inside `blocks`).
+std::vector<uint32_t> crop_plan(const Rect& blocks, const std::vector<uint32_t>& plan, const Rect& to);
 
 // Applies encoded client records (a forwarded update or a snapshot) to a scene; validates
 // them against this node's limits. Returns an error message, empty on success.

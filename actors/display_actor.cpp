@@ -122,6 +122,7 @@ void send_encoded(display_state& st, EncodedFrame& ef) {
                : DisplayKind(m.display) == DisplayKind::h264 ? protocol::FrameEncoding::h264
                                                              : protocol::FrameEncoding::jpeg;
   f.refined = m.refined;
+  f.converged = m.refined && m.converged;
   f.samples = uint16_t(std::min<uint32_t>(m.samples, 65535));
   f.timings.kernel_ms = float(m.kernel_ms);
   f.timings.rendering_ms = float(m.rendering_ms);
@@ -168,6 +169,8 @@ void send_encoded(display_state& st, EncodedFrame& ef) {
   e.with("encode_ms", Json::number(ef.encode_ms)).with("pipeline_ms", Json::number(f.timings.pipeline_ms));
   e.with("bytes", bytes).with("ao", m.ao_samples).with("depth", m.max_depth);
   if (m.samples > 1 || m.refined) e.with("samples", m.samples).with("refined", m.refined);
+  if (m.converged) e.with("converged", true);
+  if (m.blocks > 0) e.with("round", m.round).with("blocks", m.blocks);
   if (m.estimated_db > 0)
     e.with("estimated_db", Json::number(m.estimated_db)).with("denoised", m.denoised).with("denoise_ms", Json::number(m.denoise_ms));
   e.with("render_start_ms", Json::number(rel(m.render_start_ns)));

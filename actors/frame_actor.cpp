@@ -2,6 +2,7 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <cstring>
 #include <memory>
 #include <stdexcept>
@@ -11,7 +12,8 @@
 #include "actors/checks.h"
 #include "actors/errors.h"
 #include "actors/node.h"
-#include "renderer/accumulation.h"
+#include "lb/sat.h"
+#include "renderer/adaptive.h"
 #include "renderer/denoise.h"
 #include "renderer/renderer.h"
 
@@ -22,7 +24,8 @@ using protocol::ErrorCode;
 using denoise_atom = caf::atom_constant<caf::atom("denoise")>;
 
 // A still being denoised (FrameStart::denoise): its first sample's guides and the open
-// fractions of all its samples, beside the average (frame_state::acc).
+// fractions of all its samples, beside the average (frame_state::acc). While it is denoised,
+// every round renders every pixel (AdaptiveStill::set_uniform).
 struct Denoising {
   bool on = false;             // later samples bring their open fractions: off once the plain
                                // average's estimate passed NodeSettings::denoise_below_db
@@ -33,7 +36,7 @@ struct Denoising {
 
 // What the denoising worker gets (the still's state, moved in and back) and gives.
 struct DenoiseJob {
-  Accumulation acc;
+  AdaptiveStill acc;
   std::unique_ptr<Denoising> dn;
   double below_db = 0;
   Image image;          // the frame shown: denoised, or the plain average
@@ -81,8 +84,10 @@ struct frame_state {
   TaskList tiling;              // how its tasks were made (predictor, reprojection), without the tasks
   double last_rendering_ms = 0;
   // The progressive still's average (FrameStart::refine): the tiles' radiance of every sample
-  // since its sample 0, composed here, where the tiles of all nodes meet.
-  Accumulation acc;
+  // since its sample 0, composed here, where the tiles of all nodes meet; refined adaptively
+  // (renderer/adaptive.h) after its first samples when `adaptive`.
+  AdaptiveStill acc;
+  bool adaptive = false;
   std::unique_ptr<Denoising> dn;  // FrameStart::denoise: the still's denoising (none: plain)
   std::shared_ptr<std::atomic<bool>> denoise_stop;  // the denoising in flight stops when raised (cancel)
   uint32_t cancelled = 0;       // the last frame the session abandoned (cancel)
@@ -134,6 +139,8 @@ void render_here(self_ptr self, const RenderTask& t, std::function<void(TileResu
 
 // Answers the session for the frame in flight: an error, or its tiles (`show`: sent to the
 // display; a still's sample that is averaged and not shown sends nothing).
+// The answer is whether the still wants more rounds: 0 once a refining still is converged
+// (the next plan renders nothing), else 1.
 void deliver(self_ptr self, std::vector<TileResult>&& shown, const std::string& error, bool show = true) {
   auto& st = self->state;
   auto done = std::move(st.done);
@@ -143,8 +150,13 @@ void deliver(self_ptr self, std::vector<TileResult>&& shown, const std::string& 
                                       "frame " + std::to_string(st.cur.meta.client_frame) + ": " + error));
     return;
   }
+  if (st.cur.refine && st.acc.rounds() > 0 && st.acc.rounds() == st.cur.sample + 1) {  // this frame's round is in
+    st.acc.set_uniform(!st.adaptive || (st.dn && st.dn->on));
+    st.acc.plan();
+    st.cur.meta.converged = st.acc.converged();
+  }
   if (show) self->send(st.a.display, display_atom::value, FrameTiles{st.cur.meta, std::move(shown)});
-  done.deliver(st.cur.meta.seq);
+  done.deliver(st.cur.meta.converged ? 0u : 1u);
 }
 
 TileResult whole_frame(const FrameMeta& meta, Image&& image) {
@@ -161,7 +173,13 @@ void add_sample(self_ptr self, const std::vector<TileResult>& tiles) {
   const FrameMeta& meta = st.cur.meta;
   const int32_t W = meta.width, H = meta.height;
   if (st.cur.sample == 0) {
-    st.acc.reset(W, H, st.cur.scene.scene->environment().linear);
+    // Adaptive rounds: the node's setting, with packets that tile a plan block (any the ray
+    // tracer detects does).
+    st.adaptive = st.settings->adaptive_round > 0 && kPlanBlock % st.layout.w == 0 && kPlanBlock % st.layout.h == 0;
+    AdaptiveOptions options;
+    if (st.adaptive) options.round_cost = st.settings->adaptive_round;
+    st.acc.reset(W, H, st.cur.scene.scene->environment().linear, std::max<uint32_t>(1, st.cur.target), options);
+    st.acc.set_uniform(!st.adaptive);
     st.dn.reset();
     if (st.batch.guides == kAllGuides) {
       st.dn = std::make_unique<Denoising>();
@@ -169,13 +187,29 @@ void add_sample(self_ptr self, const std::vector<TileResult>& tiles) {
       st.dn->guides.assign(size_t(W) * size_t(H) * kGuideFloats, 0.0f);
       st.dn->ao.reset(W, H);
     }
-  } else if (st.acc.samples() != st.cur.sample || st.acc.width() != W || st.acc.height() != H) {
+  } else if (st.acc.rounds() != st.cur.sample || st.acc.width() != W || st.acc.height() != H) {
     throw std::logic_error("sample " + std::to_string(st.cur.sample) + " of a still that has " +
-                           std::to_string(st.acc.samples()));
+                           std::to_string(st.acc.rounds()));
   }
-  for (const TileResult& t : tiles)
-    st.acc.add_bytes(t.radiance, t.pixels.width(), t.pixels.height(), t.pixels.x0, t.pixels.y0);
-  st.acc.end_sample();
+  std::vector<float> radiance;
+  for (const TileResult& t : tiles) {
+    if (t.pixels.empty()) continue;
+    if (t.radiance.size() != size_t(t.pixels.area()) * 3 * sizeof(float)) throw std::logic_error("a tile without its radiance");
+    radiance.resize(size_t(t.pixels.area()) * 3);
+    std::memcpy(radiance.data(), t.radiance.data(), t.radiance.size());
+    st.acc.add_tile(radiance.data(), t.pixels);
+    if (!st.adaptive || t.sat.empty()) continue;
+    // Its packets' costs steer the next plans.
+    const Sat sat = Sat::deserialize(t.sat);
+    CostMap cost;
+    cost.packets = sat.packets();
+    cost.cost.reserve(size_t(cost.packets.area()));
+    for (int32_t py = cost.packets.y0; py < cost.packets.y1; ++py)
+      for (int32_t px = cost.packets.x0; px < cost.packets.x1; ++px)
+        cost.cost.push_back(uint32_t(std::min<uint64_t>(sat.cost({px, py, px + 1, py + 1}), 0xFFFFFFFFu)));
+    st.acc.add_cost(cost, st.layout);
+  }
+  st.acc.end_round();
   if (!st.dn || st.batch.guides == kNoGuides) return;
   // The tiles' guides into the frame's: all of them (sample 0), or the open fractions.
   const size_t floats = st.batch.guides == kAllGuides ? size_t(kGuideFloats) : 1;
@@ -236,7 +270,7 @@ void denoise_and_show(self_ptr self) {
       meta.estimated_db = job->estimate_db;
       meta.denoised = job->denoised;
       meta.denoise_ms = job->ms;
-      st.dn->shown = st.acc.samples();
+      st.dn->shown = st.acc.rounds();
       if (!job->denoised) st.dn->on = false;  // past the threshold: plain from now on, no more guides
     }
     deliver(self, {whole_frame(meta, std::move(job->image))}, {});
@@ -250,7 +284,7 @@ void finish_frame(self_ptr self, std::vector<TileResult>&& tiles, std::vector<do
   FrameMeta& meta = st.cur.meta;
   meta.render_end_ns = steady_ns();
   std::string error;
-  SatReport rep{meta.seq, meta.width, meta.height, st.layout.w, st.layout.h, {}, {}, {}, {}};
+  SatReport rep{meta.seq, meta.width, meta.height, st.layout.w, st.layout.h, {}, {}, {}, {}, !st.batch.plan.empty()};
   if (st.batch.hit_points && st.cur.scene.scene) rep.camera = pack_camera(st.cur.scene.scene->camera());
   std::vector<TileResult> shown;
   std::vector<Json> per_node;
@@ -297,17 +331,21 @@ void finish_frame(self_ptr self, std::vector<TileResult>&& tiles, std::vector<do
     // own pixels.
     try {
       add_sample(self, shown);
-      meta.samples = st.acc.samples();
-      if (st.dn && st.dn->on && st.acc.samples() >= 2) {
-        if (shown_while_denoising(st.acc.samples(), st.dn->shown, st.cur.target)) return denoise_and_show(self);
+      // Samples per pixel: the rounds while every pixel renders each round, else the work done
+      // in whole samples (the mean over the pixels, rounded down).
+      meta.samples = uint32_t(std::max(1.0, std::floor(st.acc.mean_samples() + 1e-9)));
+      meta.round = st.acc.rounds();
+      meta.blocks = st.batch.plan.empty() ? 0 : uint32_t(st.acc.planned());
+      if (st.dn && st.dn->on && st.acc.rounds() >= 2) {
+        if (shown_while_denoising(st.acc.rounds(), st.dn->shown, st.cur.target)) return denoise_and_show(self);
         return deliver(self, {}, {}, false);  // averaged, shown with a later sample
       }
       shown.clear();
       shown.push_back(whole_frame(meta, st.acc.average()));
-      if (st.dn) st.dn->shown = st.acc.samples();
+      if (st.dn) st.dn->shown = st.acc.rounds();
     } catch (const std::exception& e) {
       error = std::string("refine: ") + e.what();
-      st.acc.reset(0, 0, true);
+      st.acc = AdaptiveStill{};
       st.dn.reset();
     }
   }
@@ -401,6 +439,20 @@ void render_batch(self_ptr self) {
                  : st.cur.sample == 0              ? kAllGuides
                  : st.dn && st.dn->on              ? kOpenGuides
                                                    : kNoGuides;
+  // A still's later rounds: the blocks its plan renders (renderer/adaptive.h), each at its own
+  // sample; no plan while every block renders this round's sample.
+  if (st.cur.refine && st.cur.sample > 0 && st.acc.rounds() == st.cur.sample) {
+    st.acc.set_uniform(!st.adaptive || (st.dn && st.dn->on));
+    const std::vector<uint32_t>& plan = st.acc.plan();
+    if (st.acc.converged()) {  // nothing left to render (the session asked once too often)
+      st.cur.meta.converged = true;
+      return deliver(self, {}, {}, false);
+    }
+    if (!std::all_of(plan.begin(), plan.end(), [&](uint32_t k) { return k == st.cur.sample; })) {
+      batch.plan = plan;
+      batch.plan_blocks = st.acc.blocks();
+    }
+  }
   // The balancer's reprojection needs each packet's depth, which only the ray tracer gives.
   batch.hit_points = st.settings->reproject && st.cur.renderer == 0;
   // Bounded delay for lost nodes: the configured timeout, or 3x the last frame if longer.
@@ -414,7 +466,7 @@ void render_batch(self_ptr self) {
     r.tiles = {failed_tile(task_of(batch, batch.tasks[0]), ErrorCode::no_node, "no rendering node")};
     return recover(self, std::move(r));
   }
-  TaskRequest req{meta.seq, meta.width, meta.height, st.layout.w, st.layout.h, {}};
+  TaskRequest req{meta.seq, meta.width, meta.height, st.layout.w, st.layout.h, {}, !batch.plan.empty()};
   if (batch.hit_points && st.cur.scene.scene) req.camera = pack_camera(st.cur.scene.scene->camera());
   self->request(st.a.tiler, caf::infinite, tasks_atom::value, req).then([=](TaskList& tl) {
     auto& st = self->state;

@@ -6,14 +6,17 @@
 //                                  nodes this client renders on (the strongest first, at most
 //                                  max_nodes, 0: all); n of them (at least 1: with none, this
 //                                  node renders). Sent once, for the handshake's reply.
-//   render(FrameStart) -> seq      one frame: the root subtree's node list (committed again
+//   render(FrameStart) -> more     one frame: the root subtree's node list (committed again
 //                                  when its membership changed), the tiler's tasks from the
 //                                  previous frame's SATs, the scene to the root subtree and the
 //                                  batch through it, the tasks of lost nodes rendered here, the
 //                                  SATs to the tiler and the tiles to the display. Answers when
 //                                  the tiles went to the display (the encoder then encodes this
 //                                  frame while the next one renders), or with a typed error
-//                                  (actors/errors.h) when the frame cannot be shown.
+//                                  (actors/errors.h) when the frame cannot be shown. `more`: 0
+//                                  when it was a refining still's last round (converged: every
+//                                  block at the target, or refined adaptively, its error out of
+//                                  sight; FrameMeta::converged), else 1.
 //   cancel(seq)                    the session abandons frame `seq`, a still's sample in flight
 //                                  (its client asked for a new frame): the root subtree and its
 //                                  renderers are told, the tasks stop early, and the frame is
@@ -40,8 +43,9 @@ struct FrameStart {
   SceneSnapshot scene;
   int32_t ao_samples = 0, max_depth = 4;
   uint8_t renderer = 0;  // protocol::RendererKind
-  // A progressive still (renderer/accumulation.h): `refine` renders with radiance and averages
-  // it in the frame actor; `sample` 0 starts a new average, k > 0 adds the k-th sample.
+  // A progressive still (renderer/adaptive.h): `refine` renders with radiance and averages
+  // it in the frame actor; `sample` 0 starts a new average, k > 0 adds the k-th round (a
+  // sample of every pixel, or refined adaptively, of the blocks its plan picks).
   // `seed`: the frame number that seeds the still's sample pattern (its first frame).
   bool refine = false;
   uint32_t sample = 0, seed = 0;

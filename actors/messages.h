@@ -135,6 +135,11 @@ struct FrameMeta {
   // whether it refines the last requested frame (sent unasked, with that frame's number).
   uint32_t samples = 1;
   bool refined = false;
+  // The still's last refinement: converged (every block at its target, or, refined adaptively,
+  // with an error out of sight); nothing follows until the client asks again.
+  bool converged = false;
+  // Refined adaptively (renderer/adaptive.h): the round, and the blocks it rendered (0: all).
+  uint32_t round = 0, blocks = 0;
   // A refined frame of a still being denoised (renderer/denoise.h): the plain average's
   // estimated PSNR (dB; 0: not estimated), whether the frame shows it denoised, and the time
   // that took (estimate, filter and encoding to 8 bits).
@@ -154,7 +159,7 @@ template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, FrameMeta& x) {
   return f(caf::meta::type_name("tessera::frame_meta"), x.seq, x.client_frame, x.width, x.height, x.display,
            x.quality, x.kernel_ms, x.rendering_ms, x.sat_ms, x.tiling_ms, x.render_start_ns, x.render_end_ns, x.nodes,
-           x.dropped, x.scene_bytes, x.triangles, x.samples, x.refined, x.estimated_db, x.denoised, x.denoise_ms, x.video_kbps,
+           x.dropped, x.scene_bytes, x.triangles, x.samples, x.refined, x.converged, x.round, x.blocks, x.estimated_db, x.denoised, x.denoise_ms, x.video_kbps,
            x.keyframe_requests, x.ao_samples, x.max_depth);
 }
 

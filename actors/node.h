@@ -24,6 +24,7 @@
 #include "actors/subtree_protocol.h"
 #include "actors/tiler_protocol.h"
 #include "protocol/memory_budget.h"
+#include "renderer/adaptive.h"
 #include "renderer/denoise.h"
 #include "update/asset_store.h"
 #include "protocol/protocol.h"
@@ -74,6 +75,10 @@ struct NodeSettings {
   // A refining still on a scene with a sky and AO is denoised (renderer/denoise.h) while its
   // plain average's estimated PSNR is below this (dB); 0: never denoised.
   double denoise_below_db = kDenoiseBelowDb;
+  // A refining still's rounds after its first samples render only the blocks where a sample
+  // lowers the error most (renderer/adaptive.h), this share of a whole sample's cost each
+  // (AdaptiveOptions::round_cost); 0: every pixel every round, up to the target.
+  double adaptive_round = AdaptiveOptions{}.round_cost;
   // The H.264 display's bitrate (kbit/s) for a client that does not say (protocol record video).
   uint32_t video_kbps = 8000;
   // Interactive frames (requested while the view changes) are rendered at a scale that keeps

@@ -9,6 +9,7 @@
 
 #include <caf/all.hpp>
 
+#include "actors/checks.h"
 #include "actors/errors.h"
 #include "actors/node.h"
 #include "renderer/rasterizer.h"
@@ -49,6 +50,10 @@ renderer_actor::behavior_type renderer_impl(renderer_actor::stateful_pointer<ren
         if (!snap.scene) return make_error(ErrorCode::bad_task, "render task without a scene");
         if (snap.scene->width() != task.width || snap.scene->height() != task.height)
           return make_error(ErrorCode::bad_task, "scene resolution does not match the task");
+        if (!task.plan.empty() && !task.radiance)
+          return make_error(ErrorCode::bad_task, "a plan of blocks for a task that is no sample of a still");
+        if (std::string why = check_plan(task.plan_blocks, task.plan, task.width, task.height, task.pixels); !why.empty())
+          return make_error(ErrorCode::bad_task, why);
         TileResult out;
         out.frame = task.frame;
         out.pixels = task.pixels;
@@ -69,6 +74,10 @@ renderer_actor::behavior_type renderer_impl(renderer_actor::stateful_pointer<ren
           s.max_depth = task.max_depth;
           s.frame = task.seed ? task.seed : task.frame;
           s.sample = task.sample;
+          if (!task.plan.empty()) {
+            s.block_samples = task.plan.data();
+            s.plan_blocks = task.plan_blocks;
+          }
           s.radiance = task.radiance;
           s.guides = task.guides != kNoGuides;
           s.cost_map = true;

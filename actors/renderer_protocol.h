@@ -40,11 +40,16 @@ struct RenderTask {
   bool hit_points = false;
   // Also return the denoiser's guides of each pixel (TileResult::guides), with radiance.
   uint8_t guides = kNoGuides;
+  // Adaptive refinement (renderer/adaptive.h): the sample of each plan block (kPlanBlock x
+  // kPlanBlock pixels) of `plan_blocks`, row by row, kSkipPacket for a block not rendered; it
+  // covers the blocks the task's pixels touch. Empty: every pixel renders `sample`.
+  Rect plan_blocks;
+  std::vector<uint32_t> plan;
 };
 template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, RenderTask& x) {
   return f(caf::meta::type_name("tessera::render_task"), x.frame, x.width, x.height, x.pixels, x.ao_samples,
-           x.max_depth, x.renderer, x.sample, x.seed, x.radiance, x.hit_points, x.guides);
+           x.max_depth, x.renderer, x.sample, x.seed, x.radiance, x.hit_points, x.guides, x.plan_blocks, x.plan);
 }
 
 // What a rendering node returns for a task: RGBA pixels of the rectangle and the serialised

@@ -6,7 +6,7 @@
 #include "actors/errors.h"
 #include "actors/session_state.h"
 #include "protocol/scene_records.h"
-#include "renderer/accumulation.h"
+#include "renderer/adaptive.h"
 #include "renderer/denoise.h"
 #include "renderer/embree_device.h"
 #include "renderer/raytracer.h"
@@ -51,7 +51,7 @@ void frame_done(self_ptr self) {
   } else if (st.still.active && st.still.after_scaled && st.settings->still_delay_ms > 0) {
     // After an interactive frame: the still's first sample waits a moment for the next request.
     self->delayed_send(self, std::chrono::milliseconds(st.settings->still_delay_ms), still_atom::value, st.still.seed);
-  } else if (st.still.active && (st.still.after_scaled || st.still.samples < st.still.target)) {
+  } else if (st.still.active && (st.still.after_scaled || st.still.more)) {
     start_frame(self, st.still.client_frame, true);  // nothing changed: the next sample
   } else if (st.still.active) {
     st.still.active = false;  // converged: idle until the client asks again
@@ -128,7 +128,7 @@ void start_frame(self_ptr self, uint32_t client_frame, bool refine) {
     // The still's average (and what its denoising holds) is held by the frame actor while it
     // refines: it counts against the node's memory budget like the scene; a still it cannot
     // hold is not refined.
-    uint64_t need = Accumulation::bytes(st.scene->width(), st.scene->height());
+    uint64_t need = AdaptiveStill::bytes(st.scene->width(), st.scene->height());
     if (fs.denoise) need += denoise_bytes(st.scene->width(), st.scene->height());
     if (need > st.acc_bytes && !st.share.reserve(need - st.acc_bytes)) {
       fs.refine = false;
@@ -179,9 +179,12 @@ void start_frame(self_ptr self, uint32_t client_frame, bool refine) {
   fs.renderer = uint8_t(st.hs.renderer);
   self->request(st.frame, caf::infinite, render_atom::value, std::move(fs))
       .then(
-          [self](uint32_t) {
+          [self](uint32_t more) {
             auto& st = self->state;
-            if (!st.reduced_frame()) st.still.samples++;  // a sample of the still, not an interactive frame
+            if (!st.reduced_frame()) {  // a sample of the still, not an interactive frame
+              st.still.samples++;
+              st.still.more = more != 0 && st.still.target > 1;
+            }
             if (st.budget && st.frame_requested) {  // an interactive frame: its time steers the next scale
               st.budget->observe(st.frame_scale, double(steady_ns() - st.frame_t0_ns) / 1e6, st.frame_level);
               st.budget_triangles = st.frame_triangles;

@@ -63,7 +63,8 @@ struct session_state {
     uint32_t target = 0;             // samples per pixel it refines to
     uint32_t client_frame = 0;       // the requested frame it refines
     uint32_t seed = 0;               // that frame's sequence number: seeds every sample
-    uint32_t samples = 0;            // samples rendered so far
+    uint32_t samples = 0;            // samples (rounds, when refined adaptively) rendered so far
+    bool more = false;               // the frame actor wants more: not converged (its answer)
     bool after_scaled = false;       // it follows a scaled interactive frame: sample 0 is still to come
   } still;
   // Interactive frames within NodeSettings::frame_budget_ms: the scale controller, the
@@ -80,7 +81,7 @@ struct session_state {
   bool reduced_frame() const { return frame_scale < 1 || frame_level > 0; }
   bool frame_requested = false;      // the frame in flight answers a render request
   int64_t frame_t0_ns = 0;
-  // The still's average in the frame actor (Accumulation::bytes), counted in `share`.
+  // The still's average in the frame actor (AdaptiveStill::bytes), counted in `share`.
   uint64_t acc_bytes = 0;
   std::pair<uint32_t, uint64_t> checked{0, 0};  // AO samples and environment version last checked for them
   // References being loaded on a thread of their own (session_input.cpp): the client's later

@@ -125,6 +125,18 @@ void send_batch(subtree_ptr self, SubtreeChild& c, uint64_t id, size_t part) {
   const RenderBatch& b = j->second.batch;
   RenderBatch sub = b;
   sub.tasks.assign(b.tasks.begin() + long(p.begin), b.tasks.begin() + long(p.begin + p.count));
+  if (!b.plan.empty()) {  // the child gets the part of the plan its tasks need
+    Rect need;
+    for (const Rect& t : sub.tasks) {
+      const Rect tb = intersect(b.plan_blocks, plan_blocks_of(t));
+      if (tb.empty()) continue;
+      need = need.empty() ? tb
+                          : Rect{std::min(need.x0, tb.x0), std::min(need.y0, tb.y0), std::max(need.x1, tb.x1),
+                                 std::max(need.y1, tb.y1)};
+    }
+    sub.plan = crop_plan(b.plan_blocks, b.plan, need);
+    sub.plan_blocks = sub.plan.empty() ? Rect{} : need;
+  }
   // Children below answer earlier than we must, so a late grandchild fails at its own
   // parent and the healthy tiles of that sub-tree still arrive in time.
   sub.timeout_ms = std::max<uint32_t>(50, b.timeout_ms * 4 / 5);

@@ -75,11 +75,16 @@ struct RenderBatch {
   bool radiance = false;          // tiles carry their linear colour (TileResult::radiance)
   bool hit_points = false;        // tiles carry their packets' depths (TileResult::depth)
   uint8_t guides = kNoGuides;     // tiles carry the denoiser's guides (RenderTask::guides)
+  // RenderTask's plan of blocks (adaptive refinement), covering the blocks of every task here
+  // (a child gets its tasks' part of it); empty: none.
+  Rect plan_blocks;
+  std::vector<uint32_t> plan;
 };
 template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, RenderBatch& x) {
   return f(caf::meta::type_name("tessera::render_batch"), x.frame, x.width, x.height, x.ao_samples, x.max_depth,
-           x.timeout_ms, x.tasks, x.renderer, x.sample, x.seed, x.radiance, x.hit_points, x.guides);
+           x.timeout_ms, x.tasks, x.renderer, x.sample, x.seed, x.radiance, x.hit_points, x.guides, x.plan_blocks,
+           x.plan);
 }
 
 // tiles[i] answers tasks[i] (its code set when that node failed); changed: the sub-tree lost or

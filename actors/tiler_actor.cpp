@@ -25,6 +25,9 @@ struct tiler_state {
   // gave none (the paper's predictor then).
   PacketPoints points;
   std::vector<float> camera;
+  // The last partial round's SATs (SatReport::partial), at width x height in `layout`; reset by
+  // every whole frame's report.
+  std::optional<SatArray> partial;
   static inline const char* name = "tessera.tiler";
 };
 
@@ -33,6 +36,28 @@ tiler_actor::behavior_type tiler_impl(tiler_actor::stateful_pointer<tiler_state>
   return {
       [=](sats_atom, const SatReport& r) {
         auto& st = self->state;
+        if (r.partial) {  // a partial round's: beside the whole frame's, if it matches them
+          st.partial.reset();
+          if (!st.sats || r.width != st.width || r.height != st.height || r.packet_w != st.layout.w ||
+              r.packet_h != st.layout.h)
+            return;
+          try {
+            SatArray arr(packet_space(r.width, r.height, st.layout));
+            for (size_t i = 0; i < r.sats.size(); ++i) {
+              if (r.sats[i].empty()) continue;
+              std::string err;
+              auto sat = Sat::try_deserialize(r.sats[i].data(), r.sats[i].size(), &err);
+              if (!sat) continue;
+              arr.add(std::move(*sat), i < r.perf.size() && r.perf[i] > 0 ? r.perf[i] : 1.0);
+            }
+            arr.finalize();
+            st.partial = std::move(arr);
+          } catch (const std::exception&) {
+            st.partial.reset();
+          }
+          return;
+        }
+        st.partial.reset();
         st.sats.reset();
         st.points = {};
         st.camera.clear();
@@ -93,6 +118,12 @@ tiler_actor::behavior_type tiler_impl(tiler_actor::stateful_pointer<tiler_state>
         out.from_sats = use;
         out.predictor = uint8_t(use ? Predictor::previous : Predictor::area);
         const SatArray* sats = use ? &*st.sats : nullptr;
+        if (use && req.partial && st.partial) {  // a partial round after another: its map, as it is
+          for (const Rect& r : tile(&*st.partial, space, st.coefficients))
+            out.tasks.push_back(packets_to_pixels(r, layout, req.width, req.height));
+          out.tiling_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+          return out;
+        }
         // Reprojection: the last frame's cost in this frame's camera, as one SAT. Not when the
         // camera did not move (the map is already where it belongs).
         std::optional<SatArray> carried;

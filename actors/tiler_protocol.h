@@ -36,11 +36,14 @@ struct TaskRequest {
   // This frame's camera (pack_camera): with the last report's depths, the last frame's cost is
   // reprojected into it (lb/reproject.h). Empty: the previous frame's map as it is (the paper).
   std::vector<float> camera;
+  // A round of a still refined adaptively (renderer/adaptive.h), which renders part of the
+  // image: tiled from the last such round's SATs, else from the last whole frame's.
+  bool partial = false;
 };
 template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, TaskRequest& x) {
   return f(caf::meta::type_name("tessera::task_request"), x.frame, x.width, x.height, x.packet_w, x.packet_h,
-           x.camera);
+           x.camera, x.partial);
 }
 
 // Which prediction a task list was tiled from.
@@ -86,11 +89,14 @@ struct SatReport {
   // rendered with (pack_camera; empty: none): what the next frame's reprojection starts from.
   std::vector<std::vector<uint8_t>> depths;
   std::vector<float> camera;
+  // The SATs of a partial round (TaskRequest::partial): they steer the next partial round only,
+  // and the last whole frame's stay for the frames after the still.
+  bool partial = false;
 };
 template <class Inspector>
 typename Inspector::result_type inspect(Inspector& f, SatReport& x) {
   return f(caf::meta::type_name("tessera::sat_report"), x.frame, x.width, x.height, x.packet_w, x.packet_h, x.sats,
-           x.perf, x.depths, x.camera);
+           x.perf, x.depths, x.camera, x.partial);
 }
 
 // nodes: the renderer coefficients of the rendering nodes from the next task request on

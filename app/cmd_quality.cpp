@@ -270,7 +270,7 @@ int run(const std::vector<std::string>& argv) {
   } else if (mode == "adaptive") {
     // Round after round; rendering, accumulating and planning count as time (not the PSNR).
     AdaptiveStill still;
-    still.reset(W, H, rt.packet_layout(), srgb, uint32_t(max_samples), adaptive);
+    still.reset(W, H, srgb, uint32_t(max_samples), adaptive);
     RenderSettings s = base;
     s.ao_samples = ao;
     s.radiance = true;
@@ -279,12 +279,13 @@ int run(const std::vector<std::string>& argv) {
       using clock = std::chrono::steady_clock;
       const auto ms = [](clock::time_point a, clock::time_point b) { return std::chrono::duration<double, std::milli>(b - a).count(); };
       const auto t0 = clock::now();
-      s.packet_samples = still.plan().data();
+      s.block_samples = still.plan().data();
+      s.plan_blocks = still.blocks();
       if (still.converged()) break;
       const auto t1 = clock::now();
       rt.render(full, s, r);
       const auto t2 = clock::now();
-      still.add(r.radiance, &r.cost);
+      still.add(r.radiance, &r.cost, rt.packet_layout());
       const auto t3 = clock::now();
       const Image avg = still.average();
       const auto t4 = clock::now();

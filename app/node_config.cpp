@@ -75,6 +75,9 @@ NodeConfig::NodeConfig() {
            "samples per pixel a still refines to after a requested frame, for clients that do not say (0: none)")
       .add(denoise_below_db, "denoise-below-db",
            "a refining still with AO under a sky is denoised while its estimated PSNR is below this (dB, 0..99; 0: never)")
+      .add(adaptive_round, "adaptive-round",
+           "a refining still's rounds after its first 4 samples render the blocks where a sample helps most, this "
+           "share of a whole sample's cost each (0..1; 0: every pixel every round)")
       .add(video_kbps, "video-kbps",
            "H.264 display: the bitrate (kbit/s) for clients that do not say (100..200000)")
       .add(frame_budget_ms, "frame-budget-ms",
@@ -222,6 +225,8 @@ std::shared_ptr<NodeSettings> NodeConfig::node_settings() const {
   if (!(denoise_below_db >= 0 && denoise_below_db <= 99))
     throw std::invalid_argument("tessera.denoise-below-db must be in 0..99");
   s->denoise_below_db = denoise_below_db;
+  if (!(adaptive_round >= 0 && adaptive_round <= 1)) throw std::invalid_argument("tessera.adaptive-round must be in 0..1");
+  s->adaptive_round = adaptive_round;
   if (video_kbps < int(kH264MinKbps) || video_kbps > int(kH264MaxKbps))
     throw std::invalid_argument("tessera.video-kbps must be in " + std::to_string(kH264MinKbps) + ".." +
                                 std::to_string(kH264MaxKbps));

@@ -34,6 +34,7 @@ struct NodeConfig : caf::actor_system_config {
   // Resource bounds (docs/operations.md, "Resource bounds").
   int refine_samples = 0;   // a still's samples per pixel for clients that send no refine record
   double denoise_below_db = kDenoiseBelowDb;  // a refining still is denoised below this PSNR (0: never)
+  double adaptive_round = AdaptiveOptions{}.round_cost;  // a still's adaptive rounds, of a sample's cost (0: off)
   int video_kbps = 8000;
   int frame_budget_ms = 0;
   int still_delay_ms = 50;  // the still after interactive frames waits this long for a request (0: none)  // interactive frames scaled to take about this long (0: never scaled)

@@ -29,6 +29,15 @@ inline Rect intersect(const Rect& a, const Rect& b) {
   return r;
 }
 
+// Plan blocks (adaptive refinement, renderer/adaptive.h): kPlanBlock x kPlanBlock pixels, a
+// unit every packet layout tiles. The blocks (in block coordinates, x0 = first pixel / kPlanBlock)
+// that the pixels `r` touch:
+constexpr int32_t kPlanBlock = 4;
+inline Rect plan_blocks_of(const Rect& r) {
+  return r.empty() ? Rect{} : Rect{r.x0 / kPlanBlock, r.y0 / kPlanBlock, (r.x1 + kPlanBlock - 1) / kPlanBlock,
+                                   (r.y1 + kPlanBlock - 1) / kPlanBlock};
+}
+
 // The pixel footprint of one ray packet (2x2, 4x2 or 4x4, chosen from the CPU at run time).
 struct PacketLayout {
   int32_t w = 4, h = 4;

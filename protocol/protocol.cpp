@@ -338,7 +338,7 @@ void frame_fixed(Writer& w, const Frame& f) {
   w.u32(uint32_t(f.width));
   w.u32(uint32_t(f.height));
   w.u8(uint8_t(f.encoding));
-  w.u8(f.refined ? 1 : 0);
+  w.u8(f.refined ? (f.converged ? 2 : 1) : 0);  // 2: the still's last refinement
   w.u16(std::max<uint16_t>(1, f.samples));
   w.f32(f.timings.kernel_ms);
   w.f32(f.timings.rendering_ms);
@@ -1055,11 +1055,12 @@ bool server_record(Check& c, Reader& r, const Limits& lim, ServerRecord& out) {
       t.tiling_ms = r.f32();
       t.pipeline_ms = r.f32();
       t.encode_ms = r.f32();
-      if (!c.enumeration(enc, wire::enum_max::frame_encoding, "encoding") || !c.flag(refined, "refined") ||
+      if (!c.enumeration(enc, wire::enum_max::frame_encoding, "encoding") || !c.enumeration(refined, wire::enum_max::refinement, "refined") ||
           !c.resolution(w, h, wire::frame::width, wire::frame::height, lim))
         return false;
       f.encoding = FrameEncoding(enc);
       f.refined = refined != 0;
+      f.converged = refined == 2;
       f.width = int32_t(w);
       f.height = int32_t(h);
       if (f.encoding == FrameEncoding::dxt1 &&

@@ -256,6 +256,7 @@ struct Frame {
   int32_t width = 0, height = 0;
   FrameEncoding encoding = FrameEncoding::jpeg;
   bool refined = false;   // sent unasked: a refinement of the last requested frame
+  bool converged = false;  // a refinement, and the still's last: it is converged
   uint16_t samples = 1;   // samples per pixel averaged in the image
   FrameTimings timings;
   std::vector<uint8_t> payload;  // JPEG file, or DXT1 blocks (dxt1_size(width, height) bytes)

@@ -36,10 +36,8 @@ float slope(float c, bool srgb) {
 
 }  // namespace
 
-void AdaptiveStill::reset(int32_t width, int32_t height, PacketLayout layout, bool srgb, uint32_t target,
-                          const AdaptiveOptions& options) {
-  if (width <= 0 || height <= 0 || layout.w <= 0 || layout.h <= 0)
-    throw std::invalid_argument("AdaptiveStill: an empty image or packet");
+void AdaptiveStill::reset(int32_t width, int32_t height, bool srgb, uint32_t target, const AdaptiveOptions& options) {
+  if (width <= 0 || height <= 0) throw std::invalid_argument("AdaptiveStill: an empty image");
   if (target < 1) throw std::invalid_argument("AdaptiveStill: the target must be at least one sample");
   if (options.uniform < 2) throw std::invalid_argument("AdaptiveStill: at least two uniform samples (a variance needs two)");
   if (!(options.round_cost > 0 && options.round_cost <= 1))
@@ -48,27 +46,41 @@ void AdaptiveStill::reset(int32_t width, int32_t height, PacketLayout layout, bo
     throw std::invalid_argument("AdaptiveStill: done_below must be a number >= 0");
   width_ = width;
   height_ = height;
-  layout_ = layout;
-  const Rect ps = packet_space(width, height, layout);
-  pw_ = ps.width();
-  ph_ = ps.height();
+  const Rect blocks = plan_blocks_of({0, 0, width, height});
+  bw_ = blocks.width();
+  bh_ = blocks.height();
   srgb_ = srgb;
+  uniform_ = false;
   target_ = target;
   opt_ = options;
   rounds_ = 0;
-  const size_t pixels = size_t(width) * size_t(height);
-  sum_.assign(pixels * 3, 0.0f);
-  sum_sq_.assign(pixels * 3, 0.0f);
-  enc_sum_.assign(pixels * 3, 0);
-  enc_sq_.assign(pixels * 3, 0);
-  count_.assign(size_t(pw_) * size_t(ph_), 0);
+  const size_t values = size_t(width) * size_t(height) * 3;
+  sum_.assign(values, 0.0f);
+  sum_sq_.assign(values, 0.0f);
+  enc_sum_.assign(values, 0);
+  enc_sq_.assign(values, 0);
+  count_.assign(size_t(bw_) * size_t(bh_), 0);
   var_.assign(count_.size(), 0.0);
-  encoded_ = Image(width, height);
   cost_.assign(count_.size(), 0.0);
+  round_cost_.assign(count_.size(), 0.0);
   plan_.assign(count_.size(), 0);
+  encoded_ = Image(width, height);
   plan_valid_ = false;
   converged_ = false;
   planned_ = 0;
+}
+
+uint64_t AdaptiveStill::bytes(int32_t width, int32_t height) {
+  const uint64_t pixels = uint64_t(std::max(width, 0)) * uint64_t(std::max(height, 0));
+  const Rect b = plan_blocks_of({0, 0, std::max(width, 0), std::max(height, 0)});
+  // Four 4-byte values per channel, the encoded average; per block its count, variance, two
+  // costs and plan entry.
+  return pixels * (3 * 16 + 4) + uint64_t(b.area()) * (4 + 8 + 8 + 8 + 4);
+}
+
+void AdaptiveStill::set_uniform(bool on) {
+  if (on != uniform_) plan_valid_ = false;
+  uniform_ = on;
 }
 
 const std::vector<uint32_t>& AdaptiveStill::plan() {
@@ -78,55 +90,62 @@ const std::vector<uint32_t>& AdaptiveStill::plan() {
 
 void AdaptiveStill::make_plan() {
   plan_valid_ = true;
-  const size_t packets = count_.size();
-  // Every packet alike until each has `uniform` samples (or the target, if it is lower).
-  const uint32_t uniform = std::min(opt_.uniform, target_);
-  if (rounds_ < uniform) {
-    for (size_t p = 0; p < packets; ++p) plan_[p] = count_[p];
-    planned_ = packets;
+  const size_t blocks = count_.size();
+  // Every block alike until each has `uniform` samples (or the target, if it is lower), and
+  // while set_uniform holds.
+  if (uniform_ || rounds_ < std::min(opt_.uniform, target_)) {
+    planned_ = 0;
+    for (size_t b = 0; b < blocks; ++b) {
+      plan_[b] = count_[b] < target_ ? count_[b] : kSkipPacket;
+      planned_ += plan_[b] != kSkipPacket;
+    }
+    converged_ = planned_ == 0;
     return;
   }
-  // The largest over the 3x3 packets around: rows, then columns.
-  std::vector<double> rowmax(packets), dil(packets);
-  for (int32_t py = 0; py < ph_; ++py)
-    for (int32_t px = 0; px < pw_; ++px) {
+  // The largest over the 3x3 blocks around: rows, then columns.
+  std::vector<double> rowmax(blocks), dil(blocks);
+  for (int32_t by = 0; by < bh_; ++by)
+    for (int32_t bx = 0; bx < bw_; ++bx) {
       double m = 0;
-      for (int32_t x = std::max(0, px - 1); x <= std::min(pw_ - 1, px + 1); ++x)
-        m = std::max(m, var_[size_t(py) * size_t(pw_) + size_t(x)]);
-      rowmax[size_t(py) * size_t(pw_) + size_t(px)] = m;
+      for (int32_t x = std::max(0, bx - 1); x <= std::min(bw_ - 1, bx + 1); ++x)
+        m = std::max(m, var_[size_t(by) * size_t(bw_) + size_t(x)]);
+      rowmax[size_t(by) * size_t(bw_) + size_t(bx)] = m;
     }
-  for (int32_t py = 0; py < ph_; ++py)
-    for (int32_t px = 0; px < pw_; ++px) {
+  for (int32_t by = 0; by < bh_; ++by)
+    for (int32_t bx = 0; bx < bw_; ++bx) {
       double m = 0;
-      for (int32_t y = std::max(0, py - 1); y <= std::min(ph_ - 1, py + 1); ++y)
-        m = std::max(m, rowmax[size_t(y) * size_t(pw_) + size_t(px)]);
-      dil[size_t(py) * size_t(pw_) + size_t(px)] = m;
+      for (int32_t y = std::max(0, by - 1); y <= std::min(bh_ - 1, by + 1); ++y)
+        m = std::max(m, rowmax[size_t(y) * size_t(bw_) + size_t(bx)]);
+      dil[size_t(by) * size_t(bw_) + size_t(bx)] = m;
     }
-  // A packet's cost: its last measured one, else the mean of those measured (else 1 each).
+  // A block's cost: its last measured one, else the mean of those measured (else 1 each).
   double known = 0;
   size_t known_n = 0;
   for (double c : cost_)
-    if (c > 0) { known += c; ++known_n; }
+    if (c > 0) {
+      known += c;
+      ++known_n;
+    }
   const double fallback = known_n ? known / double(known_n) : 1.0;
   struct Candidate {
     double gain;  // error removed per unit of cost by one more sample
     double cost;
-    size_t p;
+    size_t b;
   };
   std::vector<Candidate> cand;
-  cand.reserve(packets);
+  cand.reserve(blocks);
   double whole = 0;  // a whole sample's cost
-  for (size_t p = 0; p < packets; ++p) {
-    const double c = cost_[p] > 0 ? cost_[p] : fallback;
+  for (size_t b = 0; b < blocks; ++b) {
+    const double c = cost_[b] > 0 ? cost_[b] : fallback;
     whole += c;
-    plan_[p] = kSkipPacket;
-    const double n = count_[p];
-    if (count_[p] >= target_) continue;
-    const int32_t px = int32_t(p % size_t(pw_)), py = int32_t(p / size_t(pw_));
-    const double values = double((std::min(width_, (px + 1) * layout_.w) - px * layout_.w) *
-                                 (std::min(height_, (py + 1) * layout_.h) - py * layout_.h) * 3);
-    if (dil[p] / n <= opt_.done_below * values) continue;  // its error is out of sight
-    cand.push_back({dil[p] / (n * (n + 1)) / c, c, p});
+    plan_[b] = kSkipPacket;
+    const double n = count_[b];
+    if (count_[b] >= target_) continue;
+    const int32_t bx = int32_t(b % size_t(bw_)), by = int32_t(b / size_t(bw_));
+    const double values = double((std::min(width_, (bx + 1) * kPlanBlock) - bx * kPlanBlock) *
+                                 (std::min(height_, (by + 1) * kPlanBlock) - by * kPlanBlock) * 3);
+    if (dil[b] / n <= opt_.done_below * values) continue;  // its error is out of sight
+    cand.push_back({dil[b] / (n * (n + 1)) / c, c, b});
   }
   planned_ = 0;
   if (cand.empty()) {
@@ -134,46 +153,77 @@ void AdaptiveStill::make_plan() {
     return;
   }
   std::sort(cand.begin(), cand.end(), [](const Candidate& a, const Candidate& b) {
-    return a.gain > b.gain || (a.gain == b.gain && a.p < b.p);
+    return a.gain > b.gain || (a.gain == b.gain && a.b < b.b);
   });
   const double budget = opt_.round_cost * whole;
   double spent = 0;
   for (const Candidate& c : cand) {
     if (spent >= budget) break;
-    plan_[c.p] = count_[c.p];
+    plan_[c.b] = count_[c.b];
     spent += c.cost;
     ++planned_;
   }
 }
 
-void AdaptiveStill::add(const std::vector<float>& radiance, const CostMap* cost) {
-  if (radiance.size() != size_t(width_) * size_t(height_) * 3)
-    throw std::invalid_argument("AdaptiveStill::add: radiance not width x height RGB");
-  if (converged_) throw std::logic_error("AdaptiveStill::add: the still is converged (an empty plan)");
+void AdaptiveStill::add_tile(const float* radiance, const Rect& pixels) {
+  if (pixels.empty()) return;
+  if (!Rect{0, 0, width_, height_}.contains(pixels)) throw std::invalid_argument("AdaptiveStill::add_tile: a tile outside the image");
+  if (converged_) throw std::logic_error("AdaptiveStill::add_tile: the still is converged (an empty plan)");
   plan();
-  tbb::parallel_for(tbb::blocked_range<int32_t>(0, ph_), [&](const tbb::blocked_range<int32_t>& r) {
-    for (int32_t py = r.begin(); py != r.end(); ++py)
-      for (int32_t px = 0; px < pw_; ++px) {
-        const size_t p = size_t(py) * size_t(pw_) + size_t(px);
-        if (plan_[p] == kSkipPacket) continue;
-        const int32_t x1 = std::min(width_, (px + 1) * layout_.w), y1 = std::min(height_, (py + 1) * layout_.h);
-        const double n = ++count_[p];
+  const size_t tw = size_t(pixels.width());
+  tbb::parallel_for(tbb::blocked_range<int32_t>(pixels.y0, pixels.y1, 8), [&](const tbb::blocked_range<int32_t>& r) {
+    for (int32_t y = r.begin(); y != r.end(); ++y)
+      for (int32_t x = pixels.x0; x < pixels.x1; ++x) {
+        if (plan_[block_of(x, y)] == kSkipPacket) continue;
+        const float* in = radiance + (size_t(y - pixels.y0) * tw + size_t(x - pixels.x0)) * 3;
+        const size_t i = (size_t(y) * size_t(width_) + size_t(x)) * 3;
+        for (int c = 0; c < 3; ++c) {
+          const float v = in[c];
+          sum_[i + size_t(c)] += v;
+          sum_sq_[i + size_t(c)] += v * v;
+          const uint32_t e = uint32_t(srgb_ ? raytracer_detail::encode_srgb(v) : raytracer_detail::encode_plain(v));
+          enc_sum_[i + size_t(c)] += e;
+          enc_sq_[i + size_t(c)] += e * e;
+        }
+      }
+  });
+}
+
+void AdaptiveStill::add_cost(const CostMap& cost, PacketLayout layout) {
+  if (layout.w <= 0 || layout.h <= 0 || kPlanBlock % layout.w != 0 || kPlanBlock % layout.h != 0)
+    throw std::invalid_argument("AdaptiveStill::add_cost: packets that do not tile a block");
+  if (cost.cost.size() != size_t(std::max<int64_t>(0, cost.packets.area())))
+    throw std::invalid_argument("AdaptiveStill::add_cost: a cost map not its rectangle's size");
+  for (int32_t py = cost.packets.y0; py < cost.packets.y1; ++py)
+    for (int32_t px = cost.packets.x0; px < cost.packets.x1; ++px) {
+      const int32_t bx = px * layout.w / kPlanBlock, by = py * layout.h / kPlanBlock;
+      if (bx < 0 || by < 0 || bx >= bw_ || by >= bh_) continue;
+      round_cost_[size_t(by) * size_t(bw_) + size_t(bx)] += double(cost.at(px, py));
+    }
+}
+
+void AdaptiveStill::end_round() {
+  if (converged_) throw std::logic_error("AdaptiveStill::end_round: the still is converged (an empty plan)");
+  plan();
+  tbb::parallel_for(tbb::blocked_range<int32_t>(0, bh_), [&](const tbb::blocked_range<int32_t>& r) {
+    for (int32_t by = r.begin(); by != r.end(); ++by)
+      for (int32_t bx = 0; bx < bw_; ++bx) {
+        const size_t b = size_t(by) * size_t(bw_) + size_t(bx);
+        if (plan_[b] == kSkipPacket) continue;
+        if (round_cost_[b] > 0) cost_[b] = round_cost_[b];
+        round_cost_[b] = 0;
+        const int32_t x1 = std::min(width_, (bx + 1) * kPlanBlock), y1 = std::min(height_, (by + 1) * kPlanBlock);
+        const double n = ++count_[b];
         const float inv = 1.0f / float(n);  // as Accumulation::average scales its sums
-        float var = 0;  // the sum of the values' sample variances, encoded (none below two samples)
-        for (int32_t y = py * layout_.h; y < y1; ++y)
-          for (int32_t x = px * layout_.w; x < x1; ++x) {
+        float var = 0;  // n - 1 times the sum of the values' sample variances, encoded
+        for (int32_t y = by * kPlanBlock; y < y1; ++y)
+          for (int32_t x = bx * kPlanBlock; x < x1; ++x) {
             const size_t pixel = size_t(y) * size_t(width_) + size_t(x);
             for (int c = 0; c < 3; ++c) {
               const size_t i = pixel * 3 + size_t(c);
-              const float v = radiance[i];
-              sum_[i] += v;
-              sum_sq_[i] += v * v;
-              const uint32_t e = uint32_t(srgb_ ? raytracer_detail::encode_srgb(v) : raytracer_detail::encode_plain(v));
-              enc_sum_[i] += e;
-              enc_sq_[i] += e * e;
               const float m = sum_[i] * inv;
-              encoded_.rgba[pixel * 4 + size_t(c)] = uint8_t(srgb_ ? raytracer_detail::encode_srgb(m) : raytracer_detail::encode_plain(m));
-              // n - 1 times the sample variance (the division is the packet's, below).
+              encoded_.rgba[pixel * 4 + size_t(c)] =
+                  uint8_t(srgb_ ? raytracer_detail::encode_srgb(m) : raytracer_detail::encode_plain(m));
               const float g = slope(m, srgb_);
               if (g > 0) {
                 var += g * g * std::max(0.0f, sum_sq_[i] - sum_[i] * m);
@@ -184,15 +234,19 @@ void AdaptiveStill::add(const std::vector<float>& radiance, const CostMap* cost)
             }
             encoded_.rgba[pixel * 4 + 3] = 255;
           }
-        var_[p] = n >= 2 ? double(var) / (n - 1) : 0.0;
-        if (cost && cost->packets.contains(px, py)) {
-          const uint32_t c = cost->at(px, py);
-          if (c > 0) cost_[p] = double(c);
-        }
+        var_[b] = n >= 2 ? double(var) / (n - 1) : 0.0;
       }
   });
   ++rounds_;
   plan_valid_ = false;
+}
+
+void AdaptiveStill::add(const std::vector<float>& radiance, const CostMap* cost, PacketLayout layout) {
+  if (radiance.size() != size_t(width_) * size_t(height_) * 3)
+    throw std::invalid_argument("AdaptiveStill::add: radiance not width x height RGB");
+  add_tile(radiance.data(), {0, 0, width_, height_});
+  if (cost) add_cost(*cost, layout);
+  end_round();
 }
 
 std::vector<float> AdaptiveStill::mean() const {
@@ -200,7 +254,7 @@ std::vector<float> AdaptiveStill::mean() const {
   std::vector<float> out(sum_.size(), 0.0f);
   for (int32_t y = 0; y < height_; ++y)
     for (int32_t x = 0; x < width_; ++x) {
-      const uint32_t n = count_[size_t(y / layout_.h) * size_t(pw_) + size_t(x / layout_.w)];
+      const uint32_t n = count_[block_of(x, y)];
       if (n == 0) continue;
       const float inv = 1.0f / float(n);
       for (int c = 0; c < 3; ++c) {
@@ -218,11 +272,11 @@ Image AdaptiveStill::average() const {
 
 double AdaptiveStill::mean_samples() const {
   double s = 0;
-  for (int32_t py = 0; py < ph_; ++py)
-    for (int32_t px = 0; px < pw_; ++px) {
-      const double area = double((std::min(width_, (px + 1) * layout_.w) - px * layout_.w) *
-                                 (std::min(height_, (py + 1) * layout_.h) - py * layout_.h));
-      s += area * count_[size_t(py) * size_t(pw_) + size_t(px)];
+  for (int32_t by = 0; by < bh_; ++by)
+    for (int32_t bx = 0; bx < bw_; ++bx) {
+      const double area = double((std::min(width_, (bx + 1) * kPlanBlock) - bx * kPlanBlock) *
+                                 (std::min(height_, (by + 1) * kPlanBlock) - by * kPlanBlock));
+      s += area * count_[size_t(by) * size_t(bw_) + size_t(bx)];
     }
   return s / (double(width_) * double(height_));
 }

@@ -1,26 +1,30 @@
 #pragma once
 // Adaptive refinement of a still (issue 18 item 2): after a few samples of every pixel, each
-// further round renders only the packets where one more sample lowers the image's error the
-// most per unit of time, so the error falls faster than with every pixel sampled alike.
+// further round renders only the blocks (kPlanBlock x kPlanBlock pixels) where one more sample
+// lowers the image's error the most per unit of time, so the error falls faster than with every
+// pixel sampled alike.
 //
-// The model: a packet p with n_p samples and per-sample variance v_p (summed over its pixels
-// and channels, in units of the encoded 8-bit range) contributes v_p / n_p to the image's
-// squared error; one more sample removes v_p / (n_p (n_p + 1)) of it at the packet's cost c_p
-// (its last measured time). Each round renders the packets of highest v_p / (n_p (n_p + 1) c_p)
+// The model: a block b with n_b samples and per-sample variance v_b (summed over its pixels
+// and channels, in units of the encoded 8-bit range) contributes v_b / n_b to the image's
+// squared error; one more sample removes v_b / (n_b (n_b + 1)) of it at the block's cost c_b
+// (its last measured time). Each round renders the blocks of highest v_b / (n_b (n_b + 1) c_b)
 // until their summed cost reaches a fraction of a whole sample's, which spreads the samples
-// towards the optimum n_p ~ sqrt(v_p / c_p) round after round (greedy water-filling).
+// towards the optimum n_b ~ sqrt(v_b / c_b) round after round (greedy water-filling).
 //
-// - v_p is each value's sample variance through the slope of the encoding at its mean; where
+// - v_b is each value's sample variance through the slope of the encoding at its mean; where
 //   the mean clips (slope 0: an outline against a light source, whose samples do not all clip)
-//   it is the variance of the samples encoded one by one. Then the largest over the packet and
-//   its 8 neighbours: a packet whose first samples agreed
-//   by chance (a thin edge missed by every jittered ray) still gets samples when its
-//   neighbours are noisy.
-// - Each pixel keeps its own sequence: a packet's next sample is its own count (sampling.h), so
+//   it is the variance of the samples encoded one by one. Then the largest over the block and
+//   its 8 neighbours: a block whose first samples agreed by chance (a thin edge missed by every
+//   jittered ray) still gets samples when its neighbours are noisy.
+// - Each pixel keeps its own sequence: a block's next sample is its own count (sampling.h), so
 //   skipping rounds leaves no gaps in the low-discrepancy sequence.
-// - A packet is done when it reaches the target count, or when its error (v_p / n_p per value)
-//   is below `done_below` (an 8-bit step squared, by default a quarter: out of sight). The still is
-//   converged when every packet is done.
+// - A block is done when it reaches the target count, or when its error (v_b / n_b per value)
+//   is below `done_below` (in 8-bit steps squared; a quarter by default: out of sight). The still
+//   is converged when every block is done.
+//
+// A round's tiles may come from several renderers (add_tile, add_cost, then end_round); a tile
+// boundary may cross a block when the renderers' packets are smaller than a block: each part of
+// the block is rendered with the block's sample, and the block counts one sample at end_round.
 #include <cstdint>
 #include <vector>
 
@@ -31,41 +35,56 @@
 namespace tessera {
 
 struct AdaptiveOptions {
-  uint32_t uniform = 4;         // samples of every packet before any is left out (>= 2)
+  uint32_t uniform = 4;         // samples of every block before any is left out (>= 2)
   double round_cost = 0.125;    // a round's cost, as a fraction of a whole sample's (0, 1]
-  double done_below = 0.25;     // a packet's error per value (8-bit units squared) counted as none
+  double done_below = 0.25;     // a block's error per value (8-bit steps squared) counted as none
 };
 
 class AdaptiveStill {
  public:
-  // An empty still of width x height pixels in packets of `layout`; `srgb`: the renderer's
-  // encoding (Environment::linear). `target`: samples per pixel at most (>= 1).
-  void reset(int32_t width, int32_t height, PacketLayout layout, bool srgb, uint32_t target,
-             const AdaptiveOptions& options = {});
-  // The next round's plan for RenderSettings::packet_samples: per packet of the image, the
-  // sample it renders, or kSkipPacket. Empty when the still is converged.
+  // An empty still of width x height pixels; `srgb`: the renderer's encoding
+  // (Environment::linear). `target`: samples per pixel at most (>= 1).
+  void reset(int32_t width, int32_t height, bool srgb, uint32_t target, const AdaptiveOptions& options = {});
+  // The next round's plan for RenderSettings::block_samples (plan_blocks: the whole image's
+  // blocks, blocks()): per block, the sample it renders, or kSkipPacket. All kSkipPacket when the
+  // still is converged.
   const std::vector<uint32_t>& plan();
-  // The round rendered with the last plan: the whole image's radiance (TaskResult::radiance,
-  // width * height RGB) and, if measured, its cost map (the packets' costs steer the next plans).
-  void add(const std::vector<float>& radiance, const CostMap* cost = nullptr);
+  Rect blocks() const { return {0, 0, bw_, bh_}; }
+  // While set, every block not at the target renders each round, as in the uniform rounds (a
+  // still being denoised needs every pixel's sample). The next plan follows it.
+  void set_uniform(bool on);
+  // One renderer's part of the round planned last: `radiance`, the linear RGB of `pixels`
+  // (row by row, 3 floats a pixel); only the planned blocks' pixels are taken.
+  void add_tile(const float* radiance, const Rect& pixels);
+  // Its cost map (packets of `layout`, which must tile a block), where measured: the blocks'
+  // costs steer the next plans.
+  void add_cost(const CostMap& cost, PacketLayout layout);
+  // The round is complete: each planned block counts one more sample.
+  void end_round();
+  // The whole round at once: the image's radiance (width * height RGB) and its cost map.
+  void add(const std::vector<float>& radiance, const CostMap* cost = nullptr, PacketLayout layout = {4, 4});
   // Each pixel's average, encoded as the renderer encodes a frame (empty before the first round).
   Image average() const;
+  // The same as linear radiance (width * height RGB; empty before the first round).
   std::vector<float> mean() const;
   uint32_t rounds() const { return rounds_; }
   // Samples rendered over all pixels, over the pixel count: the work done in whole samples.
   double mean_samples() const;
   uint32_t min_samples() const;
   bool converged() const { return converged_; }
-  int32_t packets_x() const { return pw_; }
-  int32_t packets_y() const { return ph_; }
-  // The packets the last plan renders.
+  int32_t width() const { return width_; }
+  int32_t height() const { return height_; }
+  bool srgb() const { return srgb_; }
+  // The blocks the last plan renders.
   size_t planned() const { return planned_; }
+  // The memory a width x height still holds.
+  static uint64_t bytes(int32_t width, int32_t height);
 
  private:
   void make_plan();
-  int32_t width_ = 0, height_ = 0, pw_ = 0, ph_ = 0;
-  PacketLayout layout_{};
-  bool srgb_ = true;
+  size_t block_of(int32_t x, int32_t y) const { return size_t(y / kPlanBlock) * size_t(bw_) + size_t(x / kPlanBlock); }
+  int32_t width_ = 0, height_ = 0, bw_ = 0, bh_ = 0;
+  bool srgb_ = true, uniform_ = false;
   uint32_t target_ = 1, rounds_ = 0;
   AdaptiveOptions opt_;
   std::vector<float> sum_;                // per pixel and channel (linear radiance)
@@ -73,11 +92,12 @@ class AdaptiveStill {
   // Each sample's value as encoded alone (0..255), summed, and its square summed (exact in
   // integers up to 66,000 samples): the variance where the mean clips.
   std::vector<uint32_t> enc_sum_, enc_sq_;
-  std::vector<uint32_t> count_;           // per packet: samples rendered
-  std::vector<double> var_;               // per packet: its samples' variance (see above)
-  Image encoded_;                         // the average, encoded (kept up to date packet by packet)
-  std::vector<double> cost_;              // per packet: last measured cost (ns), 0 unknown
-  std::vector<uint32_t> plan_;            // per packet: sample to render, or kSkipPacket
+  std::vector<uint32_t> count_;           // per block: samples rendered
+  std::vector<double> var_;               // per block: its samples' variance (see above)
+  std::vector<double> cost_;              // per block: last measured cost (ns), 0 unknown
+  std::vector<double> round_cost_;        // per block: this round's cost so far
+  std::vector<uint32_t> plan_;            // per block: sample to render, or kSkipPacket
+  Image encoded_;                         // the average, encoded (kept up to date block by block)
   bool plan_valid_ = false, converged_ = false;
   size_t planned_ = 0;
 };

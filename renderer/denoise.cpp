@@ -1,5 +1,7 @@
 #include "renderer/denoise.h"
 
+#include "renderer/adaptive.h"
+
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
@@ -283,8 +285,12 @@ double estimated_psnr_db(const std::vector<float>& mean, const std::vector<float
   return -10.0 * std::log10(sum / double(pixels * 3));
 }
 
-DenoisedStep denoise_step(const Accumulation& acc, const std::vector<float>& guides, const StillAo& ao,
-                          double below_db, const DenoiseOptions& options) {
+namespace {
+
+// denoise_step for an Accumulation or an AdaptiveStill (mean(), average(), width(), height(), srgb()).
+template <class Still>
+DenoisedStep step_of(const Still& acc, const std::vector<float>& guides, const StillAo& ao, double below_db,
+                     const DenoiseOptions& options) {
   DenoisedStep out;
   const auto stopped = [&] { return options.stop && options.stop->load(std::memory_order_relaxed); };
   if (stopped()) {
@@ -305,6 +311,18 @@ DenoisedStep denoise_step(const Accumulation& acc, const std::vector<float>& gui
   }
   out.image = Accumulation::encode(filtered, acc.width(), acc.height(), acc.srgb());
   return out;
+}
+
+}  // namespace
+
+DenoisedStep denoise_step(const Accumulation& acc, const std::vector<float>& guides, const StillAo& ao,
+                          double below_db, const DenoiseOptions& options) {
+  return step_of(acc, guides, ao, below_db, options);
+}
+
+DenoisedStep denoise_step(const AdaptiveStill& still, const std::vector<float>& guides, const StillAo& ao,
+                          double below_db, const DenoiseOptions& options) {
+  return step_of(still, guides, ao, below_db, options);
 }
 
 }  // namespace tessera

@@ -105,6 +105,10 @@ struct DenoisedStep {
 };
 DenoisedStep denoise_step(const Accumulation& acc, const std::vector<float>& guides, const StillAo& ao,
                           double below_db, const DenoiseOptions& options = {});
+// The same for a still refined adaptively (renderer/adaptive.h), while its rounds are uniform.
+class AdaptiveStill;
+DenoisedStep denoise_step(const AdaptiveStill& still, const std::vector<float>& guides, const StillAo& ao,
+                          double below_db, const DenoiseOptions& options = {});
 
 // What a still being denoised holds beside its average, per pixel: the first sample's guides
 // and the open fractions' sums and sums of squares (StillAo).

@@ -40,7 +40,7 @@ uint32_t locate_disturbed(const uint32_t* cost, const size_t* idx, int n, uint64
   uint32_t newly = 0;
   auto mark = [&](int k) {
     uint8_t& m = marks[idx[k]];
-    if (!m) { m = 1; ++newly; }
+    if (!m) { m = kDisturbed; ++newly; }
   };
   if (explained * 2 < gap_ns) {
     for (int k = 0; k < n; ++k) mark(k);
@@ -55,9 +55,12 @@ DisturbanceStats replace_disturbed(CostMap& map, const std::vector<uint8_t>& mar
   const int32_t w = map.packets.width(), h = map.packets.height();
   if (marks.size() != map.cost.size() || map.cost.size() != size_t(int64_t(w) * h))
     throw std::invalid_argument("replace_disturbed: marks do not match the cost map");
-  size_t marked = 0;
-  for (uint8_t m : marks) marked += m != 0;
-  if (marked == 0 || marked == marks.size()) return st;
+  size_t disturbed = 0, usable = 0;
+  for (uint8_t m : marks) {
+    disturbed += m == kDisturbed;
+    usable += m == 0;
+  }
+  if (disturbed == 0 || usable == 0) return st;
 
   const std::vector<uint32_t> measured = map.cost;
   std::vector<uint32_t> vals;
@@ -66,7 +69,7 @@ DisturbanceStats replace_disturbed(CostMap& map, const std::vector<uint8_t>& mar
   for (int32_t y = 0; y < h; ++y)
     for (int32_t x = 0; x < w; ++x) {
       const size_t i = size_t(y) * size_t(w) + size_t(x);
-      if (!marks[i]) continue;
+      if (marks[i] != kDisturbed) continue;
       uint32_t pred = 0;
       bool found = false;
       for (int32_t r = 1; r <= 4 && !found; ++r) {
@@ -82,7 +85,7 @@ DisturbanceStats replace_disturbed(CostMap& map, const std::vector<uint8_t>& mar
       if (!found) {
         if (!have_task_median) {
           std::vector<uint32_t> all;
-          all.reserve(marks.size() - marked);
+          all.reserve(usable);
           for (size_t j = 0; j < marks.size(); ++j)
             if (!marks[j]) all.push_back(measured[j]);
           task_median = median_of(all);

@@ -55,12 +55,14 @@ struct DisturbanceStats {
   uint64_t removed_ns = 0;  // sum over them of (measured - replacement), clamped at 0 each
 };
 
-// Replaces the cost of every packet with marks[i] != 0 (marks: one byte per packet of map,
-// row-major) by the median of its undisturbed neighbours in the task: the 3x3 window (up to
-// 8), widened to 5x5, 7x7 and 9x9 while it holds fewer than 3 undisturbed packets; with none
+// Replaces the cost of every packet with marks[i] == kDisturbed (marks: one byte per packet of
+// map, row-major) by the median of its undisturbed neighbours in the task: the 3x3 window (up
+// to 8), widened to 5x5, 7x7 and 9x9 while it holds fewer than 3 undisturbed packets; with none
 // even then, the median of all undisturbed packets of the task. Replacements are computed from
-// measured costs only (never from another replacement). When every packet is marked, nothing
-// is changed (no reference left). Unmarked packets keep their cost exactly.
+// measured costs only (never from another replacement). Packets marked kNotRendered (skipped by
+// an adaptive round's plan: cost 0) are neither replaced nor used. When no packet is left to
+// predict from, nothing is changed. Unmarked packets keep their cost exactly.
+constexpr uint8_t kDisturbed = 1, kNotRendered = 2;
 DisturbanceStats replace_disturbed(CostMap& map, const std::vector<uint8_t>& marks);
 
 }  // namespace tessera

@@ -682,6 +682,10 @@ void raytracer_detail::render_production(const RayTracer::Impl& impl, bool plain
 }
 
 void RayTracer::render(const Rect& pixels, const RenderSettings& settings, TaskResult& out) {
+  if (settings.block_samples && (kPlanBlock % impl_->layout.w != 0 || kPlanBlock % impl_->layout.h != 0))
+    throw std::invalid_argument("a plan of blocks (adaptive refinement) needs packets that tile a " +
+                                std::to_string(kPlanBlock) + "x" + std::to_string(kPlanBlock) + " block, not " +
+                                std::to_string(impl_->layout.w) + "x" + std::to_string(impl_->layout.h));
   const uint64_t before = impl_->shared_device->errors();
   render_production(*impl_, plain_kernel(settings), pixels, settings, out);
   impl_->check_device(before);

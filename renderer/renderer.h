@@ -51,11 +51,13 @@ struct RenderSettings {
   // frame (docs/renderer.md). None: the task always runs to its end. The ray tracer only.
   const std::atomic<uint32_t>* cancel_through = nullptr;
   uint32_t cancel_frame = 0;
-  // Adaptive refinement (renderer/adaptive.h): per packet of the whole image (row by row,
-  // packet_space(width, height).width() a row), the progressive sample that packet renders
-  // instead of `sample`, or kSkipPacket: not rendered (its pixels, radiance and guides left as
-  // zeros, its cost 0). None: every packet renders `sample`. The ray tracer only.
-  const uint32_t* packet_samples = nullptr;
+  // Adaptive refinement (renderer/adaptive.h): per plan block (kPlanBlock x kPlanBlock pixels,
+  // whatever the packet layout: every layout's packets tile a block) of the rectangle
+  // `plan_blocks` (in blocks, row by row), the progressive sample its packets render instead of
+  // `sample`, or kSkipPacket: not rendered (pixels, radiance and guides left as zeros, cost 0;
+  // so is a packet outside `plan_blocks`). None: every packet renders `sample`. The ray tracer only.
+  const uint32_t* block_samples = nullptr;
+  Rect plan_blocks;
 };
 
 constexpr uint32_t kSkipPacket = 0xFFFFFFFFu;

@@ -37,6 +37,9 @@ struct fixture : test_coordinator_fixture<TestConfig> {
     settings->log = [](const Event&) {};
     settings->handshake_timeout_ms = 0;  // run() advances the clock: the timeout has its own tests
     settings->budget = budget;
+    // Every still refined uniformly: the tests below compare its frames with plain averages
+    // byte for byte; the adaptive rounds (renderer/adaptive.h) have tests of their own.
+    settings->adaptive_round = 0;
     run();
     baseline = sys.registry().running();
     session = spawn_session(sys, sink, settings, 1);
@@ -405,7 +408,7 @@ CAF_TEST(every kind of client record ends a still that is refining) {
 
 CAF_TEST(a still whose average would not fit the memory budget is not refined and the client is told) {
   settings->refine_samples = 8;
-  // 512x512 averages in 3 MiB, over the whole budget (1 MiB): refused.
+  // A 512x512 still holds 13 MiB (AdaptiveStill::bytes), over the whole budget (1 MiB): refused.
   client({Resolution{512, 512}, SetCamera{camera_at(3)}, RenderRequest{1}});
   run();
   auto frames = sink->all<Frame>();
@@ -424,7 +427,7 @@ CAF_TEST(a still whose average would not fit the memory budget is not refined an
   const Frame refined = last_frame();
   CAF_CHECK_EQUAL(refined.samples, 8u);
   CAF_CHECK_EQUAL(sink->all<ErrorReply>().size(), 1u);
-  CAF_CHECK_EQUAL(budget->used(), before + Accumulation::bytes(64, 64));
+  CAF_CHECK_EQUAL(budget->used(), before + AdaptiveStill::bytes(64, 64));
 }
 
 // A floor and a wall meeting at a corner under a sky (docs/renderer.md, "Denoising a still's
@@ -665,6 +668,55 @@ CAF_TEST(a still is averaged plainly once its estimate passes the threshold and 
     const std::vector<Image> plain = plain_averages(recs, seed, 6);
     for (auto& f : frames) CAF_CHECK(decoded(f).rgba == through_jpeg(plain[f.samples - 1]).rgba);
   }
+}
+
+CAF_TEST(refined adaptively a still renders part of its blocks after its uniform rounds and ends converged) {
+  settings->adaptive_round = 0.25;
+  settings->denoise_below_db = 0;  // plain averages, so that the rounds after the fourth are adaptive
+  settings->refine_samples = 12;
+  auto mu = std::make_shared<std::mutex>();
+  auto logged = std::make_shared<std::vector<uint32_t>>();  // per frame shown, the blocks its round rendered (0: all)
+  settings->log = [mu, logged](const Event& e) {
+    if (e.kind != Ev::frame) return;
+    uint32_t b = 0;
+    for (const auto& [key, value] : e.fields)
+      if (key == "blocks") b = uint32_t(value.as_int());
+    std::lock_guard<std::mutex> lock(*mu);
+    logged->push_back(b);
+  };
+  std::vector<ClientRecord> recs = tiny_scene();  // the fixture's, and the corner
+  for (auto& r : corner_scene()) recs.push_back(r);
+  client(corner_session());
+  client({RenderRequest{1}});
+  run();
+  auto frames = sink->all<Frame>();
+  CAF_REQUIRE_GREATER(frames.size(), 5u);
+  // The first four: every pixel, exactly the plain averages.
+  const std::vector<Image> plain = plain_averages(recs, 1, 4);
+  for (size_t i = 0; i < 4; ++i) {
+    CAF_CHECK_EQUAL(frames[i].samples, uint32_t(i + 1));
+    CAF_CHECK(decoded(frames[i]).rgba == through_jpeg(plain[i]).rgba);
+  }
+  // Then rounds of part of the blocks (64 blocks at 32x32): more rounds than samples, and the
+  // mean samples per pixel rising to at most the target; only the last frame is converged.
+  CAF_CHECK_GREATER(status().frames_started, frames.back().samples);
+  for (size_t i = 1; i < frames.size(); ++i) CAF_CHECK_GREATER_OR_EQUAL(frames[i].samples, frames[i - 1].samples);
+  CAF_CHECK_LESS_OR_EQUAL(frames.back().samples, 12u);
+  for (size_t i = 0; i + 1 < frames.size(); ++i) CAF_CHECK(!frames[i].converged);
+  CAF_CHECK(frames.back().converged);
+  CAF_CHECK(frames.back().refined);
+  {
+    std::lock_guard<std::mutex> lock(*mu);
+    CAF_REQUIRE_EQUAL(logged->size(), frames.size());
+    for (size_t i = 0; i < 4; ++i) CAF_CHECK_EQUAL((*logged)[i], 0u);
+    CAF_CHECK_GREATER((*logged)[4], 0u);
+    CAF_CHECK_LESS((*logged)[4], 64u);
+  }
+  // Converged: the node is idle.
+  const uint32_t started = status().frames_started;
+  run();
+  CAF_CHECK_EQUAL(status().frames_started, started);
+  CAF_CHECK_EQUAL(sink->all<ErrorReply>().size(), 0u);
 }
 
 CAF_TEST(a still of a scene without triangles is its background and is not refined) {

@@ -44,9 +44,8 @@ TEST_CASE("adaptive: every packet alike at first, then only where the samples di
   AdaptiveOptions o;
   o.uniform = 4;
   o.round_cost = 0.25;
-  still.reset(W, H, kLayout, false, 64, o);
-  REQUIRE(still.packets_x() == 16);
-  REQUIRE(still.packets_y() == 8);
+  still.reset(W, H, false, 64, o);
+  REQUIRE(still.blocks() == Rect{0, 0, 16, 8});
   Synthetic syn;
   for (uint32_t r = 0; r < 4; ++r) {
     const std::vector<uint32_t>& plan = still.plan();
@@ -90,7 +89,7 @@ TEST_CASE("adaptive: the plans follow the cost: of two equally noisy halves the 
   AdaptiveStill still;
   AdaptiveOptions o;
   o.round_cost = 0.25;
-  still.reset(W, H, kLayout, false, 1000, o);
+  still.reset(W, H, false, 1000, o);
   std::mt19937 rng(3);
   std::bernoulli_distribution coin(0.5);
   CostMap cost;
@@ -102,7 +101,7 @@ TEST_CASE("adaptive: the plans follow the cost: of two equally noisy halves the 
     std::vector<float> rad(size_t(W) * H * 3);
     for (float& v : rad) v = coin(rng) ? 0.45f : 0.05f;
     still.plan();
-    still.add(rad, &cost);
+    still.add(rad, &cost, kLayout);
   }
   // The optimum is n ~ sqrt(v / c): the cheap half about twice the samples of the dear one.
   // Away from the column where the halves meet (its plans see both), each planned packet's
@@ -116,7 +115,7 @@ TEST_CASE("adaptive: the plans follow the cost: of two equally noisy halves the 
     }
     std::vector<float> rad(size_t(W) * H * 3);
     for (float& v : rad) v = coin(rng) ? 0.45f : 0.05f;
-    still.add(rad, &cost);
+    still.add(rad, &cost, kLayout);
   }
   REQUIRE_FALSE(counts_cheap.empty());
   REQUIRE_FALSE(counts_dear.empty());
@@ -131,7 +130,7 @@ TEST_CASE("adaptive: the plans follow the cost: of two equally noisy halves the 
 TEST_CASE("adaptive: a still without noise is converged after its uniform samples, and the target caps every packet",
           "[adaptive]") {
   AdaptiveStill still;
-  still.reset(W, H, kLayout, true, 64);
+  still.reset(W, H, true, 64);
   const std::vector<float> grey(size_t(W) * H * 3, 0.3f);
   for (int r = 0; r < 4; ++r) {
     REQUIRE_FALSE(still.converged());
@@ -145,7 +144,7 @@ TEST_CASE("adaptive: a still without noise is converged after its uniform sample
 
   // Noise everywhere, a target of 6: rounds until every packet has 6, then converged.
   AdaptiveStill capped;
-  capped.reset(W, H, kLayout, true, 6);
+  capped.reset(W, H, true, 6);
   Synthetic syn;
   int rounds = 0;
   while (!capped.converged() && rounds < 1000) {
@@ -168,7 +167,7 @@ TEST_CASE("adaptive: an outline against a light that clips keeps its samples (th
   AdaptiveStill still;
   AdaptiveOptions o;
   o.round_cost = 1;
-  still.reset(W, H, kLayout, true, 64, o);
+  still.reset(W, H, true, 64, o);
   std::mt19937 rng(11);
   std::bernoulli_distribution coin(0.75);
   for (int r = 0; r < 8; ++r) {
@@ -181,7 +180,7 @@ TEST_CASE("adaptive: an outline against a light that clips keeps its samples (th
   CHECK(still.planned() > 64);
   // A light that clips in every sample: settled at once.
   AdaptiveStill lit;
-  lit.reset(W, H, kLayout, true, 64, o);
+  lit.reset(W, H, true, 64, o);
   const std::vector<float> bright(size_t(W) * H * 3, 5.0f);
   for (int r = 0; r < 4; ++r) {
     lit.plan();
@@ -196,7 +195,7 @@ TEST_CASE("adaptive: with every packet in every round the average is Accumulatio
   AdaptiveOptions o;
   o.round_cost = 1;
   o.done_below = 0;
-  still.reset(W, H, kLayout, true, 64, o);
+  still.reset(W, H, true, 64, o);
   Accumulation acc;
   acc.reset(W, H, true);
   std::mt19937 rng(5);
@@ -213,25 +212,60 @@ TEST_CASE("adaptive: with every packet in every round the average is Accumulatio
   }
 }
 
+TEST_CASE("adaptive: a round in tiles that split blocks counts each block once, and set_uniform plans every block",
+          "[adaptive]") {
+  AdaptiveStill whole, tiled;
+  AdaptiveOptions o;
+  o.round_cost = 0.25;
+  whole.reset(W, H, true, 64, o);
+  tiled.reset(W, H, true, 64, o);
+  Synthetic syn;
+  for (int r = 0; r < 10; ++r) {
+    const std::vector<float> rad = syn.sample();
+    REQUIRE(whole.plan() == tiled.plan());
+    whole.add(rad);
+    // Two renderers' tiles, split at row 6 (inside the second row of blocks), then the round.
+    std::vector<float> top(rad.begin(), rad.begin() + 6 * W * 3), bottom(rad.begin() + 6 * W * 3, rad.end());
+    tiled.add_tile(bottom.data(), Rect{0, 6, W, H});
+    tiled.add_tile(top.data(), Rect{0, 0, W, 6});
+    tiled.end_round();
+    CHECK(tiled.average().rgba == whole.average().rgba);
+    CHECK(tiled.mean_samples() == whole.mean_samples());
+  }
+  CHECK(tiled.planned() < 128);  // adaptive by now
+  tiled.set_uniform(true);
+  for (uint32_t k : tiled.plan()) CHECK(k != kSkipPacket);
+  CHECK(tiled.planned() == 128);
+  tiled.set_uniform(false);
+  tiled.plan();
+  CHECK(tiled.planned() < 128);
+}
+
 TEST_CASE("adaptive: bad settings and sizes are refused", "[adaptive]") {
   AdaptiveStill still;
-  CHECK_THROWS_AS(still.reset(0, H, kLayout, true, 4), std::invalid_argument);
-  CHECK_THROWS_AS(still.reset(W, H, PacketLayout{0, 4}, true, 4), std::invalid_argument);
-  CHECK_THROWS_AS(still.reset(W, H, kLayout, true, 0), std::invalid_argument);
+  CHECK_THROWS_AS(still.reset(0, H, true, 4), std::invalid_argument);
+  CHECK_THROWS_AS(still.reset(W, H, true, 0), std::invalid_argument);
   AdaptiveOptions o;
   o.uniform = 1;
-  CHECK_THROWS_AS(still.reset(W, H, kLayout, true, 4, o), std::invalid_argument);
+  CHECK_THROWS_AS(still.reset(W, H, true, 4, o), std::invalid_argument);
   o = {};
   o.round_cost = 0;
-  CHECK_THROWS_AS(still.reset(W, H, kLayout, true, 4, o), std::invalid_argument);
+  CHECK_THROWS_AS(still.reset(W, H, true, 4, o), std::invalid_argument);
   o.round_cost = std::nan("");
-  CHECK_THROWS_AS(still.reset(W, H, kLayout, true, 4, o), std::invalid_argument);
+  CHECK_THROWS_AS(still.reset(W, H, true, 4, o), std::invalid_argument);
   o = {};
   o.done_below = -1;
-  CHECK_THROWS_AS(still.reset(W, H, kLayout, true, 4, o), std::invalid_argument);
-  still.reset(W, H, kLayout, true, 4);
+  CHECK_THROWS_AS(still.reset(W, H, true, 4, o), std::invalid_argument);
+  still.reset(W, H, true, 4);
   CHECK(still.average().rgba.empty());
   CHECK_THROWS_AS(still.add(std::vector<float>(10)), std::invalid_argument);
+  CHECK_THROWS_AS(still.add_tile(nullptr, Rect{60, 0, 70, 4}), std::invalid_argument);  // outside the image
+  CostMap odd;
+  odd.packets = {0, 0, 2, 2};
+  odd.cost.assign(4, 1);
+  CHECK_THROWS_AS(still.add_cost(odd, PacketLayout{8, 2}), std::invalid_argument);  // wider than a block
+  odd.cost.assign(3, 1);
+  CHECK_THROWS_AS(still.add_cost(odd, PacketLayout{4, 4}), std::invalid_argument);  // not its size
 }
 
 // The renderer and the plans together: a still of a real scene refined adaptively converges to
@@ -268,13 +302,14 @@ TEST_CASE("adaptive: a rendered still refined adaptively approaches the plain av
   AdaptiveStill still;
   AdaptiveOptions o;
   o.round_cost = 0.25;
-  still.reset(w, h, rt.packet_layout(), true, 64, o);
+  still.reset(w, h, true, 64, o);
   double first_db = 0;
   for (int round = 0; round < 60 && !still.converged(); ++round) {
-    s.packet_samples = still.plan().data();
+    s.block_samples = still.plan().data();
+    s.plan_blocks = still.blocks();
     if (still.converged()) break;
     rt.render({0, 0, w, h}, s, r);
-    still.add(r.radiance, &r.cost);
+    still.add(r.radiance, &r.cost, rt.packet_layout());
     if (round == 3) first_db = compare(still.average(), want).psnr;
   }
   const double db = compare(still.average(), want).psnr;

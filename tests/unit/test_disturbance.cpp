@@ -135,6 +135,31 @@ TEST_CASE("replace_disturbed on a synthetic map") {
     CHECK(replace_disturbed(one, mk).packets == 143);
     for (uint32_t c : one.cost) CHECK(c == keep);
   }
+  SECTION("packets an adaptive round did not render (cost 0) are neither used nor replaced") {
+    CostMap part = clean;
+    std::vector<uint8_t> mk(part.cost.size(), 0);
+    // Around (10, 6): its left column not rendered, itself disturbed.
+    for (int32_t y = 5; y <= 7; ++y) {
+      part.cost[at(part, 9, y)] = 0;
+      mk[at(part, 9, y)] = kNotRendered;
+    }
+    part.cost[at(part, 10, 6)] += 5000000;
+    mk[at(part, 10, 6)] = kDisturbed;
+    CHECK(replace_disturbed(part, mk).packets == 1);
+    for (int32_t y = 5; y <= 7; ++y) CHECK(part.cost[at(part, 9, y)] == 0);
+    std::vector<uint32_t> five;  // its 5 rendered neighbours
+    for (int32_t y = 5; y <= 7; ++y)
+      for (int32_t x = 10; x <= 11; ++x)
+        if (!(x == 10 && y == 6)) five.push_back(clean.cost[at(clean, x, y)]);
+    std::sort(five.begin(), five.end());
+    CHECK(part.cost[at(part, 10, 6)] == five[2]);
+    // Nothing rendered but the disturbed packet: nothing to predict from.
+    CostMap lone = clean;
+    std::vector<uint8_t> only(lone.cost.size(), kNotRendered);
+    only[0] = kDisturbed;
+    CHECK(replace_disturbed(lone, only).packets == 0);
+    CHECK(lone.cost == clean.cost);
+  }
   SECTION("marks of the wrong size are refused") {
     CostMap x = clean;
     CHECK_THROWS_AS(replace_disturbed(x, std::vector<uint8_t>(3, 0)), std::invalid_argument);

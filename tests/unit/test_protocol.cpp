@@ -1170,8 +1170,18 @@ TEST_CASE("Server-side rules: handshake reply, frame and stats fields", "[protoc
   m[kBody + 12] = 3;  // encoding: jpeg, dxt1, h264
   server_fails(m, ErrorCode::bad_enum);
   m = good;
-  m[kBody + 13] = 2;  // refined is a flag
+  m[kBody + 13] = 3;  // refined: requested, refined, converged
   server_fails(m, ErrorCode::bad_enum);
+  m = good;
+  m[kBody + 13] = 2;  // the still's last refinement
+  {
+    auto ok = decode_server(m.data(), m.size(), Limits{});
+    REQUIRE(ok.ok());
+    CHECK(std::get<Frame>(ok.value()[0]).refined);
+    CHECK(std::get<Frame>(ok.value()[0]).converged);
+    Frame back = std::get<Frame>(ok.value()[0]);
+    CHECK(encode(ServerRecord{back}) == m);
+  }
   m = good;
   m[kBody + 13] = 1;
   m[kBody + 14] = m[kBody + 15] = 0;  // 0 samples decode as they are
@@ -1179,6 +1189,7 @@ TEST_CASE("Server-side rules: handshake reply, frame and stats fields", "[protoc
     auto ok = decode_server(m.data(), m.size(), Limits{});
     REQUIRE(ok.ok());
     CHECK(std::get<Frame>(ok.value()[0]).refined);
+    CHECK_FALSE(std::get<Frame>(ok.value()[0]).converged);
     CHECK(std::get<Frame>(ok.value()[0]).samples == 0);
   }
   m = good;

@@ -1634,13 +1634,19 @@ TEST_CASE("AO on a scene without sky or ambient light is reported as changing no
   CHECK(c.rays.ao > 0);
 }
 
-// Adaptive refinement (RenderSettings::packet_samples, renderer/adaptive.h): each packet renders
-// the sample the plan gives it, exactly as a whole render of that sample would, and a skipped
-// packet traces nothing and leaves zeros.
-TEST_CASE("a packet plan renders each packet's own sample as a whole render of it would and skips the others",
+// Adaptive refinement (RenderSettings::block_samples, renderer/adaptive.h): each packet renders
+// the sample the plan gives its 4x4 block, exactly as a whole render of that sample would, and a
+// skipped packet traces nothing and leaves zeros; whatever the packet layout.
+TEST_CASE("a plan of blocks renders each packet's own sample as a whole render of it would and skips the others",
           "[raytracer][adaptive]") {
   const int W = 61, H = 37;  // not multiples of the packet: the last packets are partial
   Scene scene = busy_scene(W, H);
+  const Rect blocks = plan_blocks_of({0, 0, W, H});
+  REQUIRE(blocks == Rect{0, 0, 16, 10});
+  // A plan that mixes samples 0, 1 and 5 and skips every fourth block.
+  std::vector<uint32_t> plan(size_t(blocks.area()));
+  for (size_t i = 0; i < plan.size(); ++i) plan[i] = i % 4 == 3 ? kSkipPacket : std::array<uint32_t, 3>{0, 1, 5}[i % 3];
+  auto planned = [&](int x, int y) { return plan[size_t(y / kPlanBlock) * size_t(blocks.width()) + size_t(x / kPlanBlock)]; };
   for (PacketLayout layout : {PacketLayout{4, 4}, PacketLayout{4, 2}, PacketLayout{2, 2}}) {
     CAPTURE(layout.w, layout.h);
     RayTracer rt(layout);
@@ -1649,48 +1655,64 @@ TEST_CASE("a packet plan renders each packet's own sample as a whole render of i
     RenderSettings s = busy_settings();
     s.radiance = true;
     s.guides = true;
-    const Rect ps = packet_space(W, H, layout);
-    // Whole renders of samples 0, 1 and 5.
-    std::map<uint32_t, TaskResult> whole;
+    std::map<uint32_t, TaskResult> whole;  // whole renders of samples 0, 1 and 5
     for (uint32_t k : {0u, 1u, 5u}) {
       s.sample = k;
       rt.render({0, 0, W, H}, s, whole[k]);
     }
-    // A plan that mixes them and skips every fourth packet.
-    std::vector<uint32_t> plan(size_t(ps.area()));
-    for (size_t i = 0; i < plan.size(); ++i) plan[i] = i % 4 == 3 ? kSkipPacket : std::array<uint32_t, 3>{0, 1, 5}[i % 3];
     s.sample = 9;  // overridden by the plan everywhere
-    s.packet_samples = plan.data();
-    // Tasks that do not start at the origin read the plan at absolute packet coordinates.
-    for (Rect task : {Rect{0, 0, W, H}, Rect{9, 5, 45, 33}}) {
-      CAPTURE(task.x0, task.y0);
+    // The whole image's plan, and a task's own part of it (the blocks its pixels touch, one
+    // block less on the right: those packets are outside the plan, so skipped).
+    const Rect task{9, 5, 45, 33};
+    const Rect part{task.x0 / 4, task.y0 / 4, (task.x1 + 3) / 4 - 1, (task.y1 + 3) / 4};
+    std::vector<uint32_t> cropped;
+    for (int by = part.y0; by < part.y1; ++by)
+      for (int bx = part.x0; bx < part.x1; ++bx) cropped.push_back(plan[size_t(by) * size_t(blocks.width()) + size_t(bx)]);
+    for (const auto& [pixels, rect, values] : {std::tuple{Rect{0, 0, W, H}, blocks, &plan}, std::tuple{task, part, &cropped}}) {
+      CAPTURE(pixels.x0, pixels.y0);
+      s.block_samples = values->data();
+      s.plan_blocks = rect;
       TaskResult r;
-      rt.render(task, s, r);
+      rt.render(pixels, s, r);
       uint64_t primary = 0;
-      for (int y = task.y0; y < task.y1; ++y)
-        for (int x = task.x0; x < task.x1; ++x) {
-          const uint32_t k = plan[size_t(y / layout.h) * size_t(ps.width()) + size_t(x / layout.w)];
-          const size_t at = size_t(y - task.y0) * size_t(task.width()) + size_t(x - task.x0);
+      for (int y = pixels.y0; y < pixels.y1; ++y)
+        for (int x = pixels.x0; x < pixels.x1; ++x) {
+          // A packet renders its block's sample: its first pixel's block (a packet lies in one block).
+          const int px0 = x / layout.w * layout.w, py0 = y / layout.h * layout.h;
+          const bool inside = rect.contains(px0 / kPlanBlock, py0 / kPlanBlock);
+          const uint32_t k = inside ? planned(px0, py0) : kSkipPacket;
+          const size_t at = size_t(y - pixels.y0) * size_t(pixels.width()) + size_t(x - pixels.x0);
           const size_t full = size_t(y) * size_t(W) + size_t(x);
           if (k == kSkipPacket) {
-            CHECK(std::memcmp(r.image.pixel(x - task.x0, y - task.y0), "\0\0\0\0", 4) == 0);
+            CHECK(std::memcmp(r.image.pixel(x - pixels.x0, y - pixels.y0), "\0\0\0\0", 4) == 0);
             CHECK(r.radiance[at * 3] == 0.0f);
             CHECK(r.guides[at * kGuideFloats + 3] == -1.0f);  // what a task's untouched pixel holds
             continue;
           }
           ++primary;
           const TaskResult& w = whole.at(k);
-          CHECK(std::memcmp(r.image.pixel(x - task.x0, y - task.y0), w.image.pixel(x, y), 4) == 0);
+          CHECK(std::memcmp(r.image.pixel(x - pixels.x0, y - pixels.y0), w.image.pixel(x, y), 4) == 0);
           for (int c = 0; c < 3; ++c) CHECK(r.radiance[at * 3 + size_t(c)] == w.radiance[full * 3 + size_t(c)]);
           for (int g = 0; g < kGuideFloats; ++g)
             CHECK(r.guides[at * kGuideFloats + size_t(g)] == w.guides[full * kGuideFloats + size_t(g)]);
         }
       CHECK(r.rays.primary == primary);
+      CHECK(primary > 0);
       for (int py = r.cost.packets.y0; py < r.cost.packets.y1; ++py)
         for (int pxx = r.cost.packets.x0; pxx < r.cost.packets.x1; ++pxx) {
-          const bool skipped = plan[size_t(py) * size_t(ps.width()) + size_t(pxx)] == kSkipPacket;
+          const int bx = pxx * layout.w / kPlanBlock, by = py * layout.h / kPlanBlock;
+          const bool skipped = !rect.contains(bx, by) || planned(bx * kPlanBlock, by * kPlanBlock) == kSkipPacket;
           CHECK((r.cost.at(pxx, py) == 0) == skipped);
         }
     }
   }
+  // Packets wider than a block cannot follow a plan of blocks.
+  RayTracer wide(PacketLayout{8, 2});
+  std::vector<std::string> warnings;
+  wide.sync(scene, warnings);
+  RenderSettings s = busy_settings();
+  s.block_samples = plan.data();
+  s.plan_blocks = blocks;
+  TaskResult r;
+  CHECK_THROWS_AS(wide.render({0, 0, W, H}, s, r), std::invalid_argument);
 }

@@ -225,7 +225,7 @@ struct ServerJs {
                               .f("tiling", num(t.tiling_ms)).f("pipeline", num(t.pipeline_ms)).f("encode", num(t.encode_ms))
                               .str();
     return Obj{}.f("type", q("frame")).f("frame", num(f.frame)).f("width", num(f.width)).f("height", num(f.height))
-        .f("encoding", q(f.encoding == FrameEncoding::jpeg ? "jpeg" : "dxt1")).f("refined", boolean(f.refined))
+        .f("encoding", q(f.encoding == FrameEncoding::jpeg ? "jpeg" : "dxt1")).f("refinement", q(f.refined ? (f.converged ? "converged" : "refined") : "requested"))
         .f("samples", num(uint32_t(f.samples))).f("timings", timings)
         .f("payload", bytes(f.payload)).str();
   }
@@ -666,7 +666,7 @@ void valid_messages() {
            {frame(FrameEncoding::dxt1, 5, 3), frame(FrameEncoding::dxt1, 1, 1), odd, big});
     Frame refined = frame(FrameEncoding::jpeg, 7, 5), top = frame(FrameEncoding::dxt1, 5, 3), two = refined;
     refined.refined = true, refined.samples = 17;
-    top.refined = true, top.samples = 0xffff;
+    top.refined = true, top.samples = 0xffff, top.converged = true;
     two.samples = 2;
     server("frames: refined, the most samples, a requested frame of 2 samples", {refined, top, two});
     Frame none = frame(FrameEncoding::jpeg, 7, 5);
@@ -1153,10 +1153,10 @@ void server_records() {
     using namespace wire::frame;
     bad_server("frame: body shorter than its fixed part", body_length(j, kFixed - 1), ErrorCode::bad_length);
     bad_server("frame: encoding 3", put<uint8_t>(f, kB + at::encoding, 3), ErrorCode::bad_enum);
-    bad_server("frame: refined 2", put<uint8_t>(f, kB + at::refined, 2), ErrorCode::bad_enum);
+    bad_server("frame: refined 3", put<uint8_t>(f, kB + at::refined, 3), ErrorCode::bad_enum);
     bad_server("frame: refined 255", put<uint8_t>(j, kB + at::refined, 255), ErrorCode::bad_enum);
-    bad_server("frame: refined 2 and width 0 (the flag first)",
-               put<uint32_t>(put<uint8_t>(j, kB + at::refined, 2), kB + at::width, 0), ErrorCode::bad_enum);
+    bad_server("frame: refined 3 and width 0 (the enum first)",
+               put<uint32_t>(put<uint8_t>(j, kB + at::refined, 3), kB + at::width, 0), ErrorCode::bad_enum);
     bad_server("frame: width 0", put<uint32_t>(j, kB + at::width, 0), ErrorCode::out_of_range);
     bad_server("frame: height 0", put<uint32_t>(j, kB + at::height, 0), ErrorCode::out_of_range);
     bad_server("frame: width beyond the limit", put<uint32_t>(j, kB + at::width, uint32_t(d.max_width) + 1),

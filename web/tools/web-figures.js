@@ -216,7 +216,7 @@ async function drag(node, name) {
     view.show = async (f) => {
       const ok = await show(f);
       const t = performance.now();
-      if (ok) window.__shown.push({ t, frame: f.frame, width: f.width, samples: f.samples ?? 1, refined: !!f.refined, payload: t >= window.__keepFrom ? f.payload.slice() : null });
+      if (ok) window.__shown.push({ t, frame: f.frame, width: f.width, samples: f.samples ?? 1, refined: !!f.refined, converged: !!f.converged, payload: t >= window.__keepFrom ? f.payload.slice() : null });
       return ok;
     };
   });
@@ -262,7 +262,7 @@ async function drag(node, name) {
   const until = Date.now() + 120000;
   let last = -1, since = Date.now();
   for (;;) {
-    const [n, done] = await page.evaluate((target) => [window.__shown.length, window.__shown.some((f) => f.t >= window.__keepFrom && f.samples >= target)], DRAG_REFINE);
+    const [n, done] = await page.evaluate((target) => [window.__shown.length, window.__shown.some((f) => f.t >= window.__keepFrom && (f.converged || f.samples >= target))], DRAG_REFINE);
     if (n !== last) { last = n; since = Date.now(); }
     if (done || Date.now() - since > 5000 || Date.now() > until) break;
     await new Promise((r) => setTimeout(r, 250));

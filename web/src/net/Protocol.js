@@ -18,7 +18,7 @@
 import {
   VERSION, MAGIC, MESSAGE_HEADER, RECORD_HEADER, NO_RECORD, REMOVE_BODY, LIMITS, ENUMS, FLAGS, RECORDS, RANGES,
   RecordType, Renderer, Display, FrameEncoding, TextureFormat, BufferType, Wrap, Filter, MaterialModel, LightType,
-  SourceType, RefKind, ErrorCode, MAX_ERROR_CODE, MESH_TRANSFORM, CAMERA_TRANSFORM, WORLD_LIMIT, UNIT_TOLERANCE,
+  SourceType, RefKind, Refinement, ErrorCode, MAX_ERROR_CODE, MESH_TRANSFORM, CAMERA_TRANSFORM, WORLD_LIMIT, UNIT_TOLERANCE,
 } from './Wire.js';
 
 export {
@@ -186,7 +186,8 @@ function encodeServerRecord(w, r) {
       at = w.begin(RecordType.frame);
       const t = r.timings || {};
       w.u32(r.frame); w.u32(r.width); w.u32(r.height); w.u8(index(FrameEncoding, r.encoding ?? 'jpeg', 'encoding'));
-      w.u8(r.refined ? 1 : 0); w.u16(Math.max(1, Math.min(0xffff, r.samples ?? 1)));
+      w.u8(index(Refinement, r.refinement ?? (r.refined ? (r.converged ? 'converged' : 'refined') : 'requested'), 'refined'));
+      w.u16(Math.max(1, Math.min(0xffff, r.samples ?? 1)));
       for (const k of ['kernel', 'rendering', 'sat', 'tiling', 'pipeline', 'encode']) w.f32(t[k] ?? 0);
       w.bytes(r.payload ?? new Uint8Array(0));
       break;
@@ -609,7 +610,9 @@ function decodeServerRecord(c, op, r) {
       rec.timings = {};
       for (const k of ['kernel', 'rendering', 'sat', 'tiling', 'pipeline', 'encode']) rec.timings[k] = r.f32();
       rec.encoding = c.enumeration(encoding, 'encoding');
-      rec.refined = c.flag(refined, 'refined');
+      rec.refinement = c.enumeration(refined, 'refined');  // requested, refined or converged (the still's last)
+      rec.refined = rec.refinement !== 'requested';
+      rec.converged = rec.refinement === 'converged';
       c.resolution(rec.width, rec.height);
       if (rec.encoding === 'dxt1') c.length(body, spec.fixed + dxt1Size(rec.width, rec.height));
       rec.payload = r.rest();

@@ -213,7 +213,7 @@ export class RemoteBackend {
       this.showRefinement(f);
       this.handler.frameDrawn({ frame: f.frame, timeEnd: performance.now(), renderTimeInMilliseconds: f.timings.rendering,
         timings: f.timings, encoding: f.encoding, width: f.width, height: f.height, remote: true,
-        refined: !!f.refined, samples: f.samples ?? 1 });
+        refined: !!f.refined, converged: !!f.converged, samples: f.samples ?? 1 });
     } catch (e) {
       this.handler.setStatus('frame', `⚠ cannot show frame ${f.frame}: ${e.message}`, true);
     }

@@ -62,9 +62,11 @@ export const sameSettings = (a, b) => !!a && !!b && a.aoSamples === b.aoSamples 
 
 // The refinement status of a still after `frame` was shown, for a target of `target` samples per
 // pixel: null when refinement is off (target 0 or 1), 'interactive' after a requested frame,
-// 'refining k/N' while the node's unsolicited refinements come, 'converged N' at the target.
+// 'refining k/N' while the node's unsolicited refinements come, 'converged k' at the still's
+// last frame (at the target, or sooner where the node refines adaptively: k is then the mean
+// samples per pixel).
 export function refineStatus(frame, target) {
   if (!(target > 1)) return null;
   if (!frame.refined) return 'interactive';
-  return frame.samples >= target ? `converged ${frame.samples}` : `refining ${frame.samples}/${target}`;
+  return frame.converged || frame.samples >= target ? `converged ${frame.samples}` : `refining ${frame.samples}/${target}`;
 }

@@ -44,6 +44,7 @@ export const ENUMS = Object.freeze({
   light_type: Object.freeze(['point', 'directional', 'spot']),
   source_type: Object.freeze(['f32', 'u32', 'u16', 'u8']),
   ref_kind: Object.freeze(['buffer', 'texture']),
+  refinement: Object.freeze(['requested', 'refined', 'converged']),
 });
 export const ChannelName = ENUMS.channel;
 export const OpName = ENUMS.op;
@@ -58,6 +59,7 @@ export const MaterialModel = ENUMS.material_model;
 export const LightType = ENUMS.light_type;
 export const SourceType = ENUMS.source_type;
 export const RefKind = ENUMS.ref_kind;
+export const Refinement = ENUMS.refinement;
 
 export const FLAGS = Object.freeze({
   buffer: Object.freeze({ deflate: 1 }),
@@ -264,7 +266,7 @@ export const RECORDS = Object.freeze({
       { name: 'width', type: 'u32', offset: 4, js: 'width', limit: 'max_width', min: 1 },
       { name: 'height', type: 'u32', offset: 8, js: 'height', limit: 'max_height', min: 1 },
       { name: 'encoding', type: 'u8', offset: 12, js: 'encoding', enum: 'frame_encoding' },
-      { name: 'refined', type: 'u8', offset: 13, js: 'refined', flag: true },
+      { name: 'refined', type: 'u8', offset: 13, js: 'refinement', enum: 'refinement' },
       { name: 'samples', type: 'u16', offset: 14, js: 'samples' },
       { name: 'kernel_ms', type: 'f32', offset: 16, js: 'timings.kernel' },
       { name: 'rendering_ms', type: 'f32', offset: 20, js: 'timings.rendering' },

@@ -126,7 +126,7 @@ test('server records round-trip', () => {
   assert.equal(recs[4].meanPipelineMs, 12.5);
 });
 
-test('a frame\'s refined flag and samples sit where the reserved bytes were; samples are written as 1..65535', () => {
+test('a frame\'s refinement and samples sit where the reserved bytes were; samples are written as 1..65535', () => {
   const frame = (f) => encodeServer([{ type: 'frame', frame: 3, width: 1, height: 1, encoding: 'jpeg', timings: {}, payload: new Uint8Array(0), ...f }]);
   const body = 16;  // message header + record header
   const m = frame({ refined: true, samples: 300 });
@@ -136,8 +136,15 @@ test('a frame\'s refined flag and samples sit where the reserved bytes were; sam
   assert.equal(decodeServer(frame({ samples: 70000 }))[0].samples, 65535);
   const zero = frame({}); zero[body + 14] = 0;
   assert.equal(decodeServer(zero)[0].samples, 0, 'a decoder takes 0 samples as they are');
-  const two = frame({}); two[body + 13] = 2;
-  refuses(() => decodeServer(two), 'bad_enum', 0);
+  // Refinement: 0 requested, 1 refined, 2 the still's last (converged); nothing above.
+  const last = frame({ refined: true, converged: true });
+  assert.equal(last[body + 13], 2);
+  const back = decodeServer(last)[0];
+  assert.deepEqual([back.refined, back.converged, back.refinement], [true, true, 'converged']);
+  const plain = decodeServer(frame({ refined: true }))[0];
+  assert.deepEqual([plain.refined, plain.converged, plain.refinement], [true, false, 'refined']);
+  const three = frame({}); three[body + 13] = 3;
+  refuses(() => decodeServer(three), 'bad_enum', 0);
 });
 
 test('malformed messages are rejected with a reason', () => {

@@ -67,6 +67,9 @@ test('the refinement status: interactive after a requested frame, refining k/N, 
   assert.equal(refineStatus({ frame: 3, refined: true, samples: 2 }, 64), 'refining 2/64');
   assert.equal(refineStatus({ frame: 3, refined: true, samples: 63 }, 64), 'refining 63/64');
   assert.equal(refineStatus({ frame: 3, refined: true, samples: 64 }, 64), 'converged 64');
+  // Refined adaptively, a still converges before every pixel has the target: its last frame says so.
+  assert.equal(refineStatus({ frame: 3, refined: true, converged: true, samples: 23 }, 64), 'converged 23');
+  assert.equal(refineStatus({ frame: 3, refined: true, converged: false, samples: 23 }, 64), 'refining 23/64');
   for (const off of [0, 1, undefined]) assert.equal(refineStatus({ frame: 3, refined: true, samples: 2 }, off), null);
 });
 
