@@ -26,7 +26,8 @@ RenderTask task_of(const RenderBatch& b, const Rect& pixels) {
   t.radiance = b.radiance;
   t.hit_points = b.hit_points;
   t.guides = b.guides;
-  if (!b.plan.empty() && !pixels.empty()) {
+  // (A batch refused by check_batch still gets its tasks' failed tiles: no plan then.)
+  if (!b.plan.empty() && !pixels.empty() && check_plan(b.plan_blocks, b.plan, b.width, b.height, pixels).empty()) {
     t.plan_blocks = intersect(b.plan_blocks, plan_blocks_of(pixels));
     t.plan = crop_plan(b.plan_blocks, b.plan, t.plan_blocks);
   }

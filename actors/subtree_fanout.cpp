@@ -125,7 +125,7 @@ void send_batch(subtree_ptr self, SubtreeChild& c, uint64_t id, size_t part) {
   const RenderBatch& b = j->second.batch;
   RenderBatch sub = b;
   sub.tasks.assign(b.tasks.begin() + long(p.begin), b.tasks.begin() + long(p.begin + p.count));
-  if (!b.plan.empty()) {  // the child gets the part of the plan its tasks need
+  if (!b.plan.empty() && b.plan.size() == uint64_t(b.plan_blocks.area())) {  // the child gets the part of the plan its tasks need
     Rect need;
     for (const Rect& t : sub.tasks) {
       const Rect tb = intersect(b.plan_blocks, plan_blocks_of(t));

@@ -36,7 +36,7 @@ constexpr int kSize = 16;
 // What a fake child does with its tasks.
 // late: holds its batches until the test releases them, and answers pings meanwhile.
 // stops: every tile says it stopped early (TileResult::cancelled), asked or not.
-enum class Mode { liar, hang, straggler, bad_info, slow_acks, late, stops };
+enum class Mode { liar, hang, straggler, bad_info, slow_acks, late, stops, noisy };
 
 struct FakeLog {
   std::vector<RenderBatch> batches;
@@ -68,6 +68,11 @@ BatchReply reply_for(const RenderBatch& b, Mode mode, bool stopped = false) {
       continue;
     }
     if (b.radiance) t.radiance.assign(size_t(task.area()) * 12, 0);
+    if (b.radiance && mode == Mode::noisy)  // a still whose samples disagree: a value in [0, 1) per pixel and frame
+      for (size_t i = 0; i < size_t(task.area()) * 3; ++i) {
+        const float v = float((b.frame * 2654435761u + uint32_t(i / 3) * 40503u) % 1000u) / 1000.0f;
+        std::memcpy(t.radiance.data() + i * 4, &v, 4);
+      }
     if (mode == Mode::liar) {
       t.rgba.assign(7, 0);  // not width x height x 4
     } else {
@@ -485,6 +490,39 @@ CAF_TEST(a render request during a still sample abandons it: the children are to
   CAF_CHECK_EQUAL(log->cancels.size(), 1u);
 }
 
+CAF_TEST(an adaptive round sends each child the part of the plan its tasks need and the still ends converged) {
+  settings->refine_samples = 8;
+  settings->adaptive_round = 0.5;
+  settings->denoise_below_db = 0;
+  auto log = std::make_shared<FakeLog>();
+  auto last = std::make_shared<subtree_actor>();
+  add_child("noisy:1", caf::actor_cast<caf::actor>(sys.spawn(fake_node, Mode::noisy, log, last)));
+  start();
+  request_frame(1);
+  sched.run();
+  CAF_REQUIRE_GREATER(log->batches.size(), 5u);
+  for (size_t i = 0; i < 4; ++i) CAF_CHECK(log->batches[i].plan.empty());  // the uniform rounds
+  size_t partial = 0;
+  for (size_t i = 4; i < log->batches.size(); ++i) {
+    const RenderBatch& b = log->batches[i];
+    CAF_CHECK(b.radiance);
+    if (b.plan.empty()) continue;
+    ++partial;
+    CAF_REQUIRE_EQUAL(b.tasks.size(), 1u);
+    CAF_CHECK_EQUAL(b.plan_blocks, plan_blocks_of(b.tasks[0]));  // its task's blocks, not the frame's
+    CAF_CHECK_EQUAL(b.plan.size(), size_t(b.plan_blocks.area()));
+    for (uint32_t k : b.plan) CAF_CHECK(k == kSkipPacket || k <= b.sample);  // a block's own count, or skipped
+    CAF_CHECK_EQUAL(check_batch(b, Limits{}), "");
+  }
+  CAF_CHECK_GREATER(partial, 0u);
+  auto frames = sink->all<Frame>();
+  CAF_REQUIRE(!frames.empty());
+  CAF_CHECK(frames.back().converged);
+  CAF_CHECK_LESS_OR_EQUAL(frames.back().samples, 8u);
+  CAF_CHECK_EQUAL(count(Ev::recovering), 0u);
+  CAF_CHECK_EQUAL(sink->all<ErrorReply>().size(), 0u);
+}
+
 CAF_TEST(a tile that stopped early in a frame nobody abandoned is the node fault and its task is rendered here) {
   auto log = std::make_shared<FakeLog>();
   auto last = std::make_shared<subtree_actor>();
@@ -755,6 +793,12 @@ CAF_TEST(a worker fails every tile of a batch outside the node limits and serves
       [](RenderBatch& b) { b.tasks = {Rect{0, 0, kSize + 1, kSize}}; },
       [](RenderBatch& b) { b.tasks = {Rect{-4, 0, 4, 4}}; },
       [](RenderBatch& b) { b.tasks = {Rect{0, 0, 4, 4}, Rect{4, 4, 8, 8}}; },  // 2 tasks, 1 node
+      // Plans of blocks (adaptive rounds): of the wrong size, outside the frame, not covering the
+      // task, for a frame that is no sample of a still.
+      [](RenderBatch& b) { b.radiance = true; b.plan_blocks = {0, 0, 4, 4}; b.plan.assign(15, 0); },
+      [](RenderBatch& b) { b.radiance = true; b.plan_blocks = {0, 0, 5, 4}; b.plan.assign(20, 0); },
+      [](RenderBatch& b) { b.radiance = true; b.plan_blocks = {0, 0, 4, 3}; b.plan.assign(12, 0); },
+      [](RenderBatch& b) { b.plan_blocks = {0, 0, 4, 4}; b.plan.assign(16, 0); },
   };
   for (auto& mutate : bad) {
     RenderBatch b = good_batch();

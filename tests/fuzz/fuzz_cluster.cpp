@@ -1,7 +1,8 @@
 // libFuzzer target: what a hostile cluster peer can send (actors/cluster_protocol.h). The
 // first byte picks the message; the rest is read by CAF 0.17's binary_deserializer, as the
 // middleman reads a message's fields, into:
-//   0  RenderBatch (parent -> worker), then the worker's task_of for each task
+//   0  RenderBatch (parent -> worker), checked by check_batch, then the worker's task_of for
+//      each task (an accepted batch's plan of blocks must cover every task)
 //   1  BatchReply (worker -> parent), each tile checked by check_tile (checks.h) against a
 //      task of the parent's own 64x48 frame, as Router does
 //   2  TileResult alone, checked the same way
@@ -83,8 +84,19 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   switch (mode) {
     case 0: {
       RenderBatch b;
-      if (read(data, size, b))
-        for (const Rect& r : b.tasks) (void)task_of(b, r);
+      if (read(data, size, b)) {
+        static const NodeSettings settings;
+        const bool accepted = check_batch(b, settings.limits).empty();
+        for (const Rect& r : b.tasks) {
+          const RenderTask t = task_of(b, r);
+          // An accepted batch's plan covers each task's blocks exactly as the renderer checks it.
+          if (accepted && !b.plan.empty() && !r.empty() &&
+              (t.plan.empty() || !check_plan(t.plan_blocks, t.plan, b.width, b.height, r).empty())) {
+            std::fprintf(stderr, "an accepted batch's plan does not cover its task\n");
+            std::abort();
+          }
+        }
+      }
       break;
     }
     case 1: {

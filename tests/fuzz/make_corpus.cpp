@@ -18,6 +18,7 @@
 #include "codecs/jpeg.h"
 #include "protocol/protocol.h"
 #include "protocol/scene_records.h"
+#include "renderer/renderer.h"
 #include "update/scene_update.h"
 #include "lb/sat.h"
 
@@ -298,6 +299,12 @@ void cluster_corpus() {
   b.ao_samples = 2;
   b.tasks = {{0, 0, 32, 48}, {32, 0, 64, 48}};
   put("cluster", "render_batch", caf_bytes(0, b));
+  RenderBatch planned = b;  // an adaptive round: a plan of the frame's 16x12 blocks
+  planned.radiance = true;
+  planned.sample = 5;
+  planned.plan_blocks = {0, 0, 16, 12};
+  for (int i = 0; i < 16 * 12; ++i) planned.plan.push_back(i % 3 == 0 ? kSkipPacket : uint32_t(i % 6));
+  put("cluster", "render_batch_plan", caf_bytes(0, planned));
   BatchReply r;
   r.tiles = {tile({0, 0, 32, 48}, {4, 4}), tile({32, 0, 64, 48}, {4, 4})};
   put("cluster", "batch_reply_4x4", caf_bytes(1, r));
