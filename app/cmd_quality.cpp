@@ -20,7 +20,8 @@ namespace {
 
 const char* kHelp =
     "tessera quality --scene S.gltf --camera-loop L.json [--frame K] [--size W H] [--threads T]\n"
-    "                [--mode fixed|progressive|progressive+denoise|adaptive] [--seconds S] [--ao N] [--depth D]\n"
+    "                [--mode fixed|progressive|progressive+denoise|adaptive|adaptive+denoise] [--seconds S]\n"
+    "                [--ao N] [--depth D]\n"
     "                [--ao-list 1,2,4,8,16,32] [--max-samples M]\n"
     "                [--reference-samples R] [--reference-ao A] [--cache DIR]\n"
     "Image quality against render time, as PSNR against a converged reference: the average of R\n"
@@ -43,6 +44,8 @@ const char* kHelp =
     "  a whole sample's cost a round, until every packet has --max-samples or an error out of\n"
     "  sight (--adaptive-done E, default 0.25, in 8-bit steps squared). \"samples\" is then the\n"
     "  mean over the pixels (the work in whole samples), the step the round.\n"
+    "  adaptive+denoise: the node's default: denoised as progressive+denoise while every pixel\n"
+    "  renders each round, adaptive rounds once the plain average is clean enough.\n"
     "--write-png F writes the last image measured (the last step's average, or the last fixed frame).\n"
     "One JSON line per step (samples, elapsed_ms, psnr_db), then a summary line with\n"
     "seconds_to_psnr for 30, 35 and 40 dB (null: not reached), the step that reached each level\n"
@@ -167,9 +170,10 @@ int run(const std::vector<std::string>& argv) {
   adaptive.done_below = args.number("--adaptive-done", adaptive.done_below);
   args.finish();
   if (denoise_from < 1 || denoise_from > 4) throw std::invalid_argument("--denoise-from must be in 1..4");
-  const bool denoised = mode == "progressive+denoise";
-  if (mode != "fixed" && mode != "progressive" && !denoised && mode != "adaptive")
-    throw std::invalid_argument("--mode must be fixed, progressive, progressive+denoise or adaptive");
+  const bool adaptive_mode = mode == "adaptive" || mode == "adaptive+denoise";
+  const bool denoised = mode == "progressive+denoise" || mode == "adaptive+denoise";
+  if (mode != "fixed" && mode != "progressive" && !denoised && !adaptive_mode)
+    throw std::invalid_argument("--mode must be fixed, progressive, progressive+denoise, adaptive or adaptive+denoise");
   if (adaptive.uniform < 2 || adaptive.uniform > 65536) throw std::invalid_argument("--adaptive-uniform must be in 2..65536");
   if (!(adaptive.round_cost > 0 && adaptive.round_cost <= 1)) throw std::invalid_argument("--adaptive-round must be in (0, 1]");
   if (!(adaptive.done_below >= 0 && adaptive.done_below <= 1e6)) throw std::invalid_argument("--adaptive-done must be in 0..1e6");
@@ -199,7 +203,7 @@ int run(const std::vector<std::string>& argv) {
   // cost time. Said once, as the node says of settings that change nothing.
   const bool filter = denoised && ao > 0 && max_component(setup.loaded.scene.environment().ambient) > 0;
   if (denoised && !filter)
-    std::fprintf(stderr, "quality: progressive+denoise has nothing to filter here (%s): the still is averaged plainly\n",
+    std::fprintf(stderr, "quality: %s has nothing to filter here (%s): the still is averaged plainly\n", mode.c_str(),
                  ao > 0 ? "the scene has no sky or ambient light" : "--ao 0");
   RenderSettings base;
   base.max_depth = depth;
@@ -267,40 +271,71 @@ int run(const std::vector<std::string>& argv) {
                   t * 1e3, db);
       std::fflush(stdout);
     }
-  } else if (mode == "adaptive") {
-    // Round after round; rendering, accumulating and planning count as time (not the PSNR).
+  } else if (adaptive_mode) {
+    // Round after round, as the node refines a still (frame_actor.cpp): with denoising, every
+    // pixel each round while the plain average is denoised (its shown steps only measured, as
+    // in progressive+denoise), adaptive rounds after. Rendering, accumulating, planning and
+    // denoising count as time (not the PSNR).
     AdaptiveStill still;
     still.reset(W, H, srgb, uint32_t(max_samples), adaptive);
+    StillAo still_ao;
+    std::vector<float> guides;
+    bool denoising = filter;
+    uint32_t shown = 0;
     RenderSettings s = base;
     s.ao_samples = ao;
     s.radiance = true;
     TaskResult r;
+    using clock = std::chrono::steady_clock;
+    const auto ms = [](clock::time_point a, clock::time_point b) { return std::chrono::duration<double, std::milli>(b - a).count(); };
     while (elapsed_s < seconds && !still.converged()) {
-      using clock = std::chrono::steady_clock;
-      const auto ms = [](clock::time_point a, clock::time_point b) { return std::chrono::duration<double, std::milli>(b - a).count(); };
       const auto t0 = clock::now();
+      still.set_uniform(denoising);
       s.block_samples = still.plan().data();
       s.plan_blocks = still.blocks();
+      s.guides = denoising;
       if (still.converged()) break;
       const auto t1 = clock::now();
       rt.render(full, s, r);
       const auto t2 = clock::now();
       still.add(r.radiance, &r.cost, rt.packet_layout());
+      if (denoising) {
+        if (still.rounds() == 1) {
+          still_ao.reset(W, H);
+          guides = r.guides;
+        }
+        still_ao.add(r.guides);
+      }
       const auto t3 = clock::now();
-      const Image avg = still.average();
+      const uint32_t rounds = still.rounds();
+      if (denoising && rounds >= uint32_t(denoise_from) && !shown_while_denoising(rounds, shown, uint32_t(max_samples))) {
+        const double dt = std::chrono::duration<double>(clock::now() - t0).count();
+        elapsed_s += dt;
+        step_ms.push_back(dt * 1e3);
+        continue;
+      }
+      shown = rounds;
+      Image avg;
+      if (denoising && rounds >= uint32_t(denoise_from)) {
+        DenoisedStep step = denoise_step(still, guides, still_ao, denoise_below_db, denoise_options);
+        denoising = step.denoised;
+        avg = std::move(step.image);
+      } else {
+        avg = still.average();
+      }
       const auto t4 = clock::now();
       const double dt = std::chrono::duration<double>(t4 - t0).count();
       elapsed_s += dt;
       step_ms.push_back(dt * 1e3);
       const double db = finite_db(compare(avg, ref).psnr);
       if (!png_out.empty()) write_png(png_out, avg);
-      levels.see(db, elapsed_s, long(still.rounds()));
+      levels.see(db, elapsed_s, long(rounds));
       last_db = db;
-      samples = still.rounds();
-      std::printf("{\"mode\": \"adaptive\", \"ao\": %d, \"round\": %u, \"samples\": %.3f, \"packets\": %zu, "
+      samples = rounds;
+      std::printf("{\"mode\": \"%s\", \"ao\": %d, \"round\": %u, \"samples\": %.3f, \"blocks\": %zu, "
                   "\"plan_ms\": %.1f, \"render_ms\": %.1f, \"add_ms\": %.1f, \"average_ms\": %.1f, "
                   "\"elapsed_ms\": %.1f, \"psnr_db\": %.3f}\n",
-                  ao, still.rounds(), still.mean_samples(), still.planned(), ms(t0, t1), ms(t1, t2), ms(t2, t3),
+                  mode.c_str(), ao, rounds, still.mean_samples(), still.planned(), ms(t0, t1), ms(t1, t2), ms(t2, t3),
                   ms(t3, t4), elapsed_s * 1e3, db);
       std::fflush(stdout);
     }

@@ -473,6 +473,16 @@ TEST_CASE("tessera quality: a refining still gains PSNR sample by sample, the re
   }
   CHECK(a.lines.back()["summary"].get<bool>());
   CHECK(a.lines.back()["mode"].get<std::string>() == "adaptive");
+  // Adaptive after denoising, as the node refines: while denoised every pixel renders each
+  // round, so the first four steps are progressive+denoise's exactly.
+  Run ad = run_tessera(base + " --mode adaptive+denoise --max-samples 8 --seconds 60");
+  REQUIRE(ad.rc == 0);
+  REQUIRE(ad.lines.size() >= 5);
+  for (size_t i = 0; i < 4; ++i) {
+    CHECK(ad.lines[i]["samples"].get<double>() == double(i + 1));
+    CHECK(ad.lines[i]["psnr_db"].get<double>() == d.lines[i]["psnr_db"].get<double>());
+  }
+  CHECK(ad.lines.back()["mode"].get<std::string>() == "adaptive+denoise");
   for (const char* bad : {"--mode x", "--seconds 0", "--max-samples 0", "--reference-samples 70000", "--ao -1",
                           "--denoise-iterations 11", "--mode progressive+denoise --denoise-sigma 0",
                           "--denoise-below-db 100", "--denoise-from 0", "--denoise-from 5",
