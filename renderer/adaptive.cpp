@@ -152,10 +152,18 @@ void AdaptiveStill::make_plan() {
     converged_ = true;
     return;
   }
-  std::sort(cand.begin(), cand.end(), [](const Candidate& a, const Candidate& b) {
-    return a.gain > b.gain || (a.gain == b.gain && a.b < b.b);
-  });
+  const auto better = [](const Candidate& a, const Candidate& b) { return a.gain > b.gain || (a.gain == b.gain && a.b < b.b); };
   const double budget = opt_.round_cost * whole;
+  // Only the best ones are taken: order the first twice as many as the budget buys at the
+  // candidates' mean cost (all of them when that is not enough).
+  double cand_cost = 0;
+  for (const Candidate& c : cand) cand_cost += c.cost;
+  const size_t want = size_t(std::min<double>(double(cand.size()), 2.0 * budget / (cand_cost / double(cand.size())) + 64));
+  std::nth_element(cand.begin(), cand.begin() + long(want) - 1, cand.end(), better);
+  std::sort(cand.begin(), cand.begin() + long(want), better);
+  double head = 0;
+  for (size_t i = 0; i < want; ++i) head += cand[i].cost;
+  if (head < budget) std::sort(cand.begin(), cand.end(), better);
   double spent = 0;
   for (const Candidate& c : cand) {
     if (spent >= budget) break;
@@ -173,17 +181,19 @@ void AdaptiveStill::add_tile(const float* radiance, const Rect& pixels) {
   const size_t tw = size_t(pixels.width());
   tbb::parallel_for(tbb::blocked_range<int32_t>(pixels.y0, pixels.y1, 8), [&](const tbb::blocked_range<int32_t>& r) {
     for (int32_t y = r.begin(); y != r.end(); ++y)
-      for (int32_t x = pixels.x0; x < pixels.x1; ++x) {
-        if (plan_[block_of(x, y)] == kSkipPacket) continue;
-        const float* in = radiance + (size_t(y - pixels.y0) * tw + size_t(x - pixels.x0)) * 3;
-        const size_t i = (size_t(y) * size_t(width_) + size_t(x)) * 3;
-        for (int c = 0; c < 3; ++c) {
-          const float v = in[c];
-          sum_[i + size_t(c)] += v;
-          sum_sq_[i + size_t(c)] += v * v;
+      // Block by block along the row: a skipped block's pixels are passed over at once.
+      for (int32_t bx = pixels.x0 / kPlanBlock; bx * kPlanBlock < pixels.x1; ++bx) {
+        if (plan_[block_of(bx * kPlanBlock, y)] == kSkipPacket) continue;
+        const int32_t x0 = std::max(pixels.x0, bx * kPlanBlock), x1 = std::min(pixels.x1, (bx + 1) * kPlanBlock);
+        const float* in = radiance + (size_t(y - pixels.y0) * tw + size_t(x0 - pixels.x0)) * 3;
+        const size_t at = (size_t(y) * size_t(width_) + size_t(x0)) * 3;
+        for (size_t i = 0; i < size_t(x1 - x0) * 3; ++i) {
+          const float v = in[i];
+          sum_[at + i] += v;
+          sum_sq_[at + i] += v * v;
           const uint32_t e = uint32_t(srgb_ ? raytracer_detail::encode_srgb(v) : raytracer_detail::encode_plain(v));
-          enc_sum_[i + size_t(c)] += e;
-          enc_sq_[i + size_t(c)] += e * e;
+          enc_sum_[at + i] += e;
+          enc_sq_[at + i] += e * e;
         }
       }
   });

@@ -198,3 +198,45 @@ TEST_CASE("The tiler carries the last frame's cost into the new camera, and fall
   CHECK(Predictor(other.predictor) == Predictor::area);
   CHECK_FALSE(other.from_sats);
 }
+
+// A still's partial rounds (adaptive refinement): their SATs tile the next partial round, and
+// the whole frame's SATs stay for the frames after the still.
+TEST_CASE("The tiler keeps a partial round's SATs apart from the last whole frame's", "[tiler][adaptive]") {
+  Fixture f;
+  const Camera a = at_x(0);
+  auto ask = [&](bool partial) {
+    TaskRequest req{2, W, H, kLayout.w, kLayout.h, {}};
+    req.partial = partial;
+    TaskList out;
+    (*f.self)
+        ->request(f.tiler, caf::infinite, tasks_atom::value, req)
+        .receive([&](TaskList& tl) { out = std::move(tl); }, [&](caf::error& e) { FAIL(f.sys->render(e)); });
+    return out;
+  };
+  (*f.self)->send(f.tiler, sats_atom::value, report(a, false));
+  const TaskList whole = ask(false);
+  CHECK(ask(true).tasks == whole.tasks);  // no partial round yet: the whole frame's map
+  // A partial round that rendered only the left quarter of the image (the rest cost 0).
+  const Rect space = packet_space(W, H, kLayout);
+  CostMap part{space, std::vector<uint32_t>(size_t(space.area()), 0)};
+  for (int32_t py = 0; py < space.y1; ++py)
+    for (int32_t px = 0; px < space.x1 / 4; ++px) part.cost[size_t(py) * size_t(space.x1) + size_t(px)] = 1000;
+  SatReport partial{2, W, H, kLayout.w, kLayout.h, {Sat::from_cost_map_serial(part).serialize()}, {1.0}, {{}}, {}, true};
+  (*f.self)->send(f.tiler, sats_atom::value, partial);
+  const TaskList next_round = ask(true);
+  REQUIRE(next_round.tasks.size() == 8);
+  // Balanced on what the next partial round costs, where the whole frame's tiling is not.
+  const double b_partial = balance(next_round.tasks, part), b_whole = balance(whole.tasks, part);
+  INFO("balance on the partial round's cost: tiled from it " << b_partial << ", from the whole frame " << b_whole);
+  CHECK(b_partial < 1.1);
+  CHECK(b_whole > 2);
+  CHECK(ask(false).tasks == whole.tasks);  // a frame after the still: the whole frame's map
+  // A partial report of another size is dropped; a whole frame's report ends the partial map.
+  SatReport other = partial;
+  other.width = 128;
+  (*f.self)->send(f.tiler, sats_atom::value, other);
+  CHECK(ask(true).tasks == whole.tasks);
+  (*f.self)->send(f.tiler, sats_atom::value, partial);
+  (*f.self)->send(f.tiler, sats_atom::value, report(a, false));
+  CHECK(ask(true).tasks == whole.tasks);
+}
