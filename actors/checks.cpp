@@ -26,8 +26,9 @@ RenderTask task_of(const RenderBatch& b, const Rect& pixels) {
   t.radiance = b.radiance;
   t.hit_points = b.hit_points;
   t.guides = b.guides;
-  // (A batch refused by check_batch still gets its tasks' failed tiles: no plan then.)
-  if (!b.plan.empty() && !pixels.empty() && check_plan(b.plan_blocks, b.plan, b.width, b.height, pixels).empty()) {
+  // (A batch refused by check_batch still gets its tasks' failed tiles: no plan then. check_plan
+  // first: it compares a peer's rectangles before anything subtracts their coordinates.)
+  if (!b.plan.empty() && check_plan(b.plan_blocks, b.plan, b.width, b.height, pixels).empty() && !pixels.empty()) {
     t.plan_blocks = intersect(b.plan_blocks, plan_blocks_of(pixels));
     t.plan = crop_plan(b.plan_blocks, b.plan, t.plan_blocks);
   }
@@ -37,8 +38,17 @@ RenderTask task_of(const RenderBatch& b, const Rect& pixels) {
 std::string check_plan(const Rect& blocks, const std::vector<uint32_t>& plan, int32_t width, int32_t height,
                        const Rect& pixels) {
   if (plan.empty()) return {};
-  if (blocks.x0 < 0 || blocks.y0 < 0 || !plan_blocks_of({0, 0, width, height}).contains(blocks) || blocks.empty())
+  // Compared, never subtracted, until they are known to lie inside the frame: they may come
+  // from a peer (Rect::width of [-2^31, 2^31) overflows).
+  constexpr int32_t kMaxSide = 1 << 24;
+  if (width < 1 || height < 1 || width > kMaxSide || height > kMaxSide) return "a plan for a frame of impossible size";
+  const auto inside = [](const Rect& r, int32_t w, int32_t h) {
+    return r.x0 >= 0 && r.y0 >= 0 && r.x0 <= r.x1 && r.y0 <= r.y1 && r.x1 <= w && r.y1 <= h;
+  };
+  const Rect all = plan_blocks_of({0, 0, width, height});
+  if (!inside(blocks, all.x1, all.y1) || blocks.x0 == blocks.x1 || blocks.y0 == blocks.y1)
     return "a plan of blocks outside the frame's blocks";
+  if (!inside(pixels, width, height)) return "a plan for a task outside the frame";
   if (plan.size() != uint64_t(blocks.area()))
     return "a plan of " + std::to_string(plan.size()) + " entries for " + std::to_string(blocks.area()) + " blocks";
   if (!blocks.contains(plan_blocks_of(pixels))) return "a plan of blocks that does not cover its task";
@@ -181,9 +191,10 @@ std::string check_batch(const RenderBatch& b, const protocol::Limits& lim) {
   if (b.guides != kNoGuides && !b.radiance) return "guides asked without radiance (they serve a refining still)";
   if (b.timeout_ms < 1 || b.timeout_ms > 3'600'000) return "timeout of " + std::to_string(b.timeout_ms) + " ms";
   if (b.tasks.size() > 65536) return std::to_string(b.tasks.size()) + " tasks";
-  const Rect frame{0, 0, b.width, b.height};
+  // Compared, not subtracted (Rect::width of a peer's [-2^31, 2^31) overflows): a task is empty
+  // when it has no pixel, and else lies inside the frame.
   for (const Rect& t : b.tasks)
-    if (!t.empty() && !frame.contains(t))
+    if (t.x1 > t.x0 && t.y1 > t.y0 && !(t.x0 >= 0 && t.y0 >= 0 && t.x1 <= b.width && t.y1 <= b.height))
       return "task [" + std::to_string(t.x0) + "," + std::to_string(t.y0) + "," + std::to_string(t.x1) + "," +
              std::to_string(t.y1) + "] outside the frame " + std::to_string(b.width) + "x" + std::to_string(b.height);
   if (!b.plan.empty()) {
