@@ -85,9 +85,8 @@ struct frame_state {
   double last_rendering_ms = 0;
   // The progressive still's average (FrameStart::refine): the tiles' radiance of every sample
   // since its sample 0, composed here, where the tiles of all nodes meet; refined adaptively
-  // (renderer/adaptive.h) after its first samples when `adaptive`.
+  // (renderer/adaptive.h) after its first samples when adaptive_rounds().
   AdaptiveStill acc;
-  bool adaptive = false;
   std::unique_ptr<Denoising> dn;  // FrameStart::denoise: the still's denoising (none: plain)
   std::shared_ptr<std::atomic<bool>> denoise_stop;  // the denoising in flight stops when raised (cancel)
   uint32_t cancelled = 0;       // the last frame the session abandoned (cancel)
@@ -95,6 +94,16 @@ struct frame_state {
   static inline const char* name = "tessera.frame";
 };
 using self_ptr = frame_actor::stateful_pointer<frame_state>;
+
+// Whether this session's stills refine adaptively: the node's setting, with packets that tile a
+// plan block (any the ray tracer detects does).
+bool adaptive_rounds(const frame_state& st) {
+  return st.settings->adaptive_round > 0 && kPlanBlock % st.layout.w == 0 && kPlanBlock % st.layout.h == 0;
+}
+
+// Whether the still's next round renders every block: without adaptive rounds, and while it is
+// denoised (the denoiser needs every pixel's samples).
+bool uniform_round(const frame_state& st) { return !adaptive_rounds(st) || (st.dn && st.dn->on); }
 
 void log(self_ptr self, Event e) {
   e.scope = {{"session", self->state.id}};
@@ -151,7 +160,7 @@ void deliver(self_ptr self, std::vector<TileResult>&& shown, const std::string& 
     return;
   }
   if (st.cur.refine && st.acc.rounds() > 0 && st.acc.rounds() == st.cur.sample + 1) {  // this frame's round is in
-    st.acc.set_uniform(!st.adaptive || (st.dn && st.dn->on));
+    st.acc.set_uniform(uniform_round(st));
     st.acc.plan();
     st.cur.meta.converged = st.acc.converged();
   }
@@ -173,13 +182,10 @@ void add_sample(self_ptr self, const std::vector<TileResult>& tiles) {
   const FrameMeta& meta = st.cur.meta;
   const int32_t W = meta.width, H = meta.height;
   if (st.cur.sample == 0) {
-    // Adaptive rounds: the node's setting, with packets that tile a plan block (any the ray
-    // tracer detects does).
-    st.adaptive = st.settings->adaptive_round > 0 && kPlanBlock % st.layout.w == 0 && kPlanBlock % st.layout.h == 0;
     AdaptiveOptions options;
-    if (st.adaptive) options.round_cost = st.settings->adaptive_round;
+    if (adaptive_rounds(st)) options.round_cost = st.settings->adaptive_round;
     st.acc.reset(W, H, st.cur.scene.scene->environment().linear, std::max<uint32_t>(1, st.cur.target), options);
-    st.acc.set_uniform(!st.adaptive);
+    st.acc.set_uniform(!adaptive_rounds(st));
     st.dn.reset();
     if (st.batch.guides == kAllGuides) {
       st.dn = std::make_unique<Denoising>();
@@ -191,14 +197,10 @@ void add_sample(self_ptr self, const std::vector<TileResult>& tiles) {
     throw std::logic_error("sample " + std::to_string(st.cur.sample) + " of a still that has " +
                            std::to_string(st.acc.rounds()));
   }
-  std::vector<float> radiance;
   for (const TileResult& t : tiles) {
     if (t.pixels.empty()) continue;
-    if (t.radiance.size() != size_t(t.pixels.area()) * 3 * sizeof(float)) throw std::logic_error("a tile without its radiance");
-    radiance.resize(size_t(t.pixels.area()) * 3);
-    std::memcpy(radiance.data(), t.radiance.data(), t.radiance.size());
-    st.acc.add_tile(radiance.data(), t.pixels);
-    if (!st.adaptive || t.sat.empty()) continue;
+    st.acc.add_tile_bytes(t.radiance, t.pixels);
+    if (!adaptive_rounds(st) || t.sat.empty()) continue;
     // Its packets' costs steer the next plans.
     const Sat sat = Sat::deserialize(t.sat);
     CostMap cost;
@@ -442,7 +444,7 @@ void render_batch(self_ptr self) {
   // A still's later rounds: the blocks its plan renders (renderer/adaptive.h), each at its own
   // sample; no plan while every block renders this round's sample.
   if (st.cur.refine && st.cur.sample > 0 && st.acc.rounds() == st.cur.sample) {
-    st.acc.set_uniform(!st.adaptive || (st.dn && st.dn->on));
+    st.acc.set_uniform(uniform_round(st));
     const std::vector<uint32_t>& plan = st.acc.plan();
     if (st.acc.converged()) {  // nothing left to render (the session asked once too often)
       st.cur.meta.converged = true;

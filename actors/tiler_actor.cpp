@@ -31,6 +31,24 @@ struct tiler_state {
   static inline const char* name = "tessera.tiler";
 };
 
+// The report's SATs as one array, each with its node's single-core performance; a node without a
+// SAT, or with one that does not parse, is left to SatArray's missing-area rule. `rects`: each
+// node's packets (empty: no SAT). Throws what SatArray throws on SATs that do not fit.
+SatArray sat_array(const SatReport& r, PacketLayout layout, std::vector<Rect>* rects) {
+  SatArray arr(packet_space(r.width, r.height, layout));
+  if (rects) rects->assign(r.sats.size(), Rect{});
+  for (size_t i = 0; i < r.sats.size(); ++i) {
+    if (r.sats[i].empty()) continue;
+    std::string err;
+    auto sat = Sat::try_deserialize(r.sats[i].data(), r.sats[i].size(), &err);
+    if (!sat) continue;
+    if (rects) (*rects)[i] = sat->packets();
+    arr.add(std::move(*sat), i < r.perf.size() && r.perf[i] > 0 ? r.perf[i] : 1.0);
+  }
+  arr.finalize();
+  return arr;
+}
+
 tiler_actor::behavior_type tiler_impl(tiler_actor::stateful_pointer<tiler_state> self, std::vector<double> coefficients) {
   self->state.coefficients = std::move(coefficients);
   return {
@@ -42,16 +60,7 @@ tiler_actor::behavior_type tiler_impl(tiler_actor::stateful_pointer<tiler_state>
               r.packet_h != st.layout.h)
             return;
           try {
-            SatArray arr(packet_space(r.width, r.height, st.layout));
-            for (size_t i = 0; i < r.sats.size(); ++i) {
-              if (r.sats[i].empty()) continue;
-              std::string err;
-              auto sat = Sat::try_deserialize(r.sats[i].data(), r.sats[i].size(), &err);
-              if (!sat) continue;
-              arr.add(std::move(*sat), i < r.perf.size() && r.perf[i] > 0 ? r.perf[i] : 1.0);
-            }
-            arr.finalize();
-            st.partial = std::move(arr);
+            st.partial = sat_array(r, st.layout, nullptr);
           } catch (const std::exception&) {
             st.partial.reset();
           }
@@ -65,19 +74,8 @@ tiler_actor::behavior_type tiler_impl(tiler_actor::stateful_pointer<tiler_state>
         st.height = r.height;
         st.layout = {r.packet_w, r.packet_h};
         try {
-          SatArray arr(packet_space(r.width, r.height, st.layout));
-          std::vector<Rect> rects(r.sats.size());  // each node's packets (empty: no SAT)
-          for (size_t i = 0; i < r.sats.size(); ++i) {
-            if (r.sats[i].empty()) continue;  // a node without a SAT: filled by SatArray's missing-area rule
-            std::string err;
-            auto sat = Sat::try_deserialize(r.sats[i].data(), r.sats[i].size(), &err);
-            if (!sat) continue;
-            rects[i] = sat->packets();
-            double perf = i < r.perf.size() && r.perf[i] > 0 ? r.perf[i] : 1.0;
-            arr.add(std::move(*sat), perf);
-          }
-          arr.finalize();
-          st.sats = std::move(arr);
+          std::vector<Rect> rects;  // each node's packets (empty: no SAT)
+          st.sats = sat_array(r, st.layout, &rects);
           // The points, where the report has a camera and depths: a node's depths that do not
           // fit its SAT are left out (its packets count as unknown: filled, or a cut).
           Camera cam;

@@ -1,7 +1,6 @@
 #include "renderer/accumulation.h"
 
 #include <algorithm>
-#include <cstring>
 #include <stdexcept>
 
 #include <tbb/blocked_range.h>
@@ -34,15 +33,6 @@ void Accumulation::add_tile(size_t values, int32_t width, int32_t height, int32_
 
 void Accumulation::add(const std::vector<float>& radiance, int32_t width, int32_t height, int32_t x, int32_t y) {
   add_tile(radiance.size(), width, height, x, y, [&](size_t i) { return radiance[i]; });
-}
-
-void Accumulation::add_bytes(const std::vector<uint8_t>& radiance, int32_t width, int32_t height, int32_t x, int32_t y) {
-  if (radiance.size() % sizeof(float)) throw std::invalid_argument("Accumulation: radiance bytes not whole floats");
-  add_tile(radiance.size() / sizeof(float), width, height, x, y, [&](size_t i) {
-    float v;
-    std::memcpy(&v, radiance.data() + i * sizeof(float), sizeof(float));
-    return v;
-  });
 }
 
 std::vector<float> Accumulation::mean() const {

@@ -4,12 +4,23 @@
 // once, as the renderer encodes a frame: averaging the 8-bit encoded values instead would
 // converge to the mean of the sRGB curve over the noise, which depends on how noisy each
 // sample is (one AO ray or four), not to the image.
+#include <cmath>
 #include <cstdint>
 #include <vector>
 
 #include "core/image.h"
 
 namespace tessera {
+
+// The slope of the renderer's encoding (Accumulation::encode) at linear value c, per unit of
+// radiance, in units of the full 8-bit range (`srgb`: the sRGB curve, else plain); 0 where the
+// value clips or is not a number: noise of variance v at c is about slope^2 v once encoded.
+inline double encoding_slope(float c, bool srgb) {
+  if (!(c < 1.0f)) return 0.0;
+  if (!srgb) return 1.0;
+  if (c <= 0.0031308f) return 12.92;
+  return 1.055 / 2.4 * double(std::pow(c, 1.0f / 2.4f - 1.0f));
+}
 
 class Accumulation {
  public:
@@ -18,8 +29,6 @@ class Accumulation {
   void reset(int32_t width, int32_t height, bool srgb);
   // A tile of the current sample at (x, y): width * height RGB triples, row by row. It must fit.
   void add(const std::vector<float>& radiance, int32_t width, int32_t height, int32_t x, int32_t y);
-  // The same from the float32 bytes a tile carries between nodes (TileResult::radiance).
-  void add_bytes(const std::vector<uint8_t>& radiance, int32_t width, int32_t height, int32_t x, int32_t y);
   void end_sample() { ++samples_; }
   uint32_t samples() const { return samples_; }
   int32_t width() const { return width_; }

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <stdexcept>
 
 #include <tbb/blocked_range.h>
@@ -13,17 +14,13 @@
 namespace tessera {
 namespace {
 
-// The encoding's slope at linear value c, in 8-bit steps per unit of radiance (`srgb`: the sRGB
-// curve, else plain); 0 where the value clips or is not a number. The sRGB curve's from a table
-// of 4096 steps over [0, 1) (it only weighs the plans; a pow per value made adding a round cost
-// a quarter of rendering it).
+// encoding_slope (accumulation.h) in 8-bit steps, the sRGB curve's from a table of 4096 steps
+// over [0, 1) (it only weighs the plans; a pow per value made adding a round cost a quarter of
+// rendering it).
 struct SlopeTable {
   float at[4096];
   SlopeTable() {
-    for (int i = 0; i < 4096; ++i) {
-      const double c = (i + 0.5) / 4096.0;
-      at[i] = float(c <= 0.0031308 ? 12.92 * 255.0 : 255.0 * 1.055 / 2.4 * std::pow(c, 1.0 / 2.4 - 1.0));
-    }
+    for (int i = 0; i < 4096; ++i) at[i] = float(255.0 * encoding_slope((float(i) + 0.5f) / 4096.0f, true));
   }
 };
 
@@ -173,7 +170,9 @@ void AdaptiveStill::make_plan() {
   }
 }
 
-void AdaptiveStill::add_tile(const float* radiance, const Rect& pixels) {
+// Adds the planned blocks' pixels of a tile whose value i (RGB triples, row by row) is value(i).
+template <class Value>
+void AdaptiveStill::add_values(const Rect& pixels, Value value) {
   if (pixels.empty()) return;
   if (!Rect{0, 0, width_, height_}.contains(pixels)) throw std::invalid_argument("AdaptiveStill::add_tile: a tile outside the image");
   if (converged_) throw std::logic_error("AdaptiveStill::add_tile: the still is converged (an empty plan)");
@@ -185,10 +184,10 @@ void AdaptiveStill::add_tile(const float* radiance, const Rect& pixels) {
       for (int32_t bx = pixels.x0 / kPlanBlock; bx * kPlanBlock < pixels.x1; ++bx) {
         if (plan_[block_of(bx * kPlanBlock, y)] == kSkipPacket) continue;
         const int32_t x0 = std::max(pixels.x0, bx * kPlanBlock), x1 = std::min(pixels.x1, (bx + 1) * kPlanBlock);
-        const float* in = radiance + (size_t(y - pixels.y0) * tw + size_t(x0 - pixels.x0)) * 3;
+        const size_t in = (size_t(y - pixels.y0) * tw + size_t(x0 - pixels.x0)) * 3;
         const size_t at = (size_t(y) * size_t(width_) + size_t(x0)) * 3;
         for (size_t i = 0; i < size_t(x1 - x0) * 3; ++i) {
-          const float v = in[i];
+          const float v = value(in + i);
           sum_[at + i] += v;
           sum_sq_[at + i] += v * v;
           const uint32_t e = uint32_t(srgb_ ? raytracer_detail::encode_srgb(v) : raytracer_detail::encode_plain(v));
@@ -196,6 +195,20 @@ void AdaptiveStill::add_tile(const float* radiance, const Rect& pixels) {
           enc_sq_[at + i] += e * e;
         }
       }
+  });
+}
+
+void AdaptiveStill::add_tile(const float* radiance, const Rect& pixels) {
+  add_values(pixels, [radiance](size_t i) { return radiance[i]; });
+}
+
+void AdaptiveStill::add_tile_bytes(const std::vector<uint8_t>& radiance, const Rect& pixels) {
+  if (radiance.size() != size_t(std::max<int64_t>(0, pixels.area())) * 3 * sizeof(float))
+    throw std::invalid_argument("AdaptiveStill::add_tile_bytes: radiance not the tile's RGB float32");
+  add_values(pixels, [&radiance](size_t i) {
+    float v;
+    std::memcpy(&v, radiance.data() + i * sizeof(float), sizeof(float));
+    return v;
   });
 }
 

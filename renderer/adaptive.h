@@ -56,6 +56,8 @@ class AdaptiveStill {
   // One renderer's part of the round planned last: `radiance`, the linear RGB of `pixels`
   // (row by row, 3 floats a pixel); only the planned blocks' pixels are taken.
   void add_tile(const float* radiance, const Rect& pixels);
+  // The same from the float32 bytes a tile carries between nodes (TileResult::radiance).
+  void add_tile_bytes(const std::vector<uint8_t>& radiance, const Rect& pixels);
   // Its cost map (packets of `layout`, which must tile a block), where measured: the blocks'
   // costs steer the next plans.
   void add_cost(const CostMap& cost, PacketLayout layout);
@@ -82,6 +84,8 @@ class AdaptiveStill {
 
  private:
   void make_plan();
+  template <class Value>
+  void add_values(const Rect& pixels, Value value);
   size_t block_of(int32_t x, int32_t y) const { return size_t(y / kPlanBlock) * size_t(bw_) + size_t(x / kPlanBlock); }
   int32_t width_ = 0, height_ = 0, bw_ = 0, bh_ = 0;
   bool srgb_ = true, uniform_ = false;

@@ -256,13 +256,6 @@ double estimated_psnr_db(const std::vector<float>& mean, const std::vector<float
   if (width < 0 || height < 0 || mean.size() != pixels * 3 || guides.size() != pixels * kGuideFloats ||
       open_variance.size() != pixels)
     throw std::invalid_argument("estimated_psnr_db: radiance, guides and variances must all be width x height");
-  // The encoding's slope (per unit of linear radiance, in units of the full 8-bit range).
-  auto slope = [srgb](float c) -> double {
-    if (!(c < 1.0f)) return 0.0;  // clips (or not a number)
-    if (!srgb) return 1.0;
-    if (c <= 0.0031308f) return 12.92;
-    return 1.055 / 2.4 * double(std::pow(c, 1.0f / 2.4f - 1.0f));
-  };
   // Rows in parallel, each row's sum apart, added in row order: the same figure every time.
   std::vector<double> row_sums(size_t(std::max(height, 0)), 0.0);
   const size_t W = size_t(std::max(width, 0));
@@ -273,7 +266,7 @@ double estimated_psnr_db(const std::vector<float>& mean, const std::vector<float
       if (!(v > 0)) continue;
       const float* a = &guides[p * kGuideFloats + kAmbient];
       for (int c = 0; c < 3; ++c) {
-        const double s = slope(mean[p * 3 + size_t(c)]) * double(a[c]);
+        const double s = encoding_slope(mean[p * 3 + size_t(c)], srgb) * double(a[c]);
         row += s * s * double(v);
       }
     }
