@@ -228,6 +228,8 @@ TEST_CASE("Bad cluster settings end serve with a clear error", "[cluster]") {
   refused({"--tessera.refine-samples=5000"}, "refine-samples must be in 0..4096");
   refused({"--tessera.frame-budget-ms=-1"}, "frame-budget-ms must be in 0..60000");
   refused({"--tessera.still-delay-ms=10001"}, "still-delay-ms must be in 0..10000");
+  refused({"--tessera.adaptive-round=1.5"}, "adaptive-round must be in 0..1");
+  refused({"--tessera.adaptive-round=-0.25"}, "adaptive-round must be in 0..1");
   refused({"--cluster-port", "70000"}, "cluster-port must be in -1..65535");
   Node w = worker("taken");
   refused({"--no-http", "--cluster-port", std::to_string(w.cluster)}, "cannot publish the node on 127.0.0.1:");
