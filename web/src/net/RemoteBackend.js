@@ -101,6 +101,10 @@ export class RemoteBackend {
       onServerError: (e) => handler.setStatus(`server:${e.codeName}:${e.message}`, `⚠ server: ${e.codeName}: ${e.message}`, true),
       onStats: (s) => { this.stats = s; },
       onRequest: (n) => { if (this.probe) this.probe.request(n, performance.now()); },
+      // The node has answered everything and that frame is on screen: the page may have finished
+      // loading since (a deferred buffer whose upload's frame came before the reader saw it
+      // loaded), and no frame is coming to say so.
+      onIdle: () => { if (this.shownFrame >= this.channel.frameNumber) handler.sceneShown(); },
       onProgress: (sent, queued) => handler.setStatus('upload', queued && sent < queued
         ? `uploading scene: ${Math.round(100 * sent / queued)}% of ${(queued / 1048576).toFixed(1)} MB` : null),
     });
@@ -211,6 +215,7 @@ export class RemoteBackend {
       if (!(await this.frameView.show(f))) return;
       if (this.display === 'mjpeg') this.flushMjpeg(f);
       this.showRefinement(f);
+      this.shownFrame = Math.max(this.shownFrame || 0, f.frame);
       this.handler.frameDrawn({ frame: f.frame, timeEnd: performance.now(), renderTimeInMilliseconds: f.timings.rendering,
         timings: f.timings, encoding: f.encoding, width: f.width, height: f.height, remote: true,
         refined: !!f.refined, converged: !!f.converged, samples: f.samples ?? 1 });

@@ -48,9 +48,9 @@ let refusalsWarned = false;
 export class SyncChannel {
   constructor({ url, handshake, settings = null, videoKbps = 0, rate = 30, highWater = 4 << 20, messageBytes = 1 << 20, references = true,
     onFrame = () => {}, onState = () => {}, onServerError = () => {}, onStats = () => {}, onProgress = () => {},
-    onReferencesAnswered = () => {}, onRequest = () => {} }) {
+    onReferencesAnswered = () => {}, onRequest = () => {}, onIdle = () => {} }) {
     Object.assign(this, { url, handshake, settings, videoKbps, rate, highWater, messageBytes, onFrame, onState, onServerError, onStats, onProgress,
-      onReferencesAnswered, onRequest });
+      onReferencesAnswered, onRequest, onIdle });
     this.sync = new SceneSync({ references });
     this.queue = [];          // {size, record: Promise|object}
     this.frameNumber = 0;     // of the last render request sent
@@ -369,9 +369,17 @@ export class SyncChannel {
         this.changed = false;
         this.requestRender();
       }
+      if (this.idle) this.onIdle();
     } finally {
       this.flushing = false;
     }
+  }
+
+  // Nothing left to send and every render request answered: the last frame that came is of
+  // everything sent. (Checked after each run-loop iteration.)
+  get idle() {
+    return this.state === 'ready' && !this.queue.length && !this.dirty && !this.changed && !this.renderWanted
+      && this.outstanding === 0 && !this.groups.length;
   }
 
   // What the node holds back for this session while it loads references: half its limit, so

@@ -166,7 +166,15 @@ export class XML3DHandler {
   // Called by backends when a frame is on screen.
   frameDrawn(detail) {
     this.xml3d.dispatchEvent(new CustomEvent('framedrawn', { detail }));
-    if (!this.complete && this.scene && this.scene.pending === 0 && this.resources.pending === 0) {
+    this.sceneShown();
+  }
+
+  // XML3D's load event: once, when a frame shows the scene with every resource loaded. A
+  // remote backend also calls this when the node has answered everything it was sent and that
+  // frame is on screen: a frame can come before the page is read again with its last resource
+  // in, and no change (so no frame) may follow.
+  sceneShown() {
+    if (!this.complete && !this.dirty && this.scene && this.scene.pending === 0 && this.resources.pending === 0) {
       this.complete = true;
       this.xml3d.dispatchEvent(new Event('load'));
     }

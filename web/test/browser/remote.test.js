@@ -37,8 +37,9 @@ before(async () => {
 after(async () => { await env.close(); });
 
 class MockNode {
-  constructor({ encoding = 'jpeg', refine = false, frameSize = [64, 48] } = {}) {
+  constructor({ encoding = 'jpeg', refine = false, frameSize = [64, 48], answerReferences = false } = {}) {
     this.encoding = encoding;
+    this.answerReferences = answerReferences;
     this.refine = refine;
     this.frameSize = frameSize;
     this.sessions = [];
@@ -69,6 +70,10 @@ class MockNode {
           r.data = r.bufferType === 'f32' ? new Float32Array(ab) : new Uint32Array(ab);
         }
         if (r.type !== 'handshake') s.records.push(r);
+        if (this.answerReferences && (r.type === 'buffer_ref' || r.type === 'texture_ref')) {
+          ws.send(encodeServer([{ type: 'reference', what: r.type === 'buffer_ref' ? 'buffer' : 'texture', ok: true, id: r.id,
+            bytes: 0, message: '' }]));
+        }
         if (r.type === 'render') {
           s.renders.push(r.frame);
           const dxt = this.encoding === 'dxt1';
@@ -174,6 +179,54 @@ test('connection loss is shown and the page reconnects and re-sends the scene', 
   await page.waitForFunction(() => document.querySelector('.tessera-xml3d').dataset.connection === 'ready');
   await page.close();
   node.close();
+});
+
+// XML3D's load event needs a frame of the scene with everything loaded. With references, the
+// node has a glTF's buffers before the browser does: the frame of the complete scene can come
+// while the browser is still downloading them, and once they are in nothing is left to send, so
+// no frame follows. The load event comes all the same.
+test('the load event comes when the last download ends after the frame of the complete scene, with no frame after it', async () => {
+  const node = new MockNode({ answerReferences: true });
+  await new Promise((r) => node.wss.on('listening', r));
+  // One triangle, its buffer in a file of its own.
+  const positions = new Float32Array([-1, -1, 0, 1, -1, 0, 0, 1, 0]);
+  const gltf = {
+    asset: { version: '2.0' }, scene: 0, scenes: [{ nodes: [0] }], nodes: [{ mesh: 0 }],
+    meshes: [{ primitives: [{ attributes: { POSITION: 0 } }] }],
+    accessors: [{ bufferView: 0, componentType: 5126, count: 3, type: 'VEC3', min: [-1, -1, 0], max: [1, 1, 0] }],
+    bufferViews: [{ buffer: 0, byteLength: 36 }],
+    buffers: [{ uri: 'model.bin', byteLength: 36 }],
+  };
+  let release;
+  const held = new Promise((r) => (release = r));
+  const page = await env.context.newPage();
+  await page.route('**/held/model.gltf', (route) => route.fulfill({ status: 200, contentType: 'model/gltf+json', body: JSON.stringify(gltf) }));
+  await page.route('**/held/model.bin', async (route) => {
+    await held;
+    await route.fulfill({ status: 200, contentType: 'application/octet-stream', body: Buffer.from(positions.buffer) });
+  });
+  await page.addInitScript(() => {
+    window.__loaded = false;
+    window.__frames = 0;
+    document.addEventListener('load', (e) => { if (e.target.localName === 'xml3d') window.__loaded = true; }, true);
+    document.addEventListener('framedrawn', () => window.__frames++, true);
+  });
+  try {
+    await page.goto(`${env.base}/test/browser/pages/remote-model.html?server=127.0.0.1:${node.port}`);
+    await page.waitForFunction(() => window.__frames > 0, null, { timeout: 10000 });
+    const s = node.sessions[0];
+    assert.deepEqual(s.problems, []);
+    assert.ok(s.records.some((r) => r.type === 'buffer_ref' && /\/held\/model\.bin$/.test(r.url)), 'the buffer went as a reference');
+    assert.equal(await page.evaluate(() => window.__loaded), false, 'no load event while the buffer is on its way');
+    const renders = s.renders.length;
+    release();
+    await page.waitForFunction(() => window.__loaded, null, { timeout: 10000 });
+    assert.equal(s.renders.length, renders, 'nothing was sent after the download: the frame shown was already complete');
+  } finally {
+    release();
+    await page.close();
+    node.close();
+  }
 });
 
 test('display="s3tc" asks for DXT1 frames and draws them with WEBGL_compressed_texture_s3tc', async () => {
