@@ -43,7 +43,10 @@ const char* kHelp =
     "  where a sample lowers the error most per unit of time, --adaptive-round F (default 0.125) of\n"
     "  a whole sample's cost a round, until every packet has --max-samples or an error out of\n"
     "  sight (--adaptive-done E, default 0.25, in 8-bit steps squared). \"samples\" is then the\n"
-    "  mean over the pixels (the work in whole samples), the step the round.\n"
+    "  mean over the pixels (the work in whole samples), the step the round. Each round's line\n"
+    "  also has plan_ms, render_ms, add_ms (adding it to the still) and average_ms, and\n"
+    "  planned_cost_ms and cost_ms: the plan's blocks at their last measured cost and the round's\n"
+    "  own cost map, summed over the packets and divided by --threads.\n"
     "  adaptive+denoise: the node's default: denoised as progressive+denoise while every pixel\n"
     "  renders each round, adaptive rounds once the plain average is clean enough.\n"
     "--write-png F writes the last image measured (the last step's average, or the last fixed frame).\n"
@@ -296,8 +299,11 @@ int run(const std::vector<std::string>& argv) {
       s.guides = denoising;
       if (still.converged()) break;
       const auto t1 = clock::now();
+      const double planned_ns = still.planned_cost();
       rt.render(full, s, r);
       const auto t2 = clock::now();
+      double cost_ns = 0;  // the round's cost map: its packets' summed time
+      for (uint32_t c : r.cost.cost) cost_ns += c;
       still.add(r.radiance, &r.cost, rt.packet_layout());
       if (denoising) {
         if (still.rounds() == 1) {
@@ -333,10 +339,10 @@ int run(const std::vector<std::string>& argv) {
       last_db = db;
       samples = rounds;
       std::printf("{\"mode\": \"%s\", \"ao\": %d, \"round\": %u, \"samples\": %.3f, \"blocks\": %zu, "
-                  "\"plan_ms\": %.1f, \"render_ms\": %.1f, \"add_ms\": %.1f, \"average_ms\": %.1f, "
-                  "\"elapsed_ms\": %.1f, \"psnr_db\": %.3f}\n",
-                  mode.c_str(), ao, rounds, still.mean_samples(), still.planned(), ms(t0, t1), ms(t1, t2), ms(t2, t3),
-                  ms(t3, t4), elapsed_s * 1e3, db);
+                  "\"plan_ms\": %.1f, \"render_ms\": %.1f, \"planned_cost_ms\": %.1f, \"cost_ms\": %.1f, "
+                  "\"add_ms\": %.1f, \"average_ms\": %.1f, \"elapsed_ms\": %.1f, \"psnr_db\": %.3f}\n",
+                  mode.c_str(), ao, rounds, still.mean_samples(), still.planned(), ms(t0, t1), ms(t1, t2),
+                  planned_ns / 1e6 / threads, cost_ns / 1e6 / threads, ms(t2, t3), ms(t3, t4), elapsed_s * 1e3, db);
       std::fflush(stdout);
     }
   } else {

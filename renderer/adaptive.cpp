@@ -14,24 +14,100 @@
 namespace tessera {
 namespace {
 
-// encoding_slope (accumulation.h) in 8-bit steps, the sRGB curve's from a table of 4096 steps
-// over [0, 1) (it only weighs the plans; a pow per value made adding a round cost a quarter of
-// rendering it).
+// encoding_slope (accumulation.h) in 8-bit steps, squared; the sRGB curve's from a table of
+// 4096 steps over [0, 1) (it only weighs the plans; a pow per value made adding a round cost a
+// quarter of rendering it). `c`: a mean of values clamped to [0, 1]; at 1 every sample was 1 or
+// more and its variance is 0 anyway.
 struct SlopeTable {
-  float at[4096];
+  float at[4097];
   SlopeTable() {
-    for (int i = 0; i < 4096; ++i) at[i] = float(255.0 * encoding_slope((float(i) + 0.5f) / 4096.0f, true));
+    for (int i = 0; i < 4096; ++i) {
+      const double g = 255.0 * encoding_slope((float(i) + 0.5f) / 4096.0f, true);
+      at[i] = float(g * g);
+    }
+    at[4096] = 0.0f;
   }
 };
 
-float slope(float c, bool srgb) {
+float slope_sq(float c, bool srgb) {
   static const SlopeTable table;
-  if (!(c < 1.0f)) return 0.0f;
-  if (!srgb) return 255.0f;
-  return table.at[int(std::max(c, 0.0f) * 4096.0f)];
+  if (!srgb) return 255.0f * 255.0f;
+  return table.at[int(c * 4096.0f)];
+}
+
+// A value as the display sees it: clamped to [0, 1] (NaN: 0).
+inline float clamped(float v) { return v > 0.0f ? (v < 1.0f ? v : 1.0f) : 0.0f; }
+
+// One row of a block, `n` values (n / 3 pixels, at most a block's row): each value's mean
+// (the sums times `inv`) encoded into `out` (RGBA, opaque), and the sum of the values' variances
+// as the display sees them, times n - 1. The row is copied into arrays of a block's row so that
+// the loops have a fixed length and compile to vector code.
+float block_row(const float* sum, const float* csum, const float* csq, size_t n, float inv, bool srgb, uint8_t* out) {
+  constexpr size_t K = size_t(kPlanBlock) * 3;
+  alignas(64) float s[K] = {}, cs[K] = {}, cq[K] = {};
+  if (n == K) {  // a size known at compile time: moves, not a library call
+    std::memcpy(s, sum, sizeof s);
+    std::memcpy(cs, csum, sizeof cs);
+    std::memcpy(cq, csq, sizeof cq);
+  } else {  // the image's last column of blocks
+    std::memcpy(s, sum, n * sizeof(float));
+    std::memcpy(cs, csum, n * sizeof(float));
+    std::memcpy(cq, csq, n * sizeof(float));
+  }
+  alignas(64) int enc[K];
+  alignas(64) float mc[K], d[K];
+  if (srgb) {
+    for (size_t i = 0; i < K; ++i) enc[i] = raytracer_detail::encode_srgb(s[i] * inv);
+  } else {
+    for (size_t i = 0; i < K; ++i) enc[i] = raytracer_detail::encode_plain(s[i] * inv);
+  }
+  for (size_t i = 0; i < K; ++i) {
+    mc[i] = cs[i] * inv;
+    d[i] = std::max(0.0f, cq[i] - cs[i] * mc[i]);
+  }
+  float var = 0;
+  for (size_t i = 0; i < n; ++i) var += slope_sq(mc[i], srgb) * d[i];
+  for (size_t x = 0; x < n / 3; ++x) {
+    out[x * 4] = uint8_t(enc[x * 3]);
+    out[x * 4 + 1] = uint8_t(enc[x * 3 + 1]);
+    out[x * 4 + 2] = uint8_t(enc[x * 3 + 2]);
+    out[x * 4 + 3] = 255;
+  }
+  return var;
 }
 
 }  // namespace
+
+namespace adaptive_detail {
+
+size_t take_best(std::vector<Candidate>& cand, double budget) {
+  if (cand.empty() || !(budget > 0)) return 0;
+  const auto better = [](const Candidate& a, const Candidate& b) {
+    return a.gain > b.gain || (a.gain == b.gain && a.block < b.block);
+  };
+  // In the order of `better` (a strict total order) the round takes candidates while the cost of
+  // those before is below the budget: the first k + 1, where k is the first whose cost with
+  // those before reaches it (or all of them). A weighted quickselect finds k without sorting:
+  // [lo, hi) holds k, every candidate before lo is better than every one from lo on and is
+  // taken, and `before` is their cost (below the budget).
+  size_t lo = 0, hi = cand.size();
+  double before = 0;
+  while (hi - lo > 1) {
+    const size_t mid = lo + (hi - lo) / 2;
+    std::nth_element(cand.begin() + long(lo), cand.begin() + long(mid), cand.begin() + long(hi), better);
+    double part = 0;  // [lo, mid): each better than every one from mid on
+    for (size_t i = lo; i < mid; ++i) part += cand[i].cost;
+    if (before + part >= budget) {
+      hi = mid;
+    } else {
+      before += part;
+      lo = mid;
+    }
+  }
+  return lo + 1;
+}
+
+}  // namespace adaptive_detail
 
 void AdaptiveStill::reset(int32_t width, int32_t height, bool srgb, uint32_t target, const AdaptiveOptions& options) {
   if (width <= 0 || height <= 0) throw std::invalid_argument("AdaptiveStill: an empty image");
@@ -51,16 +127,17 @@ void AdaptiveStill::reset(int32_t width, int32_t height, bool srgb, uint32_t tar
   target_ = target;
   opt_ = options;
   rounds_ = 0;
+  planned_cost_ = 0;
   const size_t values = size_t(width) * size_t(height) * 3;
   sum_.assign(values, 0.0f);
-  sum_sq_.assign(values, 0.0f);
-  enc_sum_.assign(values, 0);
-  enc_sq_.assign(values, 0);
+  clamped_sum_.assign(values, 0.0f);
+  clamped_sq_.assign(values, 0.0f);
   count_.assign(size_t(bw_) * size_t(bh_), 0);
   var_.assign(count_.size(), 0.0);
   cost_.assign(count_.size(), 0.0);
   round_cost_.assign(count_.size(), 0.0);
   plan_.assign(count_.size(), 0);
+  finished_.assign(count_.size(), 0);
   encoded_ = Image(width, height);
   plan_valid_ = false;
   converged_ = false;
@@ -70,9 +147,9 @@ void AdaptiveStill::reset(int32_t width, int32_t height, bool srgb, uint32_t tar
 uint64_t AdaptiveStill::bytes(int32_t width, int32_t height) {
   const uint64_t pixels = uint64_t(std::max(width, 0)) * uint64_t(std::max(height, 0));
   const Rect b = plan_blocks_of({0, 0, std::max(width, 0), std::max(height, 0)});
-  // Four 4-byte values per channel, the encoded average; per block its count, variance, two
-  // costs and plan entry.
-  return pixels * (3 * 16 + 4) + uint64_t(b.area()) * (4 + 8 + 8 + 8 + 4);
+  // Three floats per channel, the encoded average; per block its count, variance, two costs,
+  // plan entry and finished mark.
+  return pixels * (3 * 12 + 4) + uint64_t(b.area()) * (4 + 8 + 8 + 8 + 4 + 1);
 }
 
 void AdaptiveStill::set_uniform(bool on) {
@@ -92,9 +169,11 @@ void AdaptiveStill::make_plan() {
   // while set_uniform holds.
   if (uniform_ || rounds_ < std::min(opt_.uniform, target_)) {
     planned_ = 0;
+    planned_cost_ = 0;
     for (size_t b = 0; b < blocks; ++b) {
       plan_[b] = count_[b] < target_ ? count_[b] : kSkipPacket;
       planned_ += plan_[b] != kSkipPacket;
+      if (plan_[b] != kSkipPacket) planned_cost_ += cost_[b];
     }
     converged_ = planned_ == 0;
     return;
@@ -124,11 +203,7 @@ void AdaptiveStill::make_plan() {
       ++known_n;
     }
   const double fallback = known_n ? known / double(known_n) : 1.0;
-  struct Candidate {
-    double gain;  // error removed per unit of cost by one more sample
-    double cost;
-    size_t b;
-  };
+  using adaptive_detail::Candidate;
   std::vector<Candidate> cand;
   cand.reserve(blocks);
   double whole = 0;  // a whole sample's cost
@@ -145,29 +220,17 @@ void AdaptiveStill::make_plan() {
     cand.push_back({dil[b] / (n * (n + 1)) / c, c, b});
   }
   planned_ = 0;
+  planned_cost_ = 0;
   if (cand.empty()) {
     converged_ = true;
     return;
   }
-  const auto better = [](const Candidate& a, const Candidate& b) { return a.gain > b.gain || (a.gain == b.gain && a.b < b.b); };
-  const double budget = opt_.round_cost * whole;
-  // Only the best ones are taken: order the first twice as many as the budget buys at the
-  // candidates' mean cost (all of them when that is not enough).
-  double cand_cost = 0;
-  for (const Candidate& c : cand) cand_cost += c.cost;
-  const size_t want = size_t(std::min<double>(double(cand.size()), 2.0 * budget / (cand_cost / double(cand.size())) + 64));
-  std::nth_element(cand.begin(), cand.begin() + long(want) - 1, cand.end(), better);
-  std::sort(cand.begin(), cand.begin() + long(want), better);
-  double head = 0;
-  for (size_t i = 0; i < want; ++i) head += cand[i].cost;
-  if (head < budget) std::sort(cand.begin(), cand.end(), better);
-  double spent = 0;
-  for (const Candidate& c : cand) {
-    if (spent >= budget) break;
-    plan_[c.b] = count_[c.b];
-    spent += c.cost;
-    ++planned_;
+  const size_t taken = adaptive_detail::take_best(cand, opt_.round_cost * whole);
+  for (size_t i = 0; i < taken; ++i) {
+    plan_[cand[i].block] = count_[cand[i].block];
+    planned_cost_ += cand[i].cost;
   }
+  planned_ = taken;
 }
 
 // Adds the planned blocks' pixels of a tile whose value i (RGB triples, row by row) is value(i).
@@ -178,21 +241,34 @@ void AdaptiveStill::add_values(const Rect& pixels, Value value) {
   if (converged_) throw std::logic_error("AdaptiveStill::add_tile: the still is converged (an empty plan)");
   plan();
   const size_t tw = size_t(pixels.width());
-  tbb::parallel_for(tbb::blocked_range<int32_t>(pixels.y0, pixels.y1, 8), [&](const tbb::blocked_range<int32_t>& r) {
-    for (int32_t y = r.begin(); y != r.end(); ++y)
-      // Block by block along the row: a skipped block's pixels are passed over at once.
-      for (int32_t bx = pixels.x0 / kPlanBlock; bx * kPlanBlock < pixels.x1; ++bx) {
-        if (plan_[block_of(bx * kPlanBlock, y)] == kSkipPacket) continue;
-        const int32_t x0 = std::max(pixels.x0, bx * kPlanBlock), x1 = std::min(pixels.x1, (bx + 1) * kPlanBlock);
-        const size_t in = (size_t(y - pixels.y0) * tw + size_t(x0 - pixels.x0)) * 3;
-        const size_t at = (size_t(y) * size_t(width_) + size_t(x0)) * 3;
-        for (size_t i = 0; i < size_t(x1 - x0) * 3; ++i) {
-          const float v = value(in + i);
-          sum_[at + i] += v;
-          sum_sq_[at + i] += v * v;
-          const uint32_t e = uint32_t(srgb_ ? raytracer_detail::encode_srgb(v) : raytracer_detail::encode_plain(v));
-          enc_sum_[at + i] += e;
-          enc_sq_[at + i] += e * e;
+  const Rect image{0, 0, width_, height_};
+  const Rect blocks = plan_blocks_of(pixels);  // the blocks the tile touches
+  tbb::parallel_for(tbb::blocked_range<int32_t>(blocks.y0, blocks.y1), [&](const tbb::blocked_range<int32_t>& r) {
+    for (int32_t by = r.begin(); by != r.end(); ++by)
+      for (int32_t bx = blocks.x0; bx < blocks.x1; ++bx) {
+        const size_t b = size_t(by) * size_t(bw_) + size_t(bx);
+        if (plan_[b] == kSkipPacket) continue;
+        const Rect block = intersect({bx * kPlanBlock, by * kPlanBlock, (bx + 1) * kPlanBlock, (by + 1) * kPlanBlock}, image);
+        const Rect part = intersect(block, pixels);
+        for (int32_t y = part.y0; y < part.y1; ++y) {
+          const size_t in = (size_t(y - pixels.y0) * tw + size_t(part.x0 - pixels.x0)) * 3;
+          const size_t at = (size_t(y) * size_t(width_) + size_t(part.x0)) * 3;
+          float* const sum = &sum_[at];
+          float* const csum = &clamped_sum_[at];
+          float* const csq = &clamped_sq_[at];
+          for (size_t i = 0; i < size_t(part.width()) * 3; ++i) {
+            const float v = value(in + i), c = clamped(v);
+            sum[i] += v;
+            csum[i] += c;
+            csq[i] += c * c;
+          }
+        }
+        // The whole block is in this tile: its round is complete, and its sums are still in the
+        // cache (end_round finishes the blocks that tiles split).
+        if (part == block) {
+          if (finished_[b]) throw std::logic_error("AdaptiveStill::add_tile: a block added twice in one round");
+          finish_block(b);
+          finished_[b] = 1;
         }
       }
   });
@@ -235,33 +311,28 @@ void AdaptiveStill::end_round() {
         if (plan_[b] == kSkipPacket) continue;
         if (round_cost_[b] > 0) cost_[b] = round_cost_[b];
         round_cost_[b] = 0;
-        const int32_t x1 = std::min(width_, (bx + 1) * kPlanBlock), y1 = std::min(height_, (by + 1) * kPlanBlock);
-        const double n = ++count_[b];
-        const float inv = 1.0f / float(n);  // as Accumulation::average scales its sums
-        float var = 0;  // n - 1 times the sum of the values' sample variances, encoded
-        for (int32_t y = by * kPlanBlock; y < y1; ++y)
-          for (int32_t x = bx * kPlanBlock; x < x1; ++x) {
-            const size_t pixel = size_t(y) * size_t(width_) + size_t(x);
-            for (int c = 0; c < 3; ++c) {
-              const size_t i = pixel * 3 + size_t(c);
-              const float m = sum_[i] * inv;
-              encoded_.rgba[pixel * 4 + size_t(c)] =
-                  uint8_t(srgb_ ? raytracer_detail::encode_srgb(m) : raytracer_detail::encode_plain(m));
-              const float g = slope(m, srgb_);
-              if (g > 0) {
-                var += g * g * std::max(0.0f, sum_sq_[i] - sum_[i] * m);
-              } else {
-                const float s1 = float(enc_sum_[i]);
-                var += std::max(0.0f, float(enc_sq_[i]) - s1 * s1 * inv);
-              }
-            }
-            encoded_.rgba[pixel * 4 + 3] = 255;
-          }
-        var_[b] = n >= 2 ? double(var) / (n - 1) : 0.0;
+        if (finished_[b])
+          finished_[b] = 0;
+        else
+          finish_block(b);
       }
   });
   ++rounds_;
   plan_valid_ = false;
+}
+
+void AdaptiveStill::finish_block(size_t b) {
+  const int32_t bx = int32_t(b % size_t(bw_)), by = int32_t(b / size_t(bw_));
+  const int32_t x1 = std::min(width_, (bx + 1) * kPlanBlock), y1 = std::min(height_, (by + 1) * kPlanBlock);
+  const double n = ++count_[b];
+  const float inv = 1.0f / float(n);  // as Accumulation::average scales its sums
+  float var = 0;  // n - 1 times the sum of the values' sample variances, as the display sees them
+  for (int32_t y = by * kPlanBlock; y < y1; ++y) {
+    const size_t p0 = size_t(y) * size_t(width_) + size_t(bx * kPlanBlock);
+    var += block_row(&sum_[p0 * 3], &clamped_sum_[p0 * 3], &clamped_sq_[p0 * 3], size_t(x1 - bx * kPlanBlock) * 3, inv,
+                     srgb_, &encoded_.rgba[p0 * 4]);
+  }
+  var_[b] = n >= 2 ? double(var) / (n - 1) : 0.0;
 }
 
 void AdaptiveStill::add(const std::vector<float>& radiance, const CostMap* cost, PacketLayout layout) {

@@ -11,11 +11,12 @@
 // until their summed cost reaches a fraction of a whole sample's, which spreads the samples
 // towards the optimum n_b ~ sqrt(v_b / c_b) round after round (greedy water-filling).
 //
-// - v_b is each value's sample variance through the slope of the encoding at its mean; where
-//   the mean clips (slope 0: an outline against a light source, whose samples do not all clip)
-//   it is the variance of the samples encoded one by one. Then the largest over the block and
-//   its 8 neighbours: a block whose first samples agreed by chance (a thin edge missed by every
-//   jittered ray) still gets samples when its neighbours are noisy.
+// - v_b is the sample variance of each value as the display sees it, clamped to [0, 1], through
+//   the slope of the encoding at the clamped values' mean. Where the mean clips (an outline
+//   against a light source) the samples below 1 still count; a firefly far above 1 counts as 1.
+//   Then the largest over the block and its 8 neighbours: a block whose first samples agreed by
+//   chance (a thin edge missed by every jittered ray) still gets samples when its neighbours are
+//   noisy.
 // - Each pixel keeps its own sequence: a block's next sample is its own count (sampling.h), so
 //   skipping rounds leaves no gaps in the low-discrepancy sequence.
 // - A block is done when it reaches the target count, or when its error (v_b / n_b per value)
@@ -25,6 +26,9 @@
 // A round's tiles may come from several renderers (add_tile, add_cost, then end_round); a tile
 // boundary may cross a block when the renderers' packets are smaller than a block: each part of
 // the block is rendered with the block's sample, and the block counts one sample at end_round.
+// A block that one tile holds whole is finished as that tile is added, while its sums are in
+// the cache.
+#include <cstddef>
 #include <cstdint>
 #include <vector>
 
@@ -33,6 +37,19 @@
 #include "renderer/renderer.h"
 
 namespace tessera {
+
+namespace adaptive_detail {
+struct Candidate {
+  double gain;  // error removed per unit of cost by one more sample
+  double cost;
+  size_t block;
+};
+// The plan's choice: reorders `cand` so that its first k are the best ones (highest gain; equal
+// gains by lower block) and returns k, the fewest whose cost reaches `budget` (all of them when
+// none does; none for a budget of 0 or less). The order within the first k and after is
+// unspecified. Linear time on average.
+size_t take_best(std::vector<Candidate>& cand, double budget);
+}  // namespace adaptive_detail
 
 struct AdaptiveOptions {
   uint32_t uniform = 4;         // samples of every block before any is left out (>= 2)
@@ -79,11 +96,16 @@ class AdaptiveStill {
   bool srgb() const { return srgb_; }
   // The blocks the last plan renders.
   size_t planned() const { return planned_; }
+  // What the last plan's blocks cost when last measured (the cost map's units, ns; 0 for blocks
+  // not measured yet): what the round is expected to cost.
+  double planned_cost() const { return planned_cost_; }
   // The memory a width x height still holds.
   static uint64_t bytes(int32_t width, int32_t height);
 
  private:
   void make_plan();
+  // Counts block b's sample of this round and derives its pixels' average and its variance.
+  void finish_block(size_t b);
   template <class Value>
   void add_values(const Rect& pixels, Value value);
   size_t block_of(int32_t x, int32_t y) const { return size_t(y / kPlanBlock) * size_t(bw_) + size_t(x / kPlanBlock); }
@@ -92,18 +114,18 @@ class AdaptiveStill {
   uint32_t target_ = 1, rounds_ = 0;
   AdaptiveOptions opt_;
   std::vector<float> sum_;                // per pixel and channel (linear radiance)
-  std::vector<float> sum_sq_;             // their squares
-  // Each sample's value as encoded alone (0..255), summed, and its square summed (exact in
-  // integers up to 66,000 samples): the variance where the mean clips.
-  std::vector<uint32_t> enc_sum_, enc_sq_;
+  // The same clamped to [0, 1], and their squares: the variance the display sees.
+  std::vector<float> clamped_sum_, clamped_sq_;
   std::vector<uint32_t> count_;           // per block: samples rendered
   std::vector<double> var_;               // per block: its samples' variance (see above)
   std::vector<double> cost_;              // per block: last measured cost (ns), 0 unknown
   std::vector<double> round_cost_;        // per block: this round's cost so far
   std::vector<uint32_t> plan_;            // per block: sample to render, or kSkipPacket
+  std::vector<uint8_t> finished_;         // per block: its round finished by a tile that held all of it
   Image encoded_;                         // the average, encoded (kept up to date block by block)
   bool plan_valid_ = false, converged_ = false;
   size_t planned_ = 0;
+  double planned_cost_ = 0;
 };
 
 }  // namespace tessera

@@ -1,6 +1,7 @@
 // Adaptive refinement of a still (renderer/adaptive.h): the plans, the averages and when it stops.
 #include <catch2/catch.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <random>
@@ -316,4 +317,77 @@ TEST_CASE("adaptive: a rendered still refined adaptively approaches the plain av
   CHECK(db > first_db + 6);  // it kept refining where it mattered
   CHECK(db > 33);
   CHECK(still.mean_samples() < 40);  // and left the quiet packets alone
+}
+
+TEST_CASE("adaptive: the plan takes the best blocks until the budget as a sort would (equal gains included)",
+          "[adaptive]") {
+  std::mt19937 rng(5);
+  for (int trial = 0; trial < 400; ++trial) {
+    const size_t n = size_t(std::uniform_int_distribution<int>(1, 300)(rng));
+    std::vector<adaptive_detail::Candidate> cand;
+    double total = 0;
+    for (size_t i = 0; i < n; ++i) {
+      // Few distinct gains, so that many are equal and the block decides.
+      const double gain = std::uniform_int_distribution<int>(0, trial % 2 ? 3 : 1000)(rng);
+      const double cost = std::uniform_real_distribution<double>(0.5, 2.0)(rng);
+      cand.push_back({gain, cost, size_t(std::uniform_int_distribution<int>(0, 100000)(rng)) * 1000 + i});
+      total += cost;
+    }
+    const double budget = total * std::uniform_real_distribution<double>(-0.05, 1.1)(rng);
+    // The reference: sorted, then taken while the cost before is below the budget.
+    std::vector<adaptive_detail::Candidate> sorted = cand;
+    std::sort(sorted.begin(), sorted.end(), [](const auto& a, const auto& b) {
+      return a.gain > b.gain || (a.gain == b.gain && a.block < b.block);
+    });
+    std::vector<size_t> want;
+    double spent = 0;
+    for (const auto& c : sorted) {
+      if (!(budget > 0) || spent >= budget) break;
+      want.push_back(c.block);
+      spent += c.cost;
+    }
+    const size_t k = adaptive_detail::take_best(cand, budget);
+    std::vector<size_t> got;
+    for (size_t i = 0; i < k; ++i) got.push_back(cand[i].block);
+    std::sort(want.begin(), want.end());
+    std::sort(got.begin(), got.end());
+    INFO("trial " << trial << ", " << n << " candidates, budget " << budget << " of " << total);
+    REQUIRE(got == want);
+  }
+}
+
+TEST_CASE("adaptive: tiles of an image whose edge blocks stick out give the whole image's rounds; a block added twice is refused",
+          "[adaptive]") {
+  constexpr int w = 30, h = 18;  // the last column and row of blocks hold 2 pixels
+  AdaptiveStill whole, tiled;
+  AdaptiveOptions o;
+  o.round_cost = 0.3;
+  whole.reset(w, h, true, 32, o);
+  tiled.reset(w, h, true, 32, o);
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> u(0.0f, 1.5f);
+  // Four tiles, split inside blocks (column 13, row 6) and on their edges (column 28).
+  const Rect tiles[] = {{0, 0, 13, 6}, {13, 0, w, 6}, {0, 6, 28, h}, {28, 6, w, h}};
+  for (int r = 0; r < 12; ++r) {
+    std::vector<float> rad(size_t(w) * h * 3);
+    for (size_t i = 0; i < rad.size(); ++i) rad[i] = (i / 3) % 7 < 3 ? u(rng) : 0.2f;
+    REQUIRE(whole.plan() == tiled.plan());
+    whole.add(rad);
+    for (const Rect& t : tiles) {
+      std::vector<float> part;
+      for (int y = t.y0; y < t.y1; ++y)
+        part.insert(part.end(), rad.begin() + (y * w + t.x0) * 3, rad.begin() + (y * w + t.x1) * 3);
+      tiled.add_tile(part.data(), t);
+    }
+    tiled.end_round();
+    REQUIRE(tiled.average().rgba == whole.average().rgba);
+    REQUIRE(tiled.mean() == whole.mean());
+  }
+  CHECK(tiled.planned() < size_t(plan_blocks_of({0, 0, w, h}).area()));  // adaptive by now
+  // The same whole block twice in one round.
+  AdaptiveStill twice;
+  twice.reset(w, h, true, 32, o);
+  const std::vector<float> grey(size_t(w) * h * 3, 0.5f);
+  twice.add_tile(grey.data(), {0, 0, w, h});
+  CHECK_THROWS_AS(twice.add_tile(grey.data(), {0, 0, w, h}), std::logic_error);
 }
