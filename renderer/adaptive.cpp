@@ -214,8 +214,7 @@ void AdaptiveStill::make_plan() {
     const double n = count_[b];
     if (count_[b] >= target_) continue;
     const int32_t bx = int32_t(b % size_t(bw_)), by = int32_t(b / size_t(bw_));
-    const double values = double((std::min(width_, (bx + 1) * kPlanBlock) - bx * kPlanBlock) *
-                                 (std::min(height_, (by + 1) * kPlanBlock) - by * kPlanBlock) * 3);
+    const double values = double(block_pixels(bx, by).area() * 3);
     if (dil[b] / n <= opt_.done_below * values) continue;  // its error is out of sight
     cand.push_back({dil[b] / (n * (n + 1)) / c, c, b});
   }
@@ -241,14 +240,13 @@ void AdaptiveStill::add_values(const Rect& pixels, Value value) {
   if (converged_) throw std::logic_error("AdaptiveStill::add_tile: the still is converged (an empty plan)");
   plan();
   const size_t tw = size_t(pixels.width());
-  const Rect image{0, 0, width_, height_};
   const Rect blocks = plan_blocks_of(pixels);  // the blocks the tile touches
   tbb::parallel_for(tbb::blocked_range<int32_t>(blocks.y0, blocks.y1), [&](const tbb::blocked_range<int32_t>& r) {
     for (int32_t by = r.begin(); by != r.end(); ++by)
       for (int32_t bx = blocks.x0; bx < blocks.x1; ++bx) {
         const size_t b = size_t(by) * size_t(bw_) + size_t(bx);
         if (plan_[b] == kSkipPacket) continue;
-        const Rect block = intersect({bx * kPlanBlock, by * kPlanBlock, (bx + 1) * kPlanBlock, (by + 1) * kPlanBlock}, image);
+        const Rect block = block_pixels(bx, by);
         const Rect part = intersect(block, pixels);
         for (int32_t y = part.y0; y < part.y1; ++y) {
           const size_t in = (size_t(y - pixels.y0) * tw + size_t(part.x0 - pixels.x0)) * 3;
@@ -323,13 +321,13 @@ void AdaptiveStill::end_round() {
 
 void AdaptiveStill::finish_block(size_t b) {
   const int32_t bx = int32_t(b % size_t(bw_)), by = int32_t(b / size_t(bw_));
-  const int32_t x1 = std::min(width_, (bx + 1) * kPlanBlock), y1 = std::min(height_, (by + 1) * kPlanBlock);
+  const Rect block = block_pixels(bx, by);
   const double n = ++count_[b];
   const float inv = 1.0f / float(n);  // as Accumulation::average scales its sums
   float var = 0;  // n - 1 times the sum of the values' sample variances, as the display sees them
-  for (int32_t y = by * kPlanBlock; y < y1; ++y) {
-    const size_t p0 = size_t(y) * size_t(width_) + size_t(bx * kPlanBlock);
-    var += block_row(&sum_[p0 * 3], &clamped_sum_[p0 * 3], &clamped_sq_[p0 * 3], size_t(x1 - bx * kPlanBlock) * 3, inv,
+  for (int32_t y = block.y0; y < block.y1; ++y) {
+    const size_t p0 = size_t(y) * size_t(width_) + size_t(block.x0);
+    var += block_row(&sum_[p0 * 3], &clamped_sum_[p0 * 3], &clamped_sq_[p0 * 3], size_t(block.width()) * 3, inv,
                      srgb_, &encoded_.rgba[p0 * 4]);
   }
   var_[b] = n >= 2 ? double(var) / (n - 1) : 0.0;
@@ -368,9 +366,7 @@ double AdaptiveStill::mean_samples() const {
   double s = 0;
   for (int32_t by = 0; by < bh_; ++by)
     for (int32_t bx = 0; bx < bw_; ++bx) {
-      const double area = double((std::min(width_, (bx + 1) * kPlanBlock) - bx * kPlanBlock) *
-                                 (std::min(height_, (by + 1) * kPlanBlock) - by * kPlanBlock));
-      s += area * count_[size_t(by) * size_t(bw_) + size_t(bx)];
+      s += double(block_pixels(bx, by).area()) * count_[size_t(by) * size_t(bw_) + size_t(bx)];
     }
   return s / (double(width_) * double(height_));
 }

@@ -109,6 +109,10 @@ class AdaptiveStill {
   template <class Value>
   void add_values(const Rect& pixels, Value value);
   size_t block_of(int32_t x, int32_t y) const { return size_t(y / kPlanBlock) * size_t(bw_) + size_t(x / kPlanBlock); }
+  // Block (bx, by)'s pixels, clipped to the image.
+  Rect block_pixels(int32_t bx, int32_t by) const {
+    return packets_to_pixels({bx, by, bx + 1, by + 1}, {kPlanBlock, kPlanBlock}, width_, height_);
+  }
   int32_t width_ = 0, height_ = 0, bw_ = 0, bh_ = 0;
   bool srgb_ = true, uniform_ = false;
   uint32_t target_ = 1, rounds_ = 0;
