@@ -391,3 +391,36 @@ TEST_CASE("adaptive: tiles of an image whose edge blocks stick out give the whol
   twice.add_tile(grey.data(), {0, 0, w, h});
   CHECK_THROWS_AS(twice.add_tile(grey.data(), {0, 0, w, h}), std::logic_error);
 }
+
+TEST_CASE("adaptive: radiance at the largest value a tile may carry keeps the plans finite", "[adaptive]") {
+  // check_tile lets a peer's radiance up to 3e38 through; two such samples overflow a float sum.
+  AdaptiveStill still;
+  AdaptiveOptions o;
+  o.round_cost = 0.5;
+  still.reset(W, H, true, 64, o);
+  std::mt19937 rng(9);
+  std::bernoulli_distribution coin(0.5);
+  for (int r = 0; r < 12 && !still.converged(); ++r) {
+    std::vector<float> rad(size_t(W) * H * 3, 0.25f);
+    for (int y = 0; y < H; ++y)
+      for (int x = W / 2; x < W; ++x)
+        for (int c = 0; c < 3; ++c) rad[(size_t(y) * W + size_t(x)) * 3 + size_t(c)] = coin(rng) ? 3.0e38f : 0.0f;
+    still.plan();
+    still.add(rad);
+  }
+  // The noisy half clips or is black: as the display sees it, each value varies between 0 and 1.
+  REQUIRE_FALSE(still.converged());
+  const std::vector<uint32_t>& plan = still.plan();
+  size_t right = 0, left = 0;
+  for (int by = 0; by < H / kPlanBlock; ++by)
+    for (int bx = 0; bx < W / kPlanBlock; ++bx)
+      if (plan[size_t(by) * (W / kPlanBlock) + size_t(bx)] != kSkipPacket) ++(bx >= W / kPlanBlock / 2 ? right : left);
+  CHECK(right > 0);
+  CHECK(left <= size_t(H / kPlanBlock));  // the constant half: at most the column beside the noise
+  const Image avg = still.average();
+  for (int y = 0; y < H; ++y) {
+    CHECK(int(avg.pixel(1, y)[0]) == int(avg.pixel(2, y)[0]));  // the constant half is one grey
+    const int v = avg.pixel(W - 1, y)[0];
+    CHECK((v == 0 || v == 255));
+  }
+}
