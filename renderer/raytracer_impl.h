@@ -141,10 +141,17 @@ inline void sincos_turn(float u, float& sine, float& cosine) {
   const float t2 = t * t;
   const float st = t * (1.0f + t2 * (-1.0f / 6 + t2 * (1.0f / 120 + t2 * (-1.0f / 5040 + t2 * (1.0f / 362880)))));
   const float ct = 1.0f + t2 * (-0.5f + t2 * (1.0f / 24 + t2 * (-1.0f / 720 + t2 * (1.0f / 40320))));
-  const bool swap = (q & 1) != 0;
-  const float s0 = swap ? ct : st, c0 = swap ? st : ct;
-  sine = (q & 2) ? -s0 : s0;
-  cosine = ((q + 1) & 2) ? -c0 : c0;
+  // The quarter's swap and signs as bit operations: GCC 12 leaves a lane loop scalar when it
+  // selects on a bool or nests two selects of one value (the selects here had made the AO
+  // direction loop scalar code).
+  uint32_t sb, cb;
+  std::memcpy(&sb, &st, 4);
+  std::memcpy(&cb, &ct, 4);
+  const uint32_t swap = 0u - uint32_t(q & 1);  // all ones in odd quarters
+  const uint32_t s0 = (sb & ~swap) | (cb & swap), c0 = (cb & ~swap) | (sb & swap);
+  const uint32_t s1 = s0 ^ (uint32_t(q & 2) << 30), c1 = c0 ^ (uint32_t((q + 1) & 2) << 30);
+  std::memcpy(&sine, &s1, 4);
+  std::memcpy(&cosine, &c1, 4);
 }
 
 // Orthonormal basis around n (Duff et al. 2017).
