@@ -46,20 +46,40 @@ std::vector<float> Accumulation::mean() const {
 namespace {
 
 // width x height pixels whose RGB value i is value(i), encoded as the renderer encodes a frame.
-// Rows in parallel (TBB, the calling arena): every refined frame of a still goes through here,
-// 10 ms a 1280x720 frame on one thread.
+// Rows in parallel (TBB, the calling arena): every refined frame of a still goes through here.
+// The values are encoded in runs of contiguous values, one loop per encoding (vector code), and
+// then spread into RGBA; encoding each value where it lands in RGBA, with the encoding chosen
+// per value, was scalar: 10 ms a 1280x720 frame on one thread.
+template <bool Srgb, class Value>
+void encode_rows(Image& out, size_t begin, size_t end, Value value) {
+  constexpr size_t kRun = 256;  // pixels
+  alignas(64) uint8_t codes[kRun * 3];
+  uint8_t* __restrict dst = out.rgba.data();
+  for (size_t p0 = begin; p0 < end; p0 += kRun) {
+    const size_t n = std::min(kRun, end - p0);
+    for (size_t i = 0; i < n * 3; ++i) {
+      const float v = value(p0 * 3 + i);
+      codes[i] = uint8_t(Srgb ? raytracer_detail::encode_srgb(v) : raytracer_detail::encode_plain(v));
+    }
+    for (size_t k = 0; k < n; ++k) {
+      dst[(p0 + k) * 4] = codes[k * 3];
+      dst[(p0 + k) * 4 + 1] = codes[k * 3 + 1];
+      dst[(p0 + k) * 4 + 2] = codes[k * 3 + 2];
+      dst[(p0 + k) * 4 + 3] = 255;
+    }
+  }
+}
+
 template <class Value>
 Image encode_values(int32_t width, int32_t height, bool srgb, Value value) {
   Image out(width, height);
   const size_t W = size_t(std::max(width, 0));
   tbb::parallel_for(tbb::blocked_range<int32_t>(0, std::max(height, 0), 16), [&](const tbb::blocked_range<int32_t>& r) {
-    for (size_t p = size_t(r.begin()) * W; p < size_t(r.end()) * W; ++p) {
-      for (int c = 0; c < 3; ++c) {
-        const float v = value(p * 3 + size_t(c));
-        out.rgba[p * 4 + size_t(c)] = uint8_t(srgb ? raytracer_detail::encode_srgb(v) : raytracer_detail::encode_plain(v));
-      }
-      out.rgba[p * 4 + 3] = 255;
-    }
+    const size_t begin = size_t(r.begin()) * W, end = size_t(r.end()) * W;
+    if (srgb)
+      encode_rows<true>(out, begin, end, value);
+    else
+      encode_rows<false>(out, begin, end, value);
   });
   return out;
 }

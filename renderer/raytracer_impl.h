@@ -108,7 +108,11 @@ enum Feature : unsigned { kAO = 1, kSecondary = 2, kTextures = 4, kAll = 7, kNon
 // degree-6 polynomial in sqrt(c), fitted minimax over that segment: within 0.04 of a code
 // step of the exact curve, so a code differs from the exactly rounded one only where the curve
 // passes within 0.04 of a half step. Plain arithmetic, no table: lane loops are vector code.
-inline float clamp_unit(float c) { return c > 0.0f ? (c < 1.0f ? c : 1.0f) : 0.0f; }
+// Two selects in a row (as a nest of selects on one value, GCC 12 left the loops around scalar).
+inline float clamp_unit(float c) {
+  const float lo = c > 0.0f ? c : 0.0f;  // NaN: 0
+  return lo < 1.0f ? lo : 1.0f;
+}
 inline int encode_plain(float c) { return int(clamp_unit(c) * 255.0f + 0.5f); }
 inline int encode_srgb(float c) {
   c = clamp_unit(c);
