@@ -87,6 +87,16 @@ struct TestNode {
       if (e.kind == kind) out.push_back(e);
     return out;
   }
+  // The node's last `n` events, one JSON line each: what a failing case prints to say where the
+  // node was (a frame that never came, a hang).
+  std::string last_events(size_t n = 40) {
+    flush_logger(sys, logger);
+    std::lock_guard<std::mutex> l(log->mu);
+    std::string out;
+    for (size_t i = log->events.size() > n ? log->events.size() - n : 0; i < log->events.size(); ++i)
+      out += to_json_line(log->events[i]) + "\n";
+    return out;
+  }
   // How many events of `kind` (and for which `pred` holds) the node reported so far.
   size_t count(Ev kind, const std::function<bool(const Event&)>& pred = nullptr) {
     size_t n = 0;

@@ -617,6 +617,9 @@ TEST_CASE("A render request during a still's sample abandons the sample, and the
     CHECK(refined->frame == frame);
     ++frame;
     auto f = c.render_past_still(pavilion_loop().camera(frame), frame);
+    // Once under TSan (2026-11-29) the requested frame never came; the node's last events say
+    // which stage the still's sample was abandoned in, if it was.
+    if (!f) UNSCOPED_INFO("frame " << frame << " never came; the node's last events:\n" << node.last_events());
     REQUIRE(f);
     CHECK_FALSE(f->refined);
     CHECK(f->samples == 1);
