@@ -158,6 +158,15 @@ inline void sincos_turn(float u, float& sine, float& cosine) {
   std::memcpy(&cosine, &c1, 4);
 }
 
+// Orthonormal basis around n (Duff et al. 2017).
+inline void basis(const Vec3& n, Vec3& t, Vec3& b) {
+  float s = std::copysign(1.0f, n.z);
+  float a = -1.0f / (s + n.z);
+  float c = n.x * n.y * a;
+  t = {1 + s * n.x * n.x * a, s * c, -s * n.x};
+  b = {c, s + n.y * n.y * a, -n.y};
+}
+
 // A texture's addressing (size, wrap modes, filter) as plain numbers, fixed when the texture
 // is converted, for texel_coords: GCC 12 leaves a lane loop scalar when it selects on a bool
 // or nests two selects of one value, and selects on these numbers vectorise.
