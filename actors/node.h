@@ -26,6 +26,7 @@
 #include "protocol/memory_budget.h"
 #include "renderer/adaptive.h"
 #include "renderer/denoise.h"
+#include "renderer/sampling.h"
 #include "update/asset_store.h"
 #include "protocol/protocol.h"
 #include "lb/tiler.h"
@@ -72,6 +73,10 @@ struct NodeSettings {
   // Samples per pixel a still refines to after each requested frame, for a client that does
   // not say (protocol record refine); 0 or 1: no refinement.
   uint32_t refine_samples = 0;
+  // AO rays per hit in each sample of a refining still after its requested frame
+  // (renderer/sampling.h, kStillAoSamples); 0: the session's own count. A session with AO off
+  // traces none.
+  uint32_t still_ao_samples = sampling::kStillAoSamples;
   // A refining still on a scene with a sky and AO is denoised (renderer/denoise.h) while its
   // plain average's estimated PSNR is below this (dB); 0: never denoised.
   double denoise_below_db = kDenoiseBelowDb;

@@ -168,10 +168,14 @@ void start_frame(self_ptr self, uint32_t client_frame, bool refine) {
   }
   if (st.closed) return;
   fs.scene = SceneSnapshot{st.scene};  // read-only until the frame actor answers: updates are cached meanwhile
-  // An interactive frame below the page's samples (FrameBudget's levels); every other frame, the
-  // still's samples included, renders the page's settings.
-  const InteractiveSamples samples = st.frame_level > 0 ? st.budget->samples()
-                                                        : InteractiveSamples{st.render.ao_samples, st.render.max_depth};
+  // An interactive frame below the page's samples (FrameBudget's levels); every other frame
+  // renders the page's settings, except that the still's refinements (sample 1 on) trace the
+  // node's still-ao-samples AO rays when the page has AO on: their average converges to the
+  // same image, sooner (renderer/sampling.h, kStillAoSamples).
+  InteractiveSamples samples = st.frame_level > 0 ? st.budget->samples()
+                                                  : InteractiveSamples{st.render.ao_samples, st.render.max_depth};
+  if (fs.sample > 0 && samples.ao_samples > 0 && st.settings->still_ao_samples > 0)
+    samples.ao_samples = st.settings->still_ao_samples;
   fs.ao_samples = int32_t(samples.ao_samples);
   fs.max_depth = int32_t(samples.max_depth);
   m.ao_samples = samples.ao_samples;

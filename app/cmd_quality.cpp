@@ -14,6 +14,7 @@
 #include "renderer/adaptive.h"
 #include "renderer/denoise.h"
 #include "renderer/raytracer.h"
+#include "renderer/sampling.h"
 
 namespace tessera::app {
 namespace {
@@ -29,8 +30,9 @@ const char* kHelp =
     "once and cached in DIR (default $XDG_CACHE_HOME/tessera or ~/.cache/tessera) by scene file,\n"
     "size, frame and settings.\n"
     "  fixed: today's frame (one sample per pixel, N AO rays per hit) for each N of --ao-list.\n"
-    "  progressive: a still that refines: sample after sample (--ao N rays each, default 1)\n"
-    "  averaged, until --seconds (default 5) of rendering or --max-samples (default 65536).\n"
+    "  progressive: a still that refines: sample after sample (--ao N rays each, default 4, the\n"
+    "  node's still-ao-samples) averaged, until --seconds (default 5) of rendering or\n"
+    "  --max-samples (default 65536).\n"
     "  progressive+denoise: the same, denoised as the node denoises a still (renderer/denoise.h,\n"
     "  with the guides of its first sample) while the plain average's estimated PSNR is below\n"
     "  --denoise-below-db D (default the node's, 0..99; 99: always), averaged plainly after; while\n"
@@ -153,7 +155,7 @@ int run(const std::vector<std::string>& argv) {
   const long frame = read_frame(args, setup);
   const std::string mode = args.str("--mode", "progressive");
   const double seconds = args.number("--seconds", 5);
-  const int ao = int(args.integer("--ao", 1));
+  const int ao = int(args.integer("--ao", sampling::kStillAoSamples));
   const int depth = int(args.integer("--depth", 4));
   std::vector<int> ao_list;
   for (double v : parse_number_list("--ao-list", args.str("--ao-list", "1,2,4,8,16,32"))) ao_list.push_back(int(v));
@@ -402,11 +404,12 @@ int run(const std::vector<std::string>& argv) {
   const PacketLayout pl = rt.packet_layout();
   std::printf(
       "{\"summary\": true, \"mode\": \"%s\", \"scene\": %s, \"frame\": %ld, \"width\": %d, \"height\": %d, "
-      "\"depth\": %d, \"samples\": %u, \"elapsed_s\": %.3f, \"psnr_db\": %.3f, \"seconds_to_psnr\": %s, "
+      "\"depth\": %d, \"ao\": %s, \"samples\": %u, \"elapsed_s\": %.3f, \"psnr_db\": %.3f, \"seconds_to_psnr\": %s, "
       "\"%s\": %s, \"ms_per_sample_median\": %s, "
       "\"reference\": {\"samples\": %ld, \"ao\": %d, \"cached\": %s, \"made_s\": %.1f, \"path\": %s}, "
       "\"cpu\": %s, \"isa\": %s, \"packet\": \"%dx%d\", \"threads\": %d, \"load_start\": \"%s\", \"load_end\": \"%s\"}\n",
-      mode.c_str(), json_str(setup.scene_path).c_str(), frame, W, H, depth, samples, elapsed_s, last_db,
+      mode.c_str(), json_str(setup.scene_path).c_str(), frame, W, H, depth,
+      mode == "fixed" ? "null" : std::to_string(ao).c_str(), samples, elapsed_s, last_db,
       levels.json(false).c_str(), mode == "fixed" ? "ao_to_psnr" : "samples_to_psnr", levels.json(true).c_str(),
       step_ms.empty() ? "null" : std::to_string(median(step_ms)).c_str(), ref_samples, ref_ao, cached ? "true" : "false", ref_s, json_str(path).c_str(),
       json_str(cpu_model()).c_str(), json_str(isa_name(pl)).c_str(), pl.w, pl.h, threads, load0.c_str(),

@@ -73,6 +73,9 @@ NodeConfig::NodeConfig() {
       .add(max_texture_size, "max-texture-size", "largest texture width/height")
       .add(refine_samples, "refine-samples",
            "samples per pixel a still refines to after a requested frame, for clients that do not say (0: none)")
+      .add(still_ao_samples, "still-ao-samples",
+           "AO rays per hit in each sample of a refining still after the requested frame, for sessions with AO on "
+           "(0: the session's own count)")
       .add(denoise_below_db, "denoise-below-db",
            "a refining still with AO under a sky is denoised while its estimated PSNR is below this (dB, 0..99; 0: never)")
       .add(adaptive_round, "adaptive-round",
@@ -222,6 +225,9 @@ std::shared_ptr<NodeSettings> NodeConfig::node_settings() const {
   if (refine_samples < 0 || uint32_t(refine_samples) > s->limits.max_refine_samples)
     throw std::invalid_argument("tessera.refine-samples must be in 0.." + std::to_string(s->limits.max_refine_samples));
   s->refine_samples = uint32_t(refine_samples);
+  if (still_ao_samples < 0 || uint32_t(still_ao_samples) > s->limits.max_ao_samples)
+    throw std::invalid_argument("tessera.still-ao-samples must be in 0.." + std::to_string(s->limits.max_ao_samples));
+  s->still_ao_samples = uint32_t(still_ao_samples);
   if (!(denoise_below_db >= 0 && denoise_below_db <= 99))
     throw std::invalid_argument("tessera.denoise-below-db must be in 0..99");
   s->denoise_below_db = denoise_below_db;

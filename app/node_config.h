@@ -33,6 +33,7 @@ struct NodeConfig : caf::actor_system_config {
   bool log_frames = true;
   // Resource bounds (docs/operations.md, "Resource bounds").
   int refine_samples = 0;   // a still's samples per pixel for clients that send no refine record
+  int still_ao_samples = sampling::kStillAoSamples;  // AO rays per hit in a still's later samples (0: the session's)
   double denoise_below_db = kDenoiseBelowDb;  // a refining still is denoised below this PSNR (0: never)
   double adaptive_round = AdaptiveOptions{}.round_cost;  // a still's adaptive rounds, of a sample's cost (0: off)
   int video_kbps = 8000;

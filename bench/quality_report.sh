@@ -1,13 +1,15 @@
 #!/usr/bin/env bash
 # Regenerates docs/results/quality.{jsonl,md,png}: image quality (PSNR against a converged
 # reference) against render time, for today's fixed frame (1 sample per pixel, N AO rays per
-# hit), for a still that refines (progressive samples averaged, 1 AO ray each), and for the
-# same still denoised at every step (renderer/denoise.h), on the pavilion, the living room and
-# the kitchen (frame 0 of each camera loop).
+# hit), for a still that refines (progressive samples averaged, AO rays AO each, default 4:
+# the node's still-ao-samples), denoised (renderer/denoise.h) and adaptively (renderer/adaptive.h),
+# on the pavilion, the living room and the kitchen (frame 0 of each camera loop); then the
+# node's mode (adaptive+denoise) with 1, 2, 4 and 8 AO rays per sample on the two scenes with a
+# sky (the kitchen has none: its AO rays change nothing).
 # Usage: bench/quality_report.sh [W H [THREADS [SECONDS [REF_SAMPLES]]]]
 #        (default 640 360, 2 threads, 8 s per refining still, 1024-sample reference)
 #        NAME=quality-1280x720 bench/quality_report.sh 1280 720 ... writes docs/results/NAME.*
-#        instead of docs/results/quality.*
+#        instead of docs/results/quality.*; AO=N sets the refining stills' AO rays per sample
 # The references (REF_SAMPLES samples of 2 AO rays) are made once and cached by `tessera
 # quality` (~/.cache/tessera); their making is not timed. Run it on a quiet machine.
 set -euo pipefail
@@ -15,6 +17,7 @@ cd "$(dirname "$0")/.."
 W=${1:-640}; H=${2:-360}; THREADS=${3:-2}; SECONDS_=${4:-8}; REF=${5:-1024}
 T=build/app/tessera
 NAME=${NAME:-quality}
+AO=${AO:-4}
 S=../shared/scenes
 out=docs/results
 mkdir -p "$out"
@@ -29,8 +32,16 @@ done
 for sc in pavilion living-room kitchen; do
   $T quality $(common $sc) --mode fixed | sed "s|^{|{\"scene_name\": \"$sc\", |" | tee -a "$out/$NAME.jsonl"
   for mode in progressive progressive+denoise adaptive adaptive+denoise; do
-    $T quality $(common $sc) --mode $mode --ao 1 --seconds "$SECONDS_" | sed "s|^{|{\"scene_name\": \"$sc\", |" \
+    $T quality $(common $sc) --mode $mode --ao "$AO" --seconds "$SECONDS_" | sed "s|^{|{\"scene_name\": \"$sc\", |" \
       | tee -a "$out/$NAME.jsonl" | grep summary
+  done
+done
+# AO rays per sample of the node's still (its AO count is the main row's).
+for sc in pavilion living-room; do
+  for a in 1 2 4 8; do
+    [ "$a" = "$AO" ] && continue
+    $T quality $(common $sc) --mode adaptive+denoise --ao "$a" --seconds "$SECONDS_" \
+      | sed "s|^{|{\"scene_name\": \"$sc\", \"ao_sweep\": true, |" | tee -a "$out/$NAME.jsonl" | grep summary
   done
 done
 python3 - "$out" "$NAME" <<'PY'
@@ -38,6 +49,10 @@ import json, sys, os
 out = sys.argv[1]
 name = sys.argv[2]
 rows = [json.loads(l) for l in open(os.path.join(out, name + ".jsonl"))]
+sweep = [r for r in rows if r.get("summary") and (r.get("ao_sweep") or r["mode"] == "adaptive+denoise")
+         and r["scene_name"] != "kitchen"]
+allrows = rows
+rows = [r for r in rows if not r.get("ao_sweep")]
 summ = [r for r in rows if r.get("summary")]
 s0 = summ[0]
 def t(r, level):
@@ -48,8 +63,8 @@ def t(r, level):
         return f"{v:.2f} s (AO {r['ao_to_psnr'][level]})"
     if r["mode"].startswith("adaptive"):  # the round, and the work by then in mean samples per pixel
         k = r["samples_to_psnr"][level]
-        step = [x for x in rows if not x.get("summary") and x["scene_name"] == r["scene_name"]
-                and x["mode"] == r["mode"] and x.get("round") == k]
+        step = [x for x in allrows if not x.get("summary") and x["scene_name"] == r["scene_name"]
+                and x["mode"] == r["mode"] and x.get("ao") == r.get("ao") and x.get("round") == k]
         work = f", {step[0]['samples']:.1f} samples" if step else ""
         return f"{v:.2f} s (round {k}{work})"
     return f"{v:.2f} s ({r['samples_to_psnr'][level]} samples)"
@@ -63,7 +78,7 @@ md = ["# Image quality against render time: fixed frames and refining stills", "
       "in the table.", "",
       "- **fixed**: today's frame, one sample per pixel through pixel centres with N AO rays per hit; its",
       "  row is the best time among N = 1..32 to reach each level (aliasing caps it).",
-      "- **progressive**: a still that refines, sample after sample (1 AO ray per hit each), averaged as",
+      f"- **progressive**: a still that refines, sample after sample ({summ[1]['ao']} AO rays per hit each), averaged as",
       "  linear radiance (`renderer/sampling.h`, `renderer/accumulation.h`).",
       "- **progressive+denoise**: the same still, denoised as the node denoises it",
       "  (`renderer/denoise.h`: the AO open fraction filtered by SVGF's spatial filter, guided by normal",
@@ -89,6 +104,14 @@ md += ["", "Fixed frames, per AO count:", "", "| scene | AO rays per hit | ms | 
 for r in rows:
     if not r.get("summary") and r["mode"] == "fixed":
         md.append(f"| {r['scene_name']} | {r['ao']} | {r['elapsed_ms']:.1f} | {r['psnr_db']:.2f} |")
+md += ["", "The node's mode (adaptive+denoise) with other AO rays per sample (`--ao N`; the node's",
+       "`still-ao-samples`). The still converges to the same image whatever the count; more rays cost",
+       "more per sample and leave less noise for the filter. The kitchen has no sky: AO changes nothing there.", "",
+       "| scene | AO rays per sample | seconds to 30 dB | to 35 dB | to 40 dB | ms per sample or round (median) | load |",
+       "|---|---|---|---|---|---|---|"]
+for r in sorted(sweep, key=lambda r: (r["scene_name"], r["ao"])):
+    ms = "" if r["ms_per_sample_median"] is None else f"{r['ms_per_sample_median']:.0f}"
+    md.append(f"| {r['scene_name']} | {r['ao']} | {t(r, '30')} | {t(r, '35')} | {t(r, '40')} | {ms} | {r['load_start']} |")
 md += ["", f"![PSNR against seconds]({name}.png)", ""]
 open(os.path.join(out, name + ".md"), "w").write("\n".join(md))
 for sc in ("pavilion", "living-room", "kitchen"):
@@ -108,7 +131,7 @@ set logscale x
 do for [sc in "pavilion living-room kitchen"] {
   set title sc
   plot "/tmp/quality-".sc."-fixed.dat" u 1:2 w lp t "fixed (1 spp, AO 1..32)", \
-       "/tmp/quality-".sc."-progressive.dat" u 1:2 w l lw 2 t "progressive (1 AO ray per sample)", \
+       "/tmp/quality-".sc."-progressive.dat" u 1:2 w l lw 2 t "progressive (${AO} AO rays per sample)", \
        "/tmp/quality-".sc."-progressive+denoise.dat" u 1:2 w l lw 2 t "progressive, denoised", \
        "/tmp/quality-".sc."-adaptive.dat" u 1:2 w l lw 2 t "adaptive", \
        "/tmp/quality-".sc."-adaptive+denoise.dat" u 1:2 w l lw 2 t "adaptive after denoising (the node)"

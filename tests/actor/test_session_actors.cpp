@@ -15,6 +15,7 @@
 #include "protocol/protocol.h"
 #include "renderer/accumulation.h"
 #include "renderer/raytracer.h"
+#include "renderer/sampling.h"
 #include "tests/actor/actor_helpers.h"
 
 using namespace tessera;
@@ -467,10 +468,12 @@ std::vector<ClientRecord> corner_session() {
   return recs;
 }
 
-// The plain averages of a still's first 1, 2, ..., `samples` samples of `recs` (`ao` AO rays
-// each; the session's: one), seeded by frame `seed`, as the session's renderer and frame actor
-// make them: element n - 1 averages n samples. One pass (the tests also run under ASan).
-std::vector<Image> plain_averages(const std::vector<ClientRecord>& recs, uint32_t seed, uint32_t samples, int32_t ao = 1) {
+// The plain averages of a still's first 1, 2, ..., `samples` samples of `recs`, seeded by frame
+// `seed`, as the session's renderer and frame actor make them: element n - 1 averages n
+// samples. The first sample traces `first_ao` AO rays per hit (the session's: one), the later
+// ones `ao` (the node's still-ao-samples). One pass (the tests also run under ASan).
+std::vector<Image> plain_averages(const std::vector<ClientRecord>& recs, uint32_t seed, uint32_t samples,
+                                  int32_t first_ao = 1, int32_t ao = sampling::kStillAoSamples) {
   Scene scene;
   CAF_REQUIRE_EQUAL(apply_records(scene, encode(recs), Limits{}), "");
   scene.set_resolution(32, 32);
@@ -483,7 +486,7 @@ std::vector<Image> plain_averages(const std::vector<ClientRecord>& recs, uint32_
   std::vector<Image> out;
   for (uint32_t k = 0; k < samples; ++k) {
     RenderSettings s;
-    s.ao_samples = ao;
+    s.ao_samples = k == 0 ? first_ao : ao;
     s.frame = seed;
     s.sample = k;
     s.radiance = true;
@@ -517,6 +520,9 @@ Image decoded(const Frame& f) {
 CAF_TEST(a still with AO under a sky is denoised while noisy and shows fewer and better frames) {
   settings->refine_samples = 16;
   settings->denoise_below_db = 99;  // denoised to its end
+  // One AO ray per sample, the noisiest still: with the node's four the plain average of this
+  // tiny image passes 36 dB (below) after five samples.
+  settings->still_ao_samples = 1;
   std::vector<ClientRecord> recs = tiny_scene();  // the fixture's, and the corner
   for (auto& r : corner_scene()) recs.push_back(r);
   client(corner_session());
@@ -533,7 +539,7 @@ CAF_TEST(a still with AO under a sky is denoised while noisy and shows fewer and
   // of as many samples to what those samples converge to with AO alone converged (64 rays
   // each, at the same sub-pixel positions: the anti-aliasing is not the denoiser's to do), all
   // through the same JPEG encoding (whose error at 32x32 would otherwise outweigh the noise).
-  const std::vector<Image> plain = plain_averages(recs, 1, 16), converged = plain_averages(recs, 1, 16, 64);
+  const std::vector<Image> plain = plain_averages(recs, 1, 16, 1, 1), converged = plain_averages(recs, 1, 16, 64, 64);
   CAF_CHECK(decoded(frames[0]).rgba == through_jpeg(plain[0]).rgba);
   for (size_t i = 1; i < frames.size(); ++i) {
     const uint32_t n = frames[i].samples;
@@ -668,6 +674,61 @@ CAF_TEST(a still is averaged plainly once its estimate passes the threshold and 
     const std::vector<Image> plain = plain_averages(recs, seed, 6);
     for (auto& f : frames) CAF_CHECK(decoded(f).rgba == through_jpeg(plain[f.samples - 1]).rgba);
   }
+}
+
+CAF_TEST(a refining still traces the node still AO rays after its requested frame and none with AO off) {
+  settings->refine_samples = 4;
+  settings->denoise_below_db = 0;  // plain averages, compared exactly
+  auto mu = std::make_shared<std::mutex>();
+  auto logged = std::make_shared<std::vector<int64_t>>();  // per frame shown, its AO rays per hit
+  settings->log = [mu, logged](const Event& e) {
+    if (e.kind != Ev::frame) return;
+    const Json* ao = e.field("ao");
+    std::lock_guard<std::mutex> lock(*mu);
+    logged->push_back(ao ? ao->as_int() : -1);
+  };
+  std::vector<ClientRecord> recs = tiny_scene();  // the fixture's, and the corner
+  for (auto& r : corner_scene()) recs.push_back(r);
+  struct Case {
+    const char* name;
+    uint32_t still_ao, page_ao;
+    std::vector<int64_t> rays;  // per frame
+  };
+  const std::vector<Case> cases = {
+      {"the default", sampling::kStillAoSamples, 1, {1, 4, 4, 4}},
+      {"two rays", 2, 1, {1, 2, 2, 2}},
+      {"0: the session's", 0, 1, {1, 1, 1, 1}},
+      {"AO off on the page", 2, 0, {0, 0, 0, 0}},
+  };
+  uint32_t frame = 0;
+  for (const Case& c : cases) {
+    CAF_MESSAGE(c.name);
+    settings->still_ao_samples = c.still_ao;
+    {
+      std::lock_guard<std::mutex> lock(sink->mu);
+      sink->records.clear();
+    }
+    {
+      std::lock_guard<std::mutex> lock(*mu);
+      logged->clear();
+    }
+    std::vector<ClientRecord> session = corner_session();
+    session.push_back(protocol::Settings{c.page_ao, 4});
+    client(session);
+    client({RenderRequest{++frame}});
+    run();
+    auto frames = sink->all<Frame>();
+    CAF_REQUIRE_EQUAL(frames.size(), 4u);
+    {
+      std::lock_guard<std::mutex> lock(*mu);
+      CAF_CHECK_EQUAL(*logged, c.rays);
+    }
+    // Exactly the averages of such samples, seeded by the still's own first frame.
+    const uint32_t seed = status().frames_started - 3;
+    const std::vector<Image> plain = plain_averages(recs, seed, 4, int32_t(c.rays[0]), int32_t(c.rays[1]));
+    for (auto& f : frames) CAF_CHECK(decoded(f).rgba == through_jpeg(plain[f.samples - 1]).rgba);
+  }
+  CAF_CHECK_EQUAL(sink->all<ErrorReply>().size(), 0u);
 }
 
 CAF_TEST(refined adaptively a still renders part of its blocks after its uniform rounds and ends converged) {

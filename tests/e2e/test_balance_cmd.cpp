@@ -14,6 +14,7 @@
 #include <unistd.h>
 
 #include "core/image.h"
+#include "renderer/sampling.h"
 #include "tests/e2e/time_scale.h"
 
 using nlohmann::json;
@@ -409,7 +410,11 @@ TEST_CASE("tessera quality: a refining still gains PSNR sample by sample, the re
   CHECK(sum["summary"].get<bool>());
   CHECK(sum["reference"]["cached"].get<bool>() == false);
   CHECK(sum["samples"].get<int>() == 16);
-  for (size_t i = 0; i < 16; ++i) CHECK(p.lines[i]["samples"].get<int>() == int(i + 1));
+  CHECK(sum["ao"].get<int>() == tessera::sampling::kStillAoSamples);  // the node's AO rays per sample of a still
+  for (size_t i = 0; i < 16; ++i) {
+    CHECK(p.lines[i]["samples"].get<int>() == int(i + 1));
+    CHECK(p.lines[i]["ao"].get<int>() == tessera::sampling::kStillAoSamples);
+  }
   // Averaging samples converges on the reference (the pavilion frame has AO and edges).
   const double first = p.lines[0]["psnr_db"].get<double>(), last = p.lines[15]["psnr_db"].get<double>();
   INFO("1 sample " << first << " dB, 16 samples " << last << " dB");
