@@ -31,6 +31,7 @@
 #include "codecs/jpeg.h"
 #include "renderer/accumulation.h"
 #include "renderer/denoise.h"
+#include "renderer/sampling.h"
 #include "tests/cluster/serve_node.h"
 #include "tests/e2e/node_fixture.h"
 
@@ -86,7 +87,8 @@ Image direct(const SharedScene& s, size_t k, uint32_t seq) {
 }
 
 // The progressive still of camera `k` as a session refines it: samples 0..n-1 seeded by the
-// still's first frame `seed`, averaged as radiance (renderer/accumulation.h), and denoised as
+// still's first frame `seed` (sample 0 with the session's AO rays, the later ones with the
+// node's still-ao-samples), averaged as radiance (renderer/accumulation.h), and denoised as
 // the node denoises it (AO under a sky, the node's default threshold; frame_actor.cpp).
 Image direct_refined(const SharedScene& s, size_t k, uint32_t seed, uint32_t n) {
   Scene scene;
@@ -100,7 +102,7 @@ Image direct_refined(const SharedScene& s, size_t k, uint32_t seed, uint32_t n) 
   Image out;
   for (uint32_t i = 0; i < n; ++i) {
     RenderSettings settings;
-    settings.ao_samples = kAo;
+    settings.ao_samples = i == 0 ? kAo : sampling::kStillAoSamples;
     settings.max_depth = kDepth;
     settings.frame = seed;
     settings.sample = i;
