@@ -227,6 +227,7 @@ TEST_CASE("Bad cluster settings end serve with a clear error", "[cluster]") {
   refused({"--tessera.task-timeout-ms=10"}, "task-timeout-ms must be >= 50");
   refused({"--tessera.refine-samples=5000"}, "refine-samples must be in 0..4096");
   refused({"--tessera.still-ao-samples=257"}, "still-ao-samples must be in 0..256");
+  refused({"--tessera.still-ao-samples=-1"}, "still-ao-samples must be in 0..256");
   refused({"--tessera.frame-budget-ms=-1"}, "frame-budget-ms must be in 0..60000");
   refused({"--tessera.still-delay-ms=10001"}, "still-delay-ms must be in 0..10000");
   refused({"--tessera.adaptive-round=1.5"}, "adaptive-round must be in 0..1");
