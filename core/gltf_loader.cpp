@@ -11,6 +11,7 @@
 #include <functional>
 #include <limits>
 #include <map>
+#include <set>
 #include <stdexcept>
 #include <utility>
 
@@ -45,9 +46,8 @@ struct LoadError : std::runtime_error {
 };
 
 // Reads accessor `index` as `comps` floats per element (converting normalized integers).
-// An accessor without a bufferView is all zeros (sparse-only accessors are not used by our
-// scenes); it may hold at most this many elements, so that a count alone cannot allocate
-// gigabytes. Accessors with a bufferView are bounded by their (checked) bufferView instead.
+// An accessor without a bufferView is all zeros before its sparse substitutions; it may hold
+// at most this many elements, so that a count alone cannot allocate gigabytes. Accessors with a bufferView are bounded by their (checked) bufferView instead.
 constexpr size_t kMaxZeroAccessor = size_t(1) << 24;
 
 // Where accessor `acc`'s `count` elements of `elem` bytes lie: checked against its bufferView
@@ -86,38 +86,103 @@ void check_buffer_views(const tinygltf::Model& m, const std::string& path) {
   }
 }
 
+// One component of a vertex attribute as a float (glTF 2.0, "Accessor Data Types", and
+// KHR_mesh_quantization, which allows every integer type below for positions, normals and
+// texture coordinates): a float as it is, an integer as its value, a normalized unsigned one
+// over its maximum, a normalized signed one over its maximum and clamped at -1.
+float component(const unsigned char* p, int type, bool normalized) {
+  switch (type) {
+    case TINYGLTF_COMPONENT_TYPE_FLOAT: { float v; std::memcpy(&v, p, 4); return v; }
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: return normalized ? p[0] / 255.0f : float(p[0]);
+    case TINYGLTF_COMPONENT_TYPE_BYTE: {
+      int8_t v; std::memcpy(&v, p, 1);
+      return normalized ? std::fmax(v / 127.0f, -1.0f) : float(v);
+    }
+    case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: { uint16_t v; std::memcpy(&v, p, 2); return normalized ? v / 65535.0f : float(v); }
+    case TINYGLTF_COMPONENT_TYPE_SHORT: {
+      int16_t v; std::memcpy(&v, p, 2);
+      return normalized ? std::fmax(v / 32767.0f, -1.0f) : float(v);
+    }
+    default: return 0.0f;  // not reached: read_floats checks the type first
+  }
+}
+
+bool float_component_type(int type) {
+  return type == TINYGLTF_COMPONENT_TYPE_FLOAT || type == TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE ||
+         type == TINYGLTF_COMPONENT_TYPE_BYTE || type == TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT ||
+         type == TINYGLTF_COMPONENT_TYPE_SHORT;
+}
+
+// A sparse accessor's substitutions (glTF 2.0, "Sparse Accessors"): `count` strictly increasing
+// indices of `acc`'s elements and as many tightly packed elements of `elem` bytes that replace
+// them. Calls put(element index, the replacement's bytes) for each, after checking that both
+// arrays lie inside their bufferViews and that every index is below the accessor's count.
+template <class Put>
+void apply_sparse(const tinygltf::Model& m, const tinygltf::Accessor& acc, size_t elem, const std::string& what, Put put) {
+  if (!acc.sparse.isSparse) return;
+  const auto& sp = acc.sparse;
+  if (sp.count < 1 || size_t(sp.count) > acc.count)
+    throw LoadError(what + ": sparse accessor with " + std::to_string(sp.count) + " substitutions for " +
+                    std::to_string(acc.count) + " elements");
+  const int itype = sp.indices.componentType;
+  const size_t isize = itype == TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE    ? 1
+                       : itype == TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT ? 2
+                       : itype == TINYGLTF_COMPONENT_TYPE_UNSIGNED_INT   ? 4
+                                                                         : 0;
+  if (isize == 0) throw LoadError(what + ": sparse indices must be unsigned bytes, shorts or ints");
+  const size_t n = size_t(sp.count);
+  auto span = [&](int view, int offset, size_t size, const char* part) -> const unsigned char* {
+    if (view < 0 || size_t(view) >= m.bufferViews.size() || offset < 0)
+      throw LoadError(what + ": sparse " + part + " name no bufferView");
+    const auto& bv = m.bufferViews[size_t(view)];
+    // In divisions, not products: a count from the file cannot overflow the check.
+    if (size_t(offset) > bv.byteLength || (bv.byteLength - size_t(offset)) / size < n)
+      throw LoadError(what + ": sparse " + part + " read past the end of bufferView " + std::to_string(view));
+    return m.buffers[size_t(bv.buffer)].data.data() + bv.byteOffset + size_t(offset);
+  };
+  const unsigned char* idx = span(sp.indices.bufferView, sp.indices.byteOffset, isize, "indices");
+  const unsigned char* val = span(sp.values.bufferView, sp.values.byteOffset, elem, "values");
+  uint64_t last = 0;
+  for (size_t k = 0; k < n; ++k) {
+    uint32_t i = 0;
+    if (isize == 1) i = idx[k];
+    else if (isize == 2) { uint16_t v; std::memcpy(&v, idx + 2 * k, 2); i = v; }
+    else std::memcpy(&i, idx + 4 * k, 4);
+    if (i >= acc.count || (k > 0 && i <= last))
+      throw LoadError(what + ": sparse index " + std::to_string(i) + " out of range or not increasing");
+    last = i;
+    put(size_t(i), val + k * elem);
+  }
+}
+
 std::vector<float> read_floats(const tinygltf::Model& m, int index, int comps, const std::string& what) {
   if (index < 0 || size_t(index) >= m.accessors.size()) throw LoadError(what + ": accessor index out of range");
   const auto& acc = m.accessors[index];
   int nc = tinygltf::GetNumComponentsInType(acc.type);
   if (nc != comps) throw LoadError(what + ": expected " + std::to_string(comps) + " components, got " + std::to_string(nc));
-  if (acc.bufferView < 0) {
+  if (!float_component_type(acc.componentType))
+    throw LoadError(what + ": unsupported component type " + std::to_string(acc.componentType));
+  const int type = acc.componentType;
+  const size_t csize = size_t(tinygltf::GetComponentSizeInBytes(uint32_t(type)));
+  std::vector<float> out;
+  if (acc.bufferView < 0) {  // all zeros, unless sparse substitutions follow
     if (acc.count > kMaxZeroAccessor)
       throw LoadError(what + ": accessor without a bufferView has " + std::to_string(acc.count) + " elements (at most " +
                       std::to_string(kMaxZeroAccessor) + ")");
-    return std::vector<float>(acc.count * comps, 0.0f);
-  }
-  int csize = tinygltf::GetComponentSizeInBytes(acc.componentType);
-  if (csize <= 0) throw LoadError(what + ": bad component type");
-  const auto span = accessor_span(m, acc, size_t(csize) * comps, what);
-  const auto& buf = m.buffers[m.bufferViews[acc.bufferView].buffer].data;
-  const size_t start = span.start, stride = span.stride;
-  std::vector<float> out(acc.count * comps, 0.0f);
-  for (size_t i = 0; i < acc.count; ++i) {
-    const unsigned char* p = buf.data() + start + i * stride;
-    for (int c = 0; c < comps; ++c) {
-      float v = 0;
-      switch (acc.componentType) {
-        case TINYGLTF_COMPONENT_TYPE_FLOAT: std::memcpy(&v, p + c * 4, 4); break;
-        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_BYTE: v = p[c] / (acc.normalized ? 255.0f : 1.0f); break;
-        case TINYGLTF_COMPONENT_TYPE_UNSIGNED_SHORT: {
-          uint16_t s; std::memcpy(&s, p + c * 2, 2); v = s / (acc.normalized ? 65535.0f : 1.0f); break;
-        }
-        default: throw LoadError(what + ": unsupported component type " + std::to_string(acc.componentType));
-      }
-      out[i * comps + c] = v;
+    out.assign(acc.count * comps, 0.0f);
+  } else {
+    const auto span = accessor_span(m, acc, csize * comps, what);
+    const auto& buf = m.buffers[m.bufferViews[acc.bufferView].buffer].data;
+    const size_t start = span.start, stride = span.stride;
+    out.assign(acc.count * comps, 0.0f);
+    for (size_t i = 0; i < acc.count; ++i) {
+      const unsigned char* p = buf.data() + start + i * stride;
+      for (int c = 0; c < comps; ++c) out[i * comps + c] = component(p + size_t(c) * csize, type, acc.normalized);
     }
   }
+  apply_sparse(m, acc, csize * comps, what, [&](size_t i, const unsigned char* p) {
+    for (int c = 0; c < comps; ++c) out[i * comps + c] = component(p + size_t(c) * csize, type, acc.normalized);
+  });
   return out;
 }
 
@@ -138,6 +203,11 @@ std::vector<uint32_t> read_indices(const tinygltf::Model& m, int index, const st
     else if (csize == 2) { uint16_t s; std::memcpy(&s, p, 2); out[i] = s; }
     else std::memcpy(&out[i], p, 4);
   }
+  apply_sparse(m, acc, size_t(csize), what + " indices", [&](size_t i, const unsigned char* p) {
+    if (csize == 1) out[i] = p[0];
+    else if (csize == 2) { uint16_t s; std::memcpy(&s, p, 2); out[i] = s; }
+    else std::memcpy(&out[i], p, 4);
+  });
   return out;
 }
 
@@ -167,6 +237,71 @@ double number_or(const tinygltf::Value& obj, const char* key, double fallback) {
   if (!obj.IsObject() || !obj.Has(key)) return fallback;
   const auto& v = obj.Get(key);
   return v.IsNumber() ? v.GetNumberAsDouble() : fallback;
+}
+
+// A triangle strip or fan's vertex order as a list of triangles (glTF 2.0, "Meshes"): strip
+// triangle i is (v_i, v_i+1+i%2, v_i+2-i%2), fan triangle i is (v_i+1, v_i+2, v_0).
+std::vector<uint32_t> triangle_list(const std::vector<uint32_t>& v, bool fan) {
+  std::vector<uint32_t> out;
+  if (v.size() < 3) return out;
+  out.reserve((v.size() - 2) * 3);
+  for (size_t i = 0; i + 2 < v.size(); ++i) {
+    if (fan) out.insert(out.end(), {v[i + 1], v[i + 2], v[0]});
+    else out.insert(out.end(), {v[i], v[i + 1 + i % 2], v[i + 2 - i % 2]});
+  }
+  return out;
+}
+
+// The glTF extensions this loader implements (KHR_mesh_quantization: the integer component
+// types of read_floats).
+const std::set<std::string> kSupportedExtensions = {
+    "KHR_lights_punctual",    "KHR_materials_emissive_strength", "KHR_materials_ior", "KHR_materials_transmission",
+    "KHR_materials_unlit",    "KHR_mesh_quantization",           "KHR_texture_transform"};
+
+std::string supported_extensions() {
+  std::string all;
+  for (const std::string& e : kSupportedExtensions) all += (all.empty() ? "" : ", ") + e;
+  return all;
+}
+
+// How a material's textures map a primitive's texture coordinates: which TEXCOORD_n set
+// (textureInfo.texCoord), and KHR_texture_transform's affine map of it, baked into the
+// primitive's coordinates at load. uv' = offset + R(rotation) (scale * uv), R's columns
+// (cos, sin) and (-sin, cos), as the extension's GLSL writes it.
+struct UvMapping {
+  int set = 0;
+  bool transformed = false;
+  float m[6] = {1, 0, 0, 0, 1, 0};  // u' = m0 u + m1 v + m2, v' = m3 u + m4 v + m5
+  bool operator==(const UvMapping& o) const {
+    return set == o.set && transformed == o.transformed && std::equal(m, m + 6, o.m);
+  }
+};
+
+UvMapping uv_mapping(const tinygltf::TextureInfo& info) {
+  UvMapping u;
+  u.set = info.texCoord;
+  auto it = info.extensions.find("KHR_texture_transform");
+  if (it == info.extensions.end() || !it->second.IsObject()) return u;
+  const tinygltf::Value& t = it->second;
+  auto pair = [&](const char* key, float a, float b) -> std::pair<float, float> {
+    if (!t.Has(key)) return {a, b};
+    const tinygltf::Value& v = t.Get(key);
+    if (!v.IsArray() || v.ArrayLen() != 2 || !v.Get(0).IsNumber() || !v.Get(1).IsNumber()) return {a, b};
+    return {float(v.Get(0).GetNumberAsDouble()), float(v.Get(1).GetNumberAsDouble())};
+  };
+  const auto [ou, ov] = pair("offset", 0, 0);
+  const auto [su, sv] = pair("scale", 1, 1);
+  const float r = float(number_or(t, "rotation", 0));
+  if (t.Has("texCoord") && t.Get("texCoord").IsNumber()) {  // a set index; anything else names no set
+    const double set = t.Get("texCoord").GetNumberAsDouble();
+    u.set = set >= 0 && set <= 1024 ? int(set) : -1;
+  }
+  if (!(std::isfinite(ou) && std::isfinite(ov) && std::isfinite(su) && std::isfinite(sv) && std::isfinite(r))) return u;
+  const float c = std::cos(r), s = std::sin(r);
+  u.transformed = true;
+  u.m[0] = c * su; u.m[1] = -s * sv; u.m[2] = ou;
+  u.m[3] = s * su; u.m[4] = c * sv;  u.m[5] = ov;
+  return u;
 }
 
 Material convert_material(const tinygltf::Material& gm, const std::map<int, Id>& texture_ids,
@@ -223,6 +358,12 @@ Material convert_material(const tinygltf::Material& gm, const std::map<int, Id>&
     mat.opacity = alpha;
   } else if (gm.alphaMode == "BLEND") {
     mat.opacity = alpha;  // see-through weighted by 1 - opacity
+  }
+  if (gm.extensions.count("KHR_materials_unlit")) {  // the base colour as it is, no lighting
+    mat.model = Material::Model::matte;
+    mat.diffuse_color = base;
+    mat.reflection = mat.refraction = 0;
+    mat.specular_color = Vec3{0.0f};
   }
   mat.double_sided = gm.doubleSided;
   mat.use_vertex_color = true;  // glTF: a primitive's COLOR_0 multiplies the base colour (meshes without one: no change)
@@ -362,6 +503,20 @@ LoadedScene load_gltf(const std::string& path, const GltfOptions& options) {
 
   check_buffer_views(model, path);
   LoadedScene out;
+  // Extensions: a file that requires one this loader does not implement is refused by name
+  // (Draco or meshopt compressed geometry would otherwise load as nothing, or as garbage);
+  // ones it only uses are named in one warning, and the file loads without them.
+  {
+    std::string required, used;
+    for (const std::string& e : model.extensionsRequired)
+      if (!kSupportedExtensions.count(e)) required += (required.empty() ? "" : ", ") + e;
+    if (!required.empty())
+      throw LoadError(path + ": requires glTF extensions this loader does not implement: " + required +
+                      " (implemented: " + supported_extensions() + ")");
+    for (const std::string& e : model.extensionsUsed)
+      if (!kSupportedExtensions.count(e)) used += (used.empty() ? "" : ", ") + e;
+    if (!used.empty()) out.warnings.push_back(path + ": glTF extensions ignored: " + used);
+  }
   out.times.parse_ms = ms_since(t0);
   Scene& scene = out.scene;
 
@@ -422,9 +577,19 @@ LoadedScene load_gltf(const std::string& path, const GltfOptions& options) {
   }
 
   std::vector<Id> material_ids(model.materials.size(), kNoId);
+  std::vector<UvMapping> uv_of(model.materials.size());  // the texture coordinates each material's textures read
   for (size_t mi = 0; mi < model.materials.size(); ++mi) {
     material_ids[mi] = next_id++;
-    scene.set_material(material_ids[mi], convert_material(model.materials[mi], texture_ids, out.warnings, path));
+    const auto& gm = model.materials[mi];
+    scene.set_material(material_ids[mi], convert_material(gm, texture_ids, out.warnings, path));
+    // A mesh has one set of texture coordinates: the base colour texture's, else the emissive's.
+    const auto& base = gm.pbrMetallicRoughness.baseColorTexture;
+    const auto& emissive = gm.emissiveTexture;
+    uv_of[mi] = uv_mapping(base.index >= 0 ? base : emissive);
+    if (base.index >= 0 && emissive.index >= 0 && !(uv_mapping(emissive) == uv_of[mi]))
+      out.warnings.push_back(path + ": material '" + gm.name +
+                             "': its emissive texture reads other texture coordinates than its base colour texture; "
+                             "both read the base colour's");
   }
 
   // Geometry: one set of buffers per primitive, shared by every node that instances the mesh.
@@ -439,8 +604,9 @@ LoadedScene load_gltf(const std::string& path, const GltfOptions& options) {
     for (size_t pi = 0; pi < gmesh.primitives.size(); ++pi) {
       const auto& p = gmesh.primitives[pi];
       std::string what = path + ": mesh '" + gmesh.name + "' primitive " + std::to_string(pi);
-      if (p.mode != TINYGLTF_MODE_TRIANGLES && p.mode != -1) {
-        out.warnings.push_back(what + ": mode " + std::to_string(p.mode) + " is not triangles; left out");
+      const bool strip = p.mode == TINYGLTF_MODE_TRIANGLE_STRIP, fan = p.mode == TINYGLTF_MODE_TRIANGLE_FAN;
+      if (p.mode != TINYGLTF_MODE_TRIANGLES && p.mode != -1 && !strip && !fan) {
+        out.warnings.push_back(what + ": mode " + std::to_string(p.mode) + " (points or lines) is not triangles; left out");
         continue;
       }
       auto pit = p.attributes.find("POSITION");
@@ -463,8 +629,20 @@ LoadedScene load_gltf(const std::string& path, const GltfOptions& options) {
       prim.positions = add_floats(prim.pos, 3);
       if (auto it = p.attributes.find("NORMAL"); it != p.attributes.end())
         prim.normals = add_floats(read_floats(model, it->second, 3, what + " NORMAL"), 3);
-      if (auto it = p.attributes.find("TEXCOORD_0"); it != p.attributes.end())
-        prim.texcoords = add_floats(read_floats(model, it->second, 2, what + " TEXCOORD_0"), 2);
+      {
+        const UvMapping uv = p.material >= 0 && size_t(p.material) < uv_of.size() ? uv_of[size_t(p.material)] : UvMapping{};
+        const std::string set = "TEXCOORD_" + std::to_string(uv.set);
+        if (auto it = p.attributes.find(set); it != p.attributes.end()) {
+          std::vector<float> t = read_floats(model, it->second, 2, what + " " + set);
+          if (uv.transformed)
+            for (size_t i = 0; i + 1 < t.size(); i += 2) {
+              const float u = t[i], v = t[i + 1];
+              t[i] = uv.m[0] * u + uv.m[1] * v + uv.m[2];
+              t[i + 1] = uv.m[3] * u + uv.m[4] * v + uv.m[5];
+            }
+          prim.texcoords = add_floats(std::move(t), 2);
+        }
+      }
       // COLOR_0: RGB or RGBA (alpha left out), float or normalised unsigned byte/short; linear.
       if (auto it = p.attributes.find("COLOR_0"); it != p.attributes.end()) {
         const int index = it->second;
@@ -486,12 +664,18 @@ LoadedScene load_gltf(const std::string& path, const GltfOptions& options) {
         else
           prim.colors = add_floats(std::move(rgb), 3);
       }
-      if (p.indices >= 0) {
+      if (p.indices >= 0 || strip || fan) {
         Buffer ib;
         ib.type = Buffer::Type::u32;
-        ib.u = read_indices(model, p.indices, what);
+        if (p.indices >= 0) {
+          ib.u = read_indices(model, p.indices, what);
+        } else {
+          ib.u.resize(nv);
+          for (size_t i = 0; i < nv; ++i) ib.u[i] = uint32_t(i);
+        }
         for (uint32_t i : ib.u)
           if (i >= nv) throw LoadError(what + ": index " + std::to_string(i) + " >= vertex count " + std::to_string(nv));
+        if (strip || fan) ib.u = triangle_list(ib.u, fan);
         if (ib.u.size() % 3) throw LoadError(what + ": index count is not a multiple of 3");
         prim.indices = next_id++;
         scene.set_buffer(prim.indices, std::move(ib));
@@ -564,7 +748,9 @@ LoadedScene load_gltf(const std::string& path, const GltfOptions& options) {
       }
     }
     if (auto it = node.extensions.find("KHR_lights_punctual"); it != node.extensions.end() && lights_ext) {
-      int li = int(number_or(it->second, "light", -1));
+      // Converted only within int's range: a double beyond it (1e300) makes the cast undefined.
+      const double index = number_or(it->second, "light", -1);
+      const int li = index >= 0 && index < 1e9 ? int(index) : -1;
       const auto& arr = lights_ext->Get("lights");
       if (li >= 0 && arr.IsArray() && size_t(li) < arr.ArrayLen()) {
         const auto& gl = arr.Get(li);

@@ -240,7 +240,49 @@ std::string gltf(const std::string& nodes, const std::string& scene_nodes, bool 
   return s;
 }
 
+// What real exporters write besides float triangle lists: quantized attributes
+// (KHR_mesh_quantization), a sparse accessor, a strip and a fan, a second texture coordinate
+// set under KHR_texture_transform, and an unlit material.
+std::string gltf_conformance() {
+  std::vector<uint8_t> bin;
+  for (int16_t v : {-32767, -32767, 0, 0, 32767, -32767, 0, 0, -32767, 32767, 0, 0, 32767, 32767, 0, 0}) append(bin, v);  // 0: 32 B
+  for (int8_t v : {0, 0, 127, 0, 0, 0, 127, 0, 0, 0, 127, 0, 0, 0, 127, 0}) append(bin, v);                        // 32: 16 B
+  for (uint16_t v : {0, 0, 65535, 0, 0, 65535, 65535, 65535}) append(bin, v);                                   // 48: 16 B
+  for (float v : {0.f, 0.f, 1.f, 0.f, 0.f, 1.f, 1.f, 1.f}) append(bin, v);                                      // 64: 32 B
+  for (uint8_t v : {3, 0, 0, 0}) append(bin, v);                                                                // 96: 4 B
+  for (float v : {1.f, 1.f, 0.5f}) append(bin, v);                                                              // 100: 12 B
+  Image img(4, 4);
+  for (size_t i = 0; i < img.rgba.size(); ++i) img.rgba[i] = uint8_t(i * 7);
+  std::vector<uint8_t> jpeg;
+  std::string err;
+  JpegEncoder().encode(img, 80, jpeg, err);
+  return R"({"asset": {"version": "2.0"},
+  "extensionsUsed": ["KHR_mesh_quantization", "KHR_texture_transform", "KHR_materials_unlit"],
+  "extensionsRequired": ["KHR_mesh_quantization"],
+  "buffers": [{"byteLength": 112, "uri": "data:application/octet-stream;base64,)" + base64(bin) + R"("}],
+  "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 32, "byteStride": 8},
+                  {"buffer": 0, "byteOffset": 32, "byteLength": 16, "byteStride": 4},
+                  {"buffer": 0, "byteOffset": 48, "byteLength": 16}, {"buffer": 0, "byteOffset": 64, "byteLength": 32},
+                  {"buffer": 0, "byteOffset": 96, "byteLength": 1}, {"buffer": 0, "byteOffset": 100, "byteLength": 12}],
+  "accessors": [{"bufferView": 0, "componentType": 5122, "normalized": true, "count": 4, "type": "VEC3"},
+                {"bufferView": 1, "componentType": 5120, "normalized": true, "count": 4, "type": "VEC3"},
+                {"bufferView": 2, "componentType": 5123, "normalized": true, "count": 4, "type": "VEC2"},
+                {"bufferView": 3, "componentType": 5126, "count": 4, "type": "VEC2"},
+                {"bufferView": 0, "componentType": 5122, "normalized": true, "count": 4, "type": "VEC3",
+                 "sparse": {"count": 1, "indices": {"bufferView": 4, "componentType": 5121}, "values": {"bufferView": 5}}}],
+  "images": [{"uri": "data:image/jpeg;base64,)" + base64(jpeg) + R"("}],
+  "textures": [{"source": 0}],
+  "materials": [{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0, "texCoord": 1,
+                   "extensions": {"KHR_texture_transform": {"offset": [0.5, 0], "rotation": 0.3, "scale": [2, 2]}}}}},
+                {"pbrMetallicRoughness": {"baseColorFactor": [0.2, 0.6, 0.2, 1]}, "extensions": {"KHR_materials_unlit": {}}}],
+  "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "NORMAL": 1, "TEXCOORD_0": 2, "TEXCOORD_1": 3}, "mode": 5, "material": 0},
+                             {"attributes": {"POSITION": 4}, "mode": 6, "material": 1}]}],
+  "nodes": [{"mesh": 0}], "scenes": [{"nodes": [0]}], "scene": 0}
+)";
+}
+
 void gltf_corpus() {
+  put("gltf", "conformance.gltf", gltf_conformance());
   put("gltf", "mesh.gltf", gltf(R"({"mesh": 0})", "0", false));
   put("gltf", "textured.gltf", gltf(R"({"mesh": 0})", "0"));
   put("gltf", "trs_matrix.gltf",

@@ -360,6 +360,275 @@ TEST_CASE("glTF COLOR_0 becomes the mesh's float3 colour buffer, used by its mat
   expect_error(dir.write("vec2.gltf", with_colors("VEC2", 3)), "COLOR_0 of two components");
 }
 
+// ---------------------------------------------------------------------------------------
+// Conformance: what real exporters write besides float triangles (gltfpack's quantized
+// attributes, sparse accessors, strips and fans, texture coordinate sets and transforms,
+// unlit materials, required extensions).
+// ---------------------------------------------------------------------------------------
+namespace {
+
+// A binary buffer built view by view (each padded to 4 bytes), and the JSON of its views.
+struct Bin {
+  std::string bytes;
+  std::vector<std::string> views;
+  template <class T>
+  int view(const std::vector<T>& values, int stride = 0) {
+    const size_t at = bytes.size();
+    bytes.append(reinterpret_cast<const char*>(values.data()), values.size() * sizeof(T));
+    const size_t length = bytes.size() - at;
+    while (bytes.size() % 4) bytes.push_back('\0');
+    views.push_back(R"({"buffer":0,"byteOffset":)" + std::to_string(at) + R"(,"byteLength":)" + std::to_string(length) +
+                    (stride ? R"(,"byteStride":)" + std::to_string(stride) : std::string()) + "}");
+    return int(views.size()) - 1;
+  }
+};
+
+// A glTF of one mesh (`primitives`), one node, `accessors` and `extra` top-level members, over `bin`.
+std::string gltf_of(TempDir& dir, const Bin& bin, const std::string& primitives, const std::string& accessors,
+                    const std::string& extra = "") {
+  dir.write("q.bin", bin.bytes);
+  std::string views;
+  for (const auto& v : bin.views) views += (views.empty() ? "" : ",") + v;
+  return R"({"asset":{"version":"2.0"},"scene":0,"scenes":[{"nodes":[0]}],"nodes":[{"mesh":0}],)"
+         R"("meshes":[{"primitives":[)" + primitives + R"(]}],"buffers":[{"uri":"q.bin","byteLength":)" +
+         std::to_string(bin.bytes.size()) + R"(}],"bufferViews":[)" + views + R"(],"accessors":[)" + accessors + "]" +
+         extra + "}";
+}
+
+std::string accessor(int view, int type, int count, const char* shape, bool normalized = false,
+                     const std::string& more = "") {
+  return R"({"bufferView":)" + std::to_string(view) + R"(,"componentType":)" + std::to_string(type) +
+         R"(,"count":)" + std::to_string(count) + R"(,"type":")" + shape + R"(")" +
+         (normalized ? R"(,"normalized":true)" : "") + more + "}";
+}
+
+const Mesh& only_mesh(const LoadedScene& ls) {
+  REQUIRE(ls.scene.meshes().size() == 1);
+  return ls.scene.meshes().begin()->second.value;
+}
+
+std::vector<float> floats_of(const LoadedScene& ls, Id id) {
+  const Buffer* b = ls.scene.buffer(id);
+  REQUIRE(b);
+  return b->f;
+}
+
+bool warned(const LoadedScene& ls, const std::string& part) {
+  for (const std::string& w : ls.warnings)
+    if (w.find(part) != std::string::npos) return true;
+  return false;
+}
+
+}  // namespace
+
+TEST_CASE("quantized glTF attributes load as the floats they encode (KHR_mesh_quantization)", "[gltf]") {
+  TempDir dir;
+  Bin bin;
+  // Positions: normalized shorts (-32768 clamps to -1), 8 bytes a vertex; the same triangle
+  // as plain shorts, and as floats; normals: normalized bytes, 4 bytes a vertex; texture
+  // coordinates: normalized unsigned shorts; indices: unsigned bytes.
+  const int pn = bin.view(std::vector<int16_t>{0, 0, 0, 0, 32767, 0, 0, 0, 0, -32768, 0, 0}, 8);
+  const int pi = bin.view(std::vector<int16_t>{0, 0, 0, 0, 2, 0, 0, 0, 0, -3, 0, 0}, 8);
+  const int pf = bin.view(std::vector<float>{0, 0, 0, 2, 0, 0, 0, -3, 0});
+  const int nb = bin.view(std::vector<int8_t>{0, 0, 127, 0, 0, 0, 127, 0, 0, 0, -128, 0}, 4);
+  const int tu = bin.view(std::vector<uint16_t>{0, 0, 65535, 0, 0, 65535});
+  const int tb = bin.view(std::vector<int8_t>{-127, 127, 0, 64, 127, -128});
+  const int ix = bin.view(std::vector<uint8_t>{0, 1, 2});
+  const std::string accessors =
+      accessor(pn, 5122, 3, "VEC3", true) + "," + accessor(pi, 5122, 3, "VEC3") + "," + accessor(pf, 5126, 3, "VEC3") +
+      "," + accessor(nb, 5120, 3, "VEC3", true) + "," + accessor(tu, 5123, 3, "VEC2", true) + "," +
+      accessor(tb, 5120, 3, "VEC2", true) + "," + accessor(ix, 5121, 3, "SCALAR");
+  auto prim = [](int pos, int uv) {
+    return R"({"attributes":{"POSITION":)" + std::to_string(pos) + R"(,"NORMAL":3,"TEXCOORD_0":)" + std::to_string(uv) +
+           R"(},"indices":6})";
+  };
+  const std::string required = R"(,"extensionsUsed":["KHR_mesh_quantization"],"extensionsRequired":["KHR_mesh_quantization"])";
+  {
+    LoadedScene ls = load_gltf(dir.write("n.gltf", gltf_of(dir, bin, prim(0, 4), accessors, required)));
+    CHECK(ls.warnings.empty());
+    const Mesh& m = only_mesh(ls);
+    CHECK(floats_of(ls, m.positions) == std::vector<float>{0, 0, 0, 1, 0, 0, 0, -1, 0});
+    CHECK(floats_of(ls, m.normals) == std::vector<float>{0, 0, 1, 0, 0, 1, 0, 0, -1});
+    CHECK(floats_of(ls, m.texcoords) == std::vector<float>{0, 0, 1, 0, 0, 1});
+    CHECK(ls.scene.validate_mesh(m).empty());
+    CHECK(ls.scene.triangle_count() == 1);
+  }
+  {  // Signed normalized bytes: over 127, -128 clamped to -1.
+    LoadedScene ls = load_gltf(dir.write("b.gltf", gltf_of(dir, bin, prim(0, 5), accessors, required)));
+    const std::vector<float> t = floats_of(ls, only_mesh(ls).texcoords);
+    const std::vector<float> want = {-1, 1, 0, 64 / 127.0f, 1, -1};
+    REQUIRE(t.size() == want.size());
+    for (size_t i = 0; i < want.size(); ++i) CHECK(t[i] == want[i]);
+  }
+  {  // Plain shorts are their values: the same buffers as the float twin.
+    LoadedScene a = load_gltf(dir.write("i.gltf", gltf_of(dir, bin, prim(1, 4), accessors, required)));
+    LoadedScene b = load_gltf(dir.write("f.gltf", gltf_of(dir, bin, prim(2, 4), accessors)));
+    CHECK(floats_of(a, only_mesh(a).positions) == floats_of(b, only_mesh(b).positions));
+    CHECK(a.bounds.lo.y == -3);
+    CHECK(a.bounds.hi.x == 2);
+  }
+  // An unsigned int is no vertex attribute type.
+  const std::string uint_pos = accessor(ix, 5125, 0, "VEC3");
+  expect_error(dir.write("u.gltf", gltf_of(dir, bin, R"({"attributes":{"POSITION":0}})", uint_pos)),
+               "unsigned int positions", "unsupported component type 5125");
+}
+
+TEST_CASE("glTF sparse accessors replace the elements they name, over a bufferView or zeros", "[gltf]") {
+  TempDir dir;
+  Bin bin;
+  const int pos = bin.view(std::vector<float>{0, 0, 0, 1, 0, 0, 0, 1, 0});
+  const int idx = bin.view(std::vector<uint8_t>{2});
+  const int val = bin.view(std::vector<float>{5, 6, 7});
+  const int idx2 = bin.view(std::vector<uint16_t>{0, 2});
+  const int val2 = bin.view(std::vector<float>{1, 1, 1, 2, 2, 2});
+  const int bad_order = bin.view(std::vector<uint16_t>{2, 0});
+  const int bad_range = bin.view(std::vector<uint16_t>{0, 3});
+  auto sparse = [](int count, int indices, int itype, int values) {
+    return R"(,"sparse":{"count":)" + std::to_string(count) + R"(,"indices":{"bufferView":)" + std::to_string(indices) +
+           R"(,"componentType":)" + std::to_string(itype) + R"(},"values":{"bufferView":)" + std::to_string(values) + "}}";
+  };
+  const std::string prim = R"({"attributes":{"POSITION":0}})";
+  {
+    LoadedScene ls = load_gltf(dir.write("s.gltf", gltf_of(dir, bin, prim, accessor(pos, 5126, 3, "VEC3", false, sparse(1, idx, 5121, val)))));
+    CHECK(floats_of(ls, only_mesh(ls).positions) == std::vector<float>{0, 0, 0, 1, 0, 0, 5, 6, 7});
+    CHECK(ls.warnings.empty());
+  }
+  {  // No bufferView: zeros, then the substitutions.
+    const std::string a = R"({"componentType":5126,"count":3,"type":"VEC3")" + sparse(2, idx2, 5123, val2) + "}";
+    LoadedScene ls = load_gltf(dir.write("z.gltf", gltf_of(dir, bin, prim, a)));
+    CHECK(floats_of(ls, only_mesh(ls).positions) == std::vector<float>{1, 1, 1, 0, 0, 0, 2, 2, 2});
+  }
+  auto broken = [&](const char* name, const std::string& sp, const std::string& says) {
+    expect_error(dir.write(name, gltf_of(dir, bin, prim, accessor(pos, 5126, 3, "VEC3", false, sp))), name, says);
+  };
+  broken("order.gltf", sparse(2, bad_order, 5123, val2), "not increasing");
+  broken("range.gltf", sparse(2, bad_range, 5123, val2), "out of range");
+  broken("values.gltf", sparse(2, idx2, 5123, val), "sparse values read past the end");
+  broken("indices.gltf", sparse(2, idx, 5121, val2), "sparse indices read past the end");
+  broken("itype.gltf", sparse(1, idx, 5126, val), "sparse indices must be unsigned");
+  broken("count.gltf", sparse(4, idx2, 5123, val2), "substitutions for 3 elements");
+}
+
+TEST_CASE("glTF triangle strips and fans become triangle lists; points and lines are left out", "[gltf]") {
+  TempDir dir;
+  Bin bin;
+  const int pos = bin.view(std::vector<float>{0, 0, 0, 1, 0, 0, 0, 1, 0, 1, 1, 0});
+  const int idx = bin.view(std::vector<uint16_t>{3, 2, 1, 0});
+  const std::string accessors = accessor(pos, 5126, 4, "VEC3") + "," + accessor(idx, 5123, 4, "SCALAR");
+  auto indices_of = [&](const std::string& name, const std::string& prim) {
+    LoadedScene ls = load_gltf(dir.write(name, gltf_of(dir, bin, prim, accessors)));
+    const Mesh& m = only_mesh(ls);
+    const Buffer* b = ls.scene.buffer(m.indices);
+    REQUIRE(b);
+    CHECK(ls.scene.validate_mesh(m).empty());
+    CHECK(ls.scene.triangle_count() == 2);
+    return b->u;
+  };
+  // The specification's order: strip triangle i is (v_i, v_i+1+i%2, v_i+2-i%2), fan triangle i
+  // (v_i+1, v_i+2, v_0): every triangle keeps the first one's winding.
+  CHECK(indices_of("strip.gltf", R"({"attributes":{"POSITION":0},"mode":5})") == std::vector<uint32_t>{0, 1, 2, 1, 3, 2});
+  CHECK(indices_of("fan.gltf", R"({"attributes":{"POSITION":0},"mode":6})") == std::vector<uint32_t>{1, 2, 0, 2, 3, 0});
+  CHECK(indices_of("istrip.gltf", R"({"attributes":{"POSITION":0},"indices":1,"mode":5})") ==
+        std::vector<uint32_t>{3, 2, 1, 2, 0, 1});
+  CHECK(indices_of("ifan.gltf", R"({"attributes":{"POSITION":0},"indices":1,"mode":6})") ==
+        std::vector<uint32_t>{2, 1, 3, 1, 0, 3});
+  LoadedScene lines = load_gltf(dir.write("lines.gltf", gltf_of(dir, bin, R"({"attributes":{"POSITION":0},"mode":1})", accessors)));
+  CHECK(lines.scene.meshes().empty());
+  CHECK(warned(lines, "mode 1 (points or lines) is not triangles"));
+}
+
+TEST_CASE("a glTF material's texture coordinate set and KHR_texture_transform are baked into the mesh", "[gltf]") {
+  TempDir dir;
+  Bin bin;
+  const int pos = bin.view(std::vector<float>{0, 0, 0, 1, 0, 0, 0, 1, 0});
+  const int uv0 = bin.view(std::vector<float>{0, 0, 1, 0, 0, 1});
+  const int uv1 = bin.view(std::vector<float>{0.5f, 0.5f, 1, 0.5f, 0.5f, 1});
+  Image img(2, 1);
+  write_png(dir.path + "/t.png", img);
+  const std::string accessors = accessor(pos, 5126, 3, "VEC3") + "," + accessor(uv0, 5126, 3, "VEC2") + "," + accessor(uv1, 5126, 3, "VEC2");
+  const std::string prim = R"({"attributes":{"POSITION":0,"TEXCOORD_0":1,"TEXCOORD_1":2},"material":0})";
+  auto file = [&](const std::string& name, const std::string& base_info, const std::string& more_material = "") {
+    const std::string extra = R"(,"images":[{"uri":"t.png"}],"textures":[{"source":0}],"materials":[{"pbrMetallicRoughness":{"baseColorTexture":)" +
+                              base_info + "}" + more_material + R"(}],"extensionsUsed":["KHR_texture_transform"])";
+    return load_gltf(dir.write(name, gltf_of(dir, bin, prim, accessors, extra)));
+  };
+  auto near = [](const std::vector<float>& got, const std::vector<float>& want) {
+    REQUIRE(got.size() == want.size());
+    for (size_t i = 0; i < want.size(); ++i) CHECK(got[i] == Approx(want[i]).margin(1e-6));
+  };
+  {
+    LoadedScene ls = file("set0.gltf", R"({"index":0})");
+    near(floats_of(ls, only_mesh(ls).texcoords), {0, 0, 1, 0, 0, 1});
+    CHECK(ls.warnings.empty());
+  }
+  {
+    LoadedScene ls = file("set1.gltf", R"({"index":0,"texCoord":1})");
+    near(floats_of(ls, only_mesh(ls).texcoords), {0.5f, 0.5f, 1, 0.5f, 0.5f, 1});
+  }
+  {  // The extension's order: scale, then rotate (columns (cos, sin), (-sin, cos)), then offset.
+    // A quarter turn: u' = -3 v + 0.5, v' = 2 u + 0.25.
+    LoadedScene ls = file("xf.gltf", R"({"index":0,"extensions":{"KHR_texture_transform":{"offset":[0.5,0.25],"rotation":1.5707963267948966,"scale":[2,3]}}})");
+    near(floats_of(ls, only_mesh(ls).texcoords), {0.5f, 0.25f, 0.5f, 2.25f, -2.5f, 0.25f});
+    CHECK(ls.warnings.empty());
+  }
+  {  // Its texCoord overrides the textureInfo's.
+    LoadedScene ls = file("xf1.gltf", R"({"index":0,"texCoord":0,"extensions":{"KHR_texture_transform":{"offset":[1,0],"texCoord":1}}})");
+    near(floats_of(ls, only_mesh(ls).texcoords), {1.5f, 0.5f, 2, 0.5f, 1.5f, 1});
+  }
+  {  // An emissive texture that reads other coordinates is drawn with the base colour's, and said so.
+    LoadedScene ls = file("em.gltf", R"({"index":0})", R"(,"emissiveTexture":{"index":0,"texCoord":1})");
+    near(floats_of(ls, only_mesh(ls).texcoords), {0, 0, 1, 0, 0, 1});
+    CHECK(warned(ls, "emissive texture reads other texture coordinates"));
+  }
+  {  // A set the primitive lacks: no texture coordinates (the texture shows its first texel).
+    LoadedScene ls = file("set2.gltf", R"({"index":0,"texCoord":2})");
+    CHECK(only_mesh(ls).texcoords == kNoId);
+  }
+}
+
+TEST_CASE("glTF KHR_materials_unlit shows the base colour unlit; unknown required extensions are refused by name", "[gltf]") {
+  TempDir dir;
+  Bin bin;
+  const int pos = bin.view(std::vector<float>{0, 0, 0, 1, 0, 0, 0, 1, 0});
+  const std::string accessors = accessor(pos, 5126, 3, "VEC3");
+  const std::string prim = R"({"attributes":{"POSITION":0},"material":0})";
+  {
+    const std::string extra =
+        R"(,"materials":[{"pbrMetallicRoughness":{"baseColorFactor":[0.2,0.4,0.6,1],"metallicFactor":1},"extensions":{"KHR_materials_unlit":{}}}],"extensionsUsed":["KHR_materials_unlit"])";
+    LoadedScene ls = load_gltf(dir.write("unlit.gltf", gltf_of(dir, bin, prim, accessors, extra)));
+    const Material* m = ls.scene.material(only_mesh(ls).material);
+    REQUIRE(m);
+    CHECK(m->model == Material::Model::matte);
+    CHECK(m->diffuse_color == Vec3{0.2f, 0.4f, 0.6f});
+    CHECK(m->reflection == 0);
+    CHECK(ls.warnings.empty());
+  }
+  const std::string draco = R"(,"materials":[{}],"extensionsUsed":["KHR_draco_mesh_compression","EXT_meshopt_compression"],"extensionsRequired":["KHR_draco_mesh_compression","EXT_meshopt_compression"])";
+  expect_error(dir.write("draco.gltf", gltf_of(dir, bin, prim, accessors, draco)), "Draco",
+               "requires glTF extensions this loader does not implement: KHR_draco_mesh_compression, EXT_meshopt_compression");
+  // Used, not required: the file loads without it, and a warning names it.
+  const std::string used = R"(,"materials":[{}],"extensionsUsed":["KHR_materials_clearcoat","KHR_materials_ior"])";
+  LoadedScene ls = load_gltf(dir.write("used.gltf", gltf_of(dir, bin, prim, accessors, used)));
+  CHECK(ls.warnings.size() == 1);
+  CHECK(warned(ls, "glTF extensions ignored: KHR_materials_clearcoat"));
+  CHECK_FALSE(warned(ls, "KHR_materials_ior"));
+}
+
+TEST_CASE("a glTF light index beyond int's range names no light", "[gltf][broken]") {
+  // Converting 1e300 to int was undefined behaviour (UBSan: "outside the range of representable
+  // values of type 'int'"); such a node now names no light, like any other bad index.
+  TempDir dir;
+  for (const char* index : {"1e300", "-1e300", "1e10", "1", "0"}) {
+    INFO(index);
+    const std::string j =
+        R"({"asset":{"version":"2.0"},"extensionsUsed":["KHR_lights_punctual"],"extensions":{"KHR_lights_punctual":{"lights":[{"type":"point","intensity":2}]}},)"
+        R"("nodes":[{"extensions":{"KHR_lights_punctual":{"light":)" + std::string(index) + R"(}}}],"scenes":[{"nodes":[0]}],"scene":0})";
+    LoadedScene ls = load_gltf(dir.write("light.gltf", j));
+    const bool named = std::string(index) == "0";  // the file has one light
+    CHECK(ls.scene.lights().size() == (named ? 1u : 0u));
+  }
+}
+
 TEST_CASE("broken glTF files throw std::runtime_error naming the file", "[gltf][broken]") {
   TempDir dir;
   dir.write("tri.bin", tri_bin());
