@@ -255,8 +255,9 @@ std::vector<uint32_t> triangle_list(const std::vector<uint32_t>& v, bool fan) {
 // The glTF extensions this loader implements (KHR_mesh_quantization: the integer component
 // types of read_floats).
 const std::set<std::string> kSupportedExtensions = {
-    "KHR_lights_punctual",    "KHR_materials_emissive_strength", "KHR_materials_ior", "KHR_materials_transmission",
-    "KHR_materials_unlit",    "KHR_mesh_quantization",           "KHR_texture_transform"};
+    "KHR_lights_punctual",   "KHR_materials_emissive_strength",     "KHR_materials_ior",
+    "KHR_materials_pbrSpecularGlossiness", "KHR_materials_transmission", "KHR_materials_unlit",
+    "KHR_mesh_quantization", "KHR_texture_transform"};
 
 std::string supported_extensions() {
   std::string all;
@@ -276,6 +277,27 @@ struct UvMapping {
     return set == o.set && transformed == o.transformed && std::equal(m, m + 6, o.m);
   }
 };
+
+// A textureInfo inside an extension (tinygltf parses only the core ones): index, texCoord and
+// its extensions (KHR_texture_transform), or index -1.
+tinygltf::TextureInfo texture_info_of(const tinygltf::Value& v) {
+  tinygltf::TextureInfo info;
+  if (!v.IsObject()) return info;
+  const double index = number_or(v, "index", -1), set = number_or(v, "texCoord", 0);
+  info.index = index >= 0 && index < 1e9 ? int(index) : -1;
+  info.texCoord = set >= 0 && set <= 1024 ? int(set) : -1;
+  if (v.Has("extensions") && v.Get("extensions").IsObject()) {
+    const tinygltf::Value& e = v.Get("extensions");
+    if (e.Has("KHR_texture_transform")) info.extensions["KHR_texture_transform"] = e.Get("KHR_texture_transform");
+  }
+  return info;
+}
+
+// KHR_materials_pbrSpecularGlossiness, as older exporters write materials, or nullptr.
+const tinygltf::Value* spec_gloss(const tinygltf::Material& gm) {
+  auto it = gm.extensions.find("KHR_materials_pbrSpecularGlossiness");
+  return it != gm.extensions.end() && it->second.IsObject() ? &it->second : nullptr;
+}
 
 UvMapping uv_mapping(const tinygltf::TextureInfo& info) {
   UvMapping u;
@@ -318,7 +340,27 @@ Material convert_material(const tinygltf::Material& gm, const std::map<int, Id>&
     if (it != texture_ids.end()) slot = it->second;
     else warnings.push_back(file + ": material '" + gm.name + "' references missing texture " + std::to_string(index));
   };
-  texture(pbr.baseColorTexture.index, mat.diffuse_texture);
+  int base_texture = pbr.baseColorTexture.index;
+  // KHR_materials_pbrSpecularGlossiness: its diffuse colour and texture take the base colour's
+  // place, 1 - glossiness the roughness's, and it is a dielectric.
+  if (const tinygltf::Value* sg = spec_gloss(gm)) {
+    if (sg->Has("diffuseFactor")) {
+      const tinygltf::Value& d = sg->Get("diffuseFactor");
+      if (d.IsArray() && d.ArrayLen() == 4) {
+        float f[4];
+        for (int i = 0; i < 4; ++i) f[i] = d.Get(i).IsNumber() ? float(d.Get(i).GetNumberAsDouble()) : 1.0f;
+        base = {f[0], f[1], f[2]};
+        alpha = f[3];
+      }
+    } else {
+      base = Vec3{1.0f};
+      alpha = 1;
+    }
+    metallic = 0;
+    rough = 1.0f - float(number_or(*sg, "glossinessFactor", 1));
+    base_texture = sg->Has("diffuseTexture") ? texture_info_of(sg->Get("diffuseTexture")).index : -1;
+  }
+  texture(base_texture, mat.diffuse_texture);
   // glTF: emission = emissiveFactor (default black) times the emissive texture (sRGB), as the
   // model's emissive colour times its emissive texture.
   texture(gm.emissiveTexture.index, mat.emissive_texture);
@@ -583,7 +625,9 @@ LoadedScene load_gltf(const std::string& path, const GltfOptions& options) {
     const auto& gm = model.materials[mi];
     scene.set_material(material_ids[mi], convert_material(gm, texture_ids, out.warnings, path));
     // A mesh has one set of texture coordinates: the base colour texture's, else the emissive's.
-    const auto& base = gm.pbrMetallicRoughness.baseColorTexture;
+    const tinygltf::Value* sg = spec_gloss(gm);
+    const tinygltf::TextureInfo base = sg ? (sg->Has("diffuseTexture") ? texture_info_of(sg->Get("diffuseTexture")) : tinygltf::TextureInfo{})
+                                          : gm.pbrMetallicRoughness.baseColorTexture;
     const auto& emissive = gm.emissiveTexture;
     uv_of[mi] = uv_mapping(base.index >= 0 ? base : emissive);
     if (base.index >= 0 && emissive.index >= 0 && !(uv_mapping(emissive) == uv_of[mi]))

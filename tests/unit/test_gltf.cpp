@@ -584,6 +584,22 @@ TEST_CASE("a glTF material's texture coordinate set and KHR_texture_transform ar
     LoadedScene ls = file("set2.gltf", R"({"index":0,"texCoord":2})");
     CHECK(only_mesh(ls).texcoords == kNoId);
   }
+  {  // KHR_materials_pbrSpecularGlossiness: the diffuse colour and texture (and its coordinates)
+     // are the base colour's; a dielectric, whatever metallicFactor's default says.
+    const std::string extra =
+        R"(,"images":[{"uri":"t.png"}],"textures":[{"source":0}],"materials":[{"extensions":{"KHR_materials_pbrSpecularGlossiness":)"
+        R"({"diffuseFactor":[0.5,0.25,1,0.5],"glossinessFactor":0.2,"diffuseTexture":{"index":0,"texCoord":1,)"
+        R"("extensions":{"KHR_texture_transform":{"scale":[2,2]}}}}}}],"extensionsUsed":["KHR_materials_pbrSpecularGlossiness","KHR_texture_transform"])";
+    LoadedScene ls = load_gltf(dir.write("sg.gltf", gltf_of(dir, bin, prim, accessors, extra)));
+    CHECK(ls.warnings.empty());
+    const Mesh& m = only_mesh(ls);
+    near(floats_of(ls, m.texcoords), {1, 1, 2, 1, 1, 2});
+    const Material* mat = ls.scene.material(m.material);
+    REQUIRE(mat);
+    CHECK(mat->diffuse_texture != kNoId);
+    CHECK(mat->diffuse_color == Vec3{0.5f, 0.25f, 1});
+    CHECK(mat->reflection == 0);
+  }
 }
 
 TEST_CASE("glTF KHR_materials_unlit shows the base colour unlit; unknown required extensions are refused by name", "[gltf]") {
