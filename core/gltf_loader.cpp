@@ -586,6 +586,7 @@ LoadedScene load_gltf(const std::string& path, const GltfOptions& options) {
   // Textures: decode images (tinygltf already did, via stb_image) and attach the sampler.
   std::map<int, Id> texture_ids;
   std::vector<SharedBytes> shared(model.images.size());  // each image's bytes, once a texture took them
+  bool mirrored_said = false;  // one warning for the file's mirrored samplers
   for (size_t ti = 0; ti < model.textures.size(); ++ti) {
     const auto& gt = model.textures[ti];
     if (gt.source < 0 || size_t(gt.source) >= model.images.size()) {
@@ -612,6 +613,11 @@ LoadedScene load_gltf(const std::string& path, const GltfOptions& options) {
       tex.sampler.wrap_s = wrap(s.wrapS);
       tex.sampler.wrap_t = wrap(s.wrapT);
       tex.sampler.filter = s.magFilter == TINYGLTF_TEXTURE_FILTER_NEAREST ? Sampler::Filter::nearest : Sampler::Filter::linear;
+      if ((s.wrapS == TINYGLTF_TEXTURE_WRAP_MIRRORED_REPEAT || s.wrapT == TINYGLTF_TEXTURE_WRAP_MIRRORED_REPEAT) && !mirrored_said) {
+        out.warnings.push_back(path + ": sampler " + std::to_string(gt.sampler) +
+                               " wraps by MIRRORED_REPEAT, which is drawn as REPEAT");
+        mirrored_said = true;
+      }
     }
     Id id = next_id++;
     scene.set_texture(id, std::move(tex));

@@ -580,6 +580,15 @@ TEST_CASE("a glTF material's texture coordinate set and KHR_texture_transform ar
     near(floats_of(ls, only_mesh(ls).texcoords), {0, 0, 1, 0, 0, 1});
     CHECK(warned(ls, "emissive texture reads other texture coordinates"));
   }
+  {  // A mirrored sampler is drawn repeating, and said so once.
+    const std::string extra =
+        R"(,"images":[{"uri":"t.png"}],"samplers":[{"wrapS":33648,"wrapT":33648}],"textures":[{"source":0,"sampler":0},{"source":0,"sampler":0}],)"
+        R"("materials":[{"pbrMetallicRoughness":{"baseColorTexture":{"index":0}},"emissiveTexture":{"index":1}}])";
+    LoadedScene ls = load_gltf(dir.write("mirror.gltf", gltf_of(dir, bin, prim, accessors, extra)));
+    CHECK(ls.warnings.size() == 1);
+    CHECK(warned(ls, "MIRRORED_REPEAT, which is drawn as REPEAT"));
+    for (const auto& [id, t] : ls.scene.textures()) CHECK(t.value.sampler.wrap_s == Sampler::Wrap::repeat);
+  }
   {  // A set the primitive lacks: no texture coordinates (the texture shows its first texel).
     LoadedScene ls = file("set2.gltf", R"({"index":0,"texCoord":2})");
     CHECK(only_mesh(ls).texcoords == kNoId);
