@@ -790,6 +790,9 @@ LoadedScene load_gltf(const std::string& path, const GltfOptions& options) {
       Camera c;
       c.to_world = world;
       if (cam.type == "perspective") c.fov_y = float(cam.perspective.yfov);
+      else  // the renderers have pinhole cameras only
+        out.warnings.push_back(node_name + ": camera of type '" + cam.type + "' drawn as a perspective one with a " +
+                               std::to_string(int(std::lround(c.fov_y * 180 / kPi))) + " degree field of view");
       if (std::string why = check_camera(c); !why.empty()) {
         out.warnings.push_back(node_name + ": camera ignored: " + why);
       } else {

@@ -639,6 +639,18 @@ TEST_CASE("glTF KHR_materials_unlit shows the base colour unlit; unknown require
   CHECK_FALSE(warned(ls, "KHR_materials_ior"));
 }
 
+TEST_CASE("a glTF orthographic camera is drawn as a perspective one, and a warning says so", "[gltf]") {
+  TempDir dir;
+  const std::string j =
+      R"({"asset":{"version":"2.0"},"cameras":[{"type":"orthographic","orthographic":{"xmag":2,"ymag":2,"znear":0.1,"zfar":100}}],)"
+      R"("nodes":[{"camera":0,"translation":[0,0,5]}],"scenes":[{"nodes":[0]}],"scene":0})";
+  LoadedScene ls = load_gltf(dir.write("ortho.gltf", j));
+  CHECK(ls.has_camera);
+  CHECK(ls.scene.camera().to_world.m[14] == 5);
+  CHECK(ls.warnings.size() == 1);
+  CHECK(warned(ls, "camera of type 'orthographic' drawn as a perspective one with a 45 degree field of view"));
+}
+
 TEST_CASE("a glTF light index beyond int's range names no light", "[gltf][broken]") {
   // Converting 1e300 to int was undefined behaviour (UBSan: "outside the range of representable
   // values of type 'int'"); such a node now names no light, like any other bad index.
