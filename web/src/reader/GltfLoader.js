@@ -7,6 +7,42 @@ const COMPONENTS = { SCALAR: 1, VEC2: 2, VEC3: 3, VEC4: 4, MAT4: 16 };
 const TYPES = { 5120: Int8Array, 5121: Uint8Array, 5122: Int16Array, 5123: Uint16Array, 5125: Uint32Array, 5126: Float32Array };
 const WRAP = { 33071: 'clamp', 33648: 'repeat', 10497: 'repeat' };  // mirrored repeat read as repeat
 const SOURCE = { 5126: 'f32', 5125: 'u32', 5123: 'u16', 5121: 'u8' };  // a buffer_ref's source, by componentType
+// The glTF extensions read here (as the node's loader, core/gltf_loader.cpp): a file that
+// requires another one is refused by name; one it only uses is named in a warning.
+export const SUPPORTED_EXTENSIONS = Object.freeze(['KHR_lights_punctual', 'KHR_materials_emissive_strength',
+  'KHR_materials_ior', 'KHR_materials_pbrSpecularGlossiness', 'KHR_materials_transmission', 'KHR_materials_unlit',
+  'KHR_mesh_quantization', 'KHR_texture_transform']);
+
+// The texture coordinates a textureInfo reads: its set (texCoord, or KHR_texture_transform's)
+// and that extension's affine map, u' = m[0] u + m[1] v + m[2], v' = m[3] u + m[4] v + m[5]
+// (offset + R(rotation) (scale * uv), R's columns (cos, sin) and (-sin, cos), as the
+// extension's GLSL), or m null.
+function uvMapping(info) {
+  const u = { set: info && Number.isInteger(info.texCoord) ? info.texCoord : 0, m: null };
+  const t = info && info.extensions && info.extensions.KHR_texture_transform;
+  if (!t || typeof t !== 'object') return u;
+  if (Number.isInteger(t.texCoord)) u.set = t.texCoord;
+  const pair = (v, d) => (Array.isArray(v) && v.length === 2 && v.every(Number.isFinite) ? v : d);
+  const [ou, ov] = pair(t.offset, [0, 0]), [su, sv] = pair(t.scale, [1, 1]);
+  const r = Number.isFinite(t.rotation) ? t.rotation : 0, c = Math.cos(r), sn = Math.sin(r);
+  u.m = [c * su, -sn * sv, ou, sn * su, c * sv, ov];
+  return u;
+}
+const sameMapping = (a, b) => a.set === b.set && JSON.stringify(a.m) === JSON.stringify(b.m);
+
+// The fields every glTF material gives, whatever its model.
+const MATERIAL_BASE = (m, base) => ({
+  name: m.name, specularColor: [0, 0, 0], shininess: 0.01, emissiveColor: m.emissiveFactor ? [...m.emissiveFactor] : [0, 0, 0],
+  opacity: m.alphaMode === 'BLEND' ? base[3] : 1, reflectionCoefficient: 0, refractionCoefficient: 0, refractionIndex: 1,
+  alphaMask: m.alphaMode === 'MASK', alphaCutoff: m.alphaCutoff ?? 0.5, doubleSided: !!m.doubleSided,
+});
+
+// A triangle fan's vertex order as a triangle list (glTF 2.0: triangle i is v_i+1, v_i+2, v_0).
+function fanToList(v) {
+  const out = new Uint32Array(Math.max(0, v.length - 2) * 3);
+  for (let i = 0; i + 2 < v.length; i++) out.set([v[i + 1], v[i + 2], v[0]], 3 * i);
+  return out;
+}
 
 // Where an array the loader returned lies in an external file, so that a node can load it
 // itself (a buffer_ref, docs/protocol.md "References"): {url, byteOffset, byteStride (0:
@@ -31,23 +67,37 @@ export const pendingValues = (array) => {
 // file's bytes as they are (or u16/u8 indices widened, which a node widens too): those need
 // no values until the download is in. Anything converted from the values (normalised, strided,
 // sparse, RGBA colours, strips unrolled) needs them at once, so such files load whole first.
+// Per material, the texture coordinates its textures read: the base colour texture's (the
+// diffuse texture's under KHR_materials_pbrSpecularGlossiness), else the emissive's.
+function materialMappings(json) {
+  return (json.materials || []).map((m) => {
+    const sg = m.extensions && m.extensions.KHR_materials_pbrSpecularGlossiness;
+    const base = sg ? sg.diffuseTexture : (m.pbrMetallicRoughness || {}).baseColorTexture;
+    return uvMapping(base || m.emissiveTexture);
+  });
+}
+
 function deferrable(json, bufferUrls) {
   const external = (a) => a.bufferView !== undefined && json.bufferViews[a.bufferView] &&
     !!bufferUrls[json.bufferViews[a.bufferView].buffer];
   if ((json.buffers || []).some((b, i) => bufferUrls[i] && !(Number.isInteger(b.byteLength) && b.byteLength > 0 && b.byteLength < 2 ** 31)))
     return false;
+  const uvOf = materialMappings(json);
   for (const mesh of json.meshes || []) {
     for (const p of mesh.primitives || []) {
       const mode = p.mode ?? 4;
-      if (mode !== 4 && mode !== 5) continue;
-      const uses = Object.entries(p.attributes || {}).filter(([k]) => ['POSITION', 'NORMAL', 'TEXCOORD_0', 'COLOR_0'].includes(k));
+      if (mode !== 4 && mode !== 5 && mode !== 6) continue;
+      const uv = uvOf[p.material] || { set: 0, m: null };
+      const set = `TEXCOORD_${uv.set}`;
+      const uses = Object.entries(p.attributes || {}).filter(([k]) => ['POSITION', 'NORMAL', set, 'COLOR_0'].includes(k));
+      if (uv.m && (p.attributes || {})[set] !== undefined) uses.push(['transformed', p.attributes[set]]);
       if (p.indices !== undefined) uses.push(['indices', p.indices]);
       for (const [k, i] of uses) {
         const a = json.accessors && json.accessors[i];
         if (!a) return false;
         if (!external(a)) continue;  // zeros, a data: URI or the GLB chunk: its values are here
         const T = TYPES[a.componentType], n = COMPONENTS[a.type];
-        if (!T || !n || mode === 5 || a.sparse || a.normalized) return false;
+        if (!T || !n || mode !== 4 || a.sparse || a.normalized || k === 'transformed') return false;
         const v = json.bufferViews[a.bufferView], elem = n * T.BYTES_PER_ELEMENT;
         if ((v.byteStride || elem) !== elem || ((v.byteOffset || 0) + (a.byteOffset || 0)) % T.BYTES_PER_ELEMENT) return false;
         if (k === 'indices' ? ![5125, 5123, 5121].includes(a.componentType) : a.componentType !== 5126) return false;
@@ -87,6 +137,13 @@ export async function loadGltf(body, url, fetchBinary, { defer = false } = {}) {
   let json = body, glbBin = null;
   if (body instanceof ArrayBuffer) ({ json, bin: glbBin } = parseGlb(body));
   if (!json.asset || !String(json.asset.version).startsWith('2')) throw new Error('only glTF 2.0 is supported');
+  const unsupported = (list) => (Array.isArray(list) ? list : []).filter((e) => !SUPPORTED_EXTENSIONS.includes(e));
+  const required = unsupported(json.extensionsRequired);
+  if (required.length)  // Draco or meshopt geometry would otherwise load as nothing, or as garbage
+    throw new Error(`requires glTF extensions this loader does not implement: ${required.join(', ')}`);
+  const warnings = [];
+  const ignored = unsupported(json.extensionsUsed);
+  if (ignored.length) warnings.push(`glTF extensions ignored: ${ignored.join(', ')}`);
   // The absolute URL of each external buffer (null for data: URIs and the GLB chunk).
   const bufferUrls = (json.buffers || []).map((b) => (b.uri === undefined || b.uri.startsWith('data:') ? null : new URL(b.uri, url).href));
   const later = defer && bufferUrls.some(Boolean) && deferrable(json, bufferUrls);
@@ -120,6 +177,30 @@ export async function loadGltf(body, url, fetchBinary, { defer = false } = {}) {
       byteStride: v.byteStride || 0, source: SOURCE[a.componentType], components: n, values: a.count * n });
   }
 
+  // A sparse accessor's substitutions (glTF 2.0, "Sparse Accessors") on `out`, its base values:
+  // increasing indices below the count, and the values that replace those elements. Errors name
+  // the accessor.
+  function applySparse(a, out, T, n, i) {
+    const sp = a.sparse, count = sp.count;
+    const IT = { 5121: Uint8Array, 5123: Uint16Array, 5125: Uint32Array }[sp.indices && sp.indices.componentType];
+    if (!IT || !Number.isInteger(count) || count < 1 || count > a.count)
+      throw new Error(`accessor ${i}: sparse accessor with bad indices or ${count} substitutions for ${a.count} elements`);
+    const view = (ref, size) => {
+      const v = json.bufferViews[ref.bufferView];
+      if (!v) throw new Error(`accessor ${i}: sparse arrays name no bufferView`);
+      const start = (v.byteOffset || 0) + (ref.byteOffset || 0), bytes = count * size;
+      if ((ref.byteOffset || 0) + bytes > v.byteLength) throw new Error(`accessor ${i}: sparse arrays read past the end of bufferView ${ref.bufferView}`);
+      return new Uint8Array(buffers[v.buffer], start, bytes).slice().buffer;  // aligned copies
+    };
+    const idx = new IT(view(sp.indices, IT.BYTES_PER_ELEMENT));
+    const val = new T(view(sp.values, n * T.BYTES_PER_ELEMENT));
+    for (let k = 0; k < count; k++) {
+      if (idx[k] >= a.count || (k > 0 && idx[k] <= idx[k - 1])) throw new Error(`accessor ${i}: sparse index ${idx[k]} out of range or not increasing`);
+      out.set(val.subarray(k * n, k * n + n), idx[k] * n);
+    }
+    return out;
+  }
+
   const accessorCache = new Map();
   function accessor(i) {
     if (accessorCache.has(i)) return accessorCache.get(i);
@@ -144,6 +225,7 @@ export async function loadGltf(body, url, fetchBinary, { defer = false } = {}) {
         for (let k = 0; k < a.count; k++) tmp.set(bytes.subarray(base + k * stride, base + k * stride + elem), k * elem);
       }
     }
+    if (a.sparse) out = applySparse(a, out.slice(), T, n, i);  // on a copy: never the file's bytes
     if (a.normalized && T !== Float32Array) {
       const max = { 5120: 127, 5121: 255, 5122: 32767, 5123: 65535 }[a.componentType] || 1;
       out = Float32Array.from(out, (x) => Math.max(x / max, -1));
@@ -171,14 +253,28 @@ export async function loadGltf(body, url, fetchBinary, { defer = false } = {}) {
   }
   const asFloat = (a) => (a instanceof Float32Array ? a : Float32Array.from(a));
 
+  // An image in a bufferView (a .glb's own images) becomes a blob: URL of its bytes, once per image.
+  const imageUrls = new Map();
+  function imageUrl(k) {
+    const img = json.images[k];
+    if (!img) return null;
+    if (img.uri) return new URL(img.uri, url).href;
+    if (img.bufferView === undefined || !json.bufferViews[img.bufferView]) return null;
+    if (!imageUrls.has(k)) {
+      const v = json.bufferViews[img.bufferView];
+      const bytes = new Uint8Array(buffers[v.buffer], v.byteOffset || 0, v.byteLength);
+      imageUrls.set(k, URL.createObjectURL(new Blob([bytes.slice()], { type: img.mimeType || 'image/png' })));
+    }
+    return imageUrls.get(k);
+  }
   function texture(info) {
     if (!info) return null;
     const t = json.textures[info.index];
-    const img = t && json.images[t.source];
-    if (!img || !img.uri) return null;
+    const src = t && imageUrl(t.source);
+    if (!src) return null;
     const s = (t.sampler !== undefined && json.samplers[t.sampler]) || {};
     return {
-      url: new URL(img.uri, url).href,
+      url: src,
       wrapS: WRAP[s.wrapS ?? 10497], wrapT: WRAP[s.wrapT ?? 10497],
       filter: s.magFilter === 9728 ? 'nearest' : 'linear',
       flipY: false, srgb: true,
@@ -187,9 +283,16 @@ export async function loadGltf(body, url, fetchBinary, { defer = false } = {}) {
 
   const materials = (json.materials || []).map((m) => {
     const pbr = m.pbrMetallicRoughness || {};
-    const base = pbr.baseColorFactor || [1, 1, 1, 1];
-    const metallic = pbr.metallicFactor ?? 1, rough = pbr.roughnessFactor ?? 1;
     const ext = m.extensions || {};
+    // KHR_materials_pbrSpecularGlossiness: the diffuse colour and texture as the base colour,
+    // 1 - glossiness as the roughness, a dielectric.
+    const sg = ext.KHR_materials_pbrSpecularGlossiness;
+    const base = (sg ? sg.diffuseFactor : pbr.baseColorFactor) || [1, 1, 1, 1];
+    const metallic = sg ? 0 : pbr.metallicFactor ?? 1, rough = sg ? 1 - (sg.glossinessFactor ?? 1) : pbr.roughnessFactor ?? 1;
+    const baseTexture = sg ? sg.diffuseTexture : pbr.baseColorTexture;
+    if (ext.KHR_materials_unlit)  // XML3D's matte: the base colour as it is
+      return { ...MATERIAL_BASE(m, base), model: 'matte', diffuseColor: [base[0], base[1], base[2]],
+        diffuseTexture: texture(baseTexture), emissiveTexture: texture(m.emissiveTexture) };
     const transmission = ext.KHR_materials_transmission ? ext.KHR_materials_transmission.transmissionFactor ?? 0 : 0;
     const spec = 0.04 * (1 - metallic);
     return {
@@ -200,7 +303,7 @@ export async function loadGltf(body, url, fetchBinary, { defer = false } = {}) {
       shininess: Math.max(0.01, (1 - rough) * (1 - rough)),
       emissiveColor: m.emissiveFactor ? [...m.emissiveFactor] : [0, 0, 0],
       opacity: m.alphaMode === 'BLEND' ? base[3] : 1,
-      diffuseTexture: texture(pbr.baseColorTexture),
+      diffuseTexture: texture(baseTexture),
       emissiveTexture: texture(m.emissiveTexture),
       reflectionCoefficient: metallic * (1 - rough),
       refractionCoefficient: transmission,
@@ -213,7 +316,28 @@ export async function loadGltf(body, url, fetchBinary, { defer = false } = {}) {
 
   // undrawn: primitives that are not drawn (points and lines), counted for one warning;
   // badColors: COLOR_0 attributes left out because they do not give one colour per vertex.
-  const result = { meshes: [], lights: [], camera: null, url, undrawn: 0, badColors: 0 };
+  const result = { meshes: [], lights: [], camera: null, url, undrawn: 0, badColors: 0, warnings };
+  const uvOf = materialMappings(json);
+  (json.materials || []).forEach((m, k) => {
+    const base = (m.extensions && m.extensions.KHR_materials_pbrSpecularGlossiness || m.pbrMetallicRoughness || {})[
+      m.extensions && m.extensions.KHR_materials_pbrSpecularGlossiness ? 'diffuseTexture' : 'baseColorTexture'];
+    if (base && m.emissiveTexture && !sameMapping(uvMapping(m.emissiveTexture), uvOf[k]))
+      warnings.push(`material '${m.name ?? k}': its emissive texture reads other texture coordinates than its base colour texture; both read the base colour's`);
+  });
+  // A primitive's texture coordinates: its material's set, through its transform (a new array).
+  function texcoords(at, material) {
+    const uv = uvOf[material] || { set: 0, m: null };
+    const i = at[`TEXCOORD_${uv.set}`];
+    if (i === undefined) return null;
+    const t = asFloat(accessor(i));
+    if (!uv.m) return t;
+    const m = uv.m, out = new Float32Array(t.length);
+    for (let k = 0; k + 1 < t.length; k += 2) {
+      out[k] = m[0] * t[k] + m[1] * t[k + 1] + m[2];
+      out[k + 1] = m[3] * t[k] + m[4] * t[k + 1] + m[5];
+    }
+    return out;
+  }
   // COLOR_0 as RGB floats (VEC3, or VEC4 with its alpha dropped; normalised integers are scaled
   // by accessor()), or null. glTF multiplies the base colour by it.
   function vertexColors(at) {
@@ -240,16 +364,20 @@ export async function loadGltf(body, url, fetchBinary, { defer = false } = {}) {
       const mesh = json.meshes[node.mesh];
       mesh.primitives.forEach((p, k) => {
         const mode = p.mode ?? 4;
-        if (mode !== 4 && mode !== 5) { result.undrawn++; return; }  // points, lines and fans are not drawn
+        if (mode !== 4 && mode !== 5 && mode !== 6) { result.undrawn++; return; }  // points and lines are not drawn
         const at = p.attributes;
         if (at.POSITION === undefined) return;
-        const indices = p.indices !== undefined ? indexAccessor(p.indices) : null;
+        let indices = p.indices !== undefined ? indexAccessor(p.indices) : null;
+        if (mode === 6) {  // a fan becomes a triangle list (a new array, without a source)
+          const order = indices || Uint32Array.from({ length: json.accessors[at.POSITION].count }, (_, k) => k);
+          indices = fanToList(order);
+        }
         result.meshes.push({
           name: `${node.name ?? ni}${k}`,
           nodeName: node.name, meshName: mesh.name,
           positions: asFloat(accessor(at.POSITION)),
           normals: at.NORMAL !== undefined ? asFloat(accessor(at.NORMAL)) : null,
-          texcoords: at.TEXCOORD_0 !== undefined ? asFloat(accessor(at.TEXCOORD_0)) : null,
+          texcoords: texcoords(at, p.material),
           colors: vertexColors(at),
           indices, strip: mode === 5,  // unrolled by MarkupReader (a new array, without a source)
           material: p.material !== undefined ? materials[p.material] : null,

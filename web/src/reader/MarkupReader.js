@@ -573,8 +573,9 @@ export class MarkupReader {
     if (r.gltf) {
       const g = r.gltf;
       if (g.undrawn > 0)
-        this.warn(el, `${this.describe(el)} src="${src}": ${g.undrawn} glTF primitive${g.undrawn > 1 ? 's' : ''} of points, lines or triangle fans ` +
-          `not drawn: only triangles and triangle strips are`);
+        this.warn(el, `${this.describe(el)} src="${src}": ${g.undrawn} glTF primitive${g.undrawn > 1 ? 's' : ''} of points or lines ` +
+          `not drawn: only triangles, triangle strips and fans are`);
+      for (const w of g.warnings || []) this.warn(el, `${this.describe(el)} src="${src}": ${w}`);
       if (g.badColors > 0)
         this.warn(el, `${this.describe(el)} src="${src}": COLOR_0 of ${g.badColors} glTF primitive${g.badColors > 1 ? 's' : ''} ` +
           'left out: not one RGB or RGBA colour per vertex');

@@ -253,3 +253,114 @@ test('the reader checks a deferred glTF\'s positions once they are in: NaN drops
   assert.equal(loaded.meshes.size, 0);
   assert.match(loaded.errors.map((e) => e.message).join('\n'), /positions hold NaN or Infinity/);
 });
+
+// ---- conformance: what real exporters write (the node's loader reads the same, test_gltf.cpp) ----
+
+// A glTF over one data: buffer made of `views` (typed arrays, each padded to 4 bytes).
+function overViews(views, rest) {
+  const parts = [], bufferViews = [];
+  let at = 0;
+  for (const v of views) {
+    const bytes = new Uint8Array(v.buffer, v.byteOffset, v.byteLength);
+    bufferViews.push({ buffer: 0, byteOffset: at, byteLength: bytes.length });
+    parts.push(bytes);
+    at += bytes.length;
+    const pad = (4 - (at % 4)) % 4;
+    if (pad) { parts.push(new Uint8Array(pad)); at += pad; }
+  }
+  const all = Buffer.concat(parts.map((p) => Buffer.from(p)));
+  return { asset: { version: '2.0' }, scene: 0, scenes: [{ nodes: [0] }], nodes: [{ mesh: 0 }], bufferViews,
+    buffers: [{ uri: 'data:application/octet-stream;base64,' + all.toString('base64'), byteLength: all.length }], ...rest };
+}
+const noFetch = async () => assert.fail('nothing is fetched');
+const near = (got, want) => {
+  assert.equal(got.length, want.length);
+  for (let i = 0; i < want.length; i++) assert.ok(Math.abs(got[i] - want[i]) < 1e-6, `${i}: ${got[i]} vs ${want[i]}`);
+};
+
+test('glTF sparse accessors replace the elements they name, over a bufferView or zeros; bad ones are errors', async () => {
+  const views = [new Float32Array([0, 0, 0, 1, 0, 0, 0, 1, 0]), new Uint16Array([0, 2]), new Float32Array([5, 6, 7, 8, 9, 10]),
+    new Uint16Array([2, 0])];
+  const sparse = (indices) => ({ count: 2, indices: { bufferView: indices, componentType: 5123 }, values: { bufferView: 2 } });
+  const file = (accessor) => overViews(views, { meshes: [{ primitives: [{ attributes: { POSITION: 0 } }] }], accessors: [accessor] });
+  let g = await loadGltf(file({ bufferView: 0, componentType: 5126, count: 3, type: 'VEC3', sparse: sparse(1) }), 'http://localhost/s.gltf', noFetch);
+  assert.deepEqual([...g.meshes[0].positions], [5, 6, 7, 1, 0, 0, 8, 9, 10]);
+  g = await loadGltf(file({ componentType: 5126, count: 3, type: 'VEC3', sparse: sparse(1) }), 'http://localhost/z.gltf', noFetch);
+  assert.deepEqual([...g.meshes[0].positions], [5, 6, 7, 0, 0, 0, 8, 9, 10]);
+  await assert.rejects(loadGltf(file({ bufferView: 0, componentType: 5126, count: 3, type: 'VEC3', sparse: sparse(3) }), 'http://localhost/o.gltf', noFetch),
+    /accessor 0: sparse index 0 out of range or not increasing/);
+  // The file's own bytes are not changed: another accessor over the same view reads them as they are.
+  g = await loadGltf(overViews(views, { meshes: [{ primitives: [{ attributes: { POSITION: 0 } }, { attributes: { POSITION: 1 } }] }],
+    accessors: [{ bufferView: 0, componentType: 5126, count: 3, type: 'VEC3', sparse: sparse(1) },
+      { bufferView: 0, componentType: 5126, count: 3, type: 'VEC3' }] }), 'http://localhost/t.gltf', noFetch);
+  assert.deepEqual([...g.meshes[1].positions], [0, 0, 0, 1, 0, 0, 0, 1, 0]);
+});
+
+test('glTF triangle fans become triangle lists; quantized attributes are scaled; points and lines are counted', async () => {
+  const views = [new Int16Array([0, 0, 0, 0, 32767, 0, 0, 0, 0, 32767, 0, 0, 32767, 32767, 0, 0]), new Uint8Array([3, 2, 1, 0])];
+  const file = overViews(views, {
+    extensionsUsed: ['KHR_mesh_quantization'], extensionsRequired: ['KHR_mesh_quantization'],
+    meshes: [{ primitives: [{ attributes: { POSITION: 0 }, mode: 6 }, { attributes: { POSITION: 0 }, indices: 1, mode: 6 },
+      { attributes: { POSITION: 0 }, mode: 1 }] }],
+    accessors: [{ bufferView: 0, byteOffset: 0, componentType: 5122, normalized: true, count: 4, type: 'VEC3' },
+      { bufferView: 1, componentType: 5121, count: 4, type: 'SCALAR' }],
+  });
+  file.bufferViews[0].byteStride = 8;  // normalized shorts, 4-byte aligned vertices
+  const g = await loadGltf(file, 'http://localhost/f.gltf', noFetch);
+  assert.equal(g.meshes.length, 2, 'both fans drawn');
+  assert.deepEqual([...g.meshes[0].positions], [0, 0, 0, 1, 0, 0, 0, 1, 0, 1, 1, 0]);
+  assert.deepEqual([...g.meshes[0].indices], [1, 2, 0, 2, 3, 0]);
+  assert.deepEqual([...g.meshes[1].indices], [2, 1, 3, 1, 0, 3]);
+  assert.equal(g.meshes[0].strip, false);
+  assert.equal(g.undrawn, 1);
+  assert.deepEqual(g.warnings, []);
+});
+
+test('a glTF material\'s texCoord set and KHR_texture_transform are baked into the coordinates; unlit and spec-gloss materials', async () => {
+  const views = [new Float32Array([0, 0, 0, 1, 0, 0, 0, 1, 0]), new Float32Array([0, 0, 1, 0, 0, 1]), new Float32Array([0.5, 0.5, 1, 0.5, 0.5, 1])];
+  const file = (materials, extensionsUsed = []) => overViews(views, {
+    extensionsUsed, images: [{ uri: 't.png' }], textures: [{ source: 0 }], materials,
+    meshes: [{ primitives: [{ attributes: { POSITION: 0, TEXCOORD_0: 1, TEXCOORD_1: 2 }, material: 0 }] }],
+    accessors: [{ bufferView: 0, componentType: 5126, count: 3, type: 'VEC3' }, { bufferView: 1, componentType: 5126, count: 3, type: 'VEC2' },
+      { bufferView: 2, componentType: 5126, count: 3, type: 'VEC2' }],
+  });
+  let g = await loadGltf(file([{ pbrMetallicRoughness: { baseColorTexture: { index: 0, texCoord: 1 } } }]), 'http://localhost/a.gltf', noFetch);
+  near(g.meshes[0].texcoords, [0.5, 0.5, 1, 0.5, 0.5, 1]);
+  // Scale, then a quarter turn (columns (cos, sin), (-sin, cos)), then the offset: u' = -3 v + 0.5, v' = 2 u + 0.25.
+  g = await loadGltf(file([{ pbrMetallicRoughness: { baseColorTexture: { index: 0, extensions: { KHR_texture_transform:
+    { offset: [0.5, 0.25], rotation: Math.PI / 2, scale: [2, 3] } } } } }], ['KHR_texture_transform']), 'http://localhost/b.gltf', noFetch);
+  near(g.meshes[0].texcoords, [0.5, 0.25, 0.5, 2.25, -2.5, 0.25]);
+  assert.equal(sourceOf(g.meshes[0].texcoords), null);
+  assert.deepEqual(g.warnings, []);
+  g = await loadGltf(file([{ pbrMetallicRoughness: { baseColorTexture: { index: 0 } }, emissiveTexture: { index: 0, texCoord: 1 } }]),
+    'http://localhost/c.gltf', noFetch);
+  near(g.meshes[0].texcoords, [0, 0, 1, 0, 0, 1]);
+  assert.match(g.warnings[0], /emissive texture reads other texture coordinates/);
+  g = await loadGltf(file([{ pbrMetallicRoughness: { baseColorFactor: [0.2, 0.4, 0.6, 1], metallicFactor: 1 },
+    extensions: { KHR_materials_unlit: {} } }], ['KHR_materials_unlit']), 'http://localhost/d.gltf', noFetch);
+  assert.equal(g.meshes[0].material.model, 'matte');
+  assert.deepEqual(g.meshes[0].material.diffuseColor, [0.2, 0.4, 0.6]);
+  assert.equal(g.meshes[0].material.reflectionCoefficient, 0);
+  g = await loadGltf(file([{ extensions: { KHR_materials_pbrSpecularGlossiness: { diffuseFactor: [0.5, 0.25, 1, 1],
+    diffuseTexture: { index: 0, texCoord: 1 } } } }], ['KHR_materials_pbrSpecularGlossiness']), 'http://localhost/e.gltf', noFetch);
+  assert.deepEqual(g.meshes[0].material.diffuseColor, [0.5, 0.25, 1]);
+  assert.equal(g.meshes[0].material.diffuseTexture.url, 'http://localhost/t.png');
+  assert.equal(g.meshes[0].material.reflectionCoefficient, 0);
+  near(g.meshes[0].texcoords, [0.5, 0.5, 1, 0.5, 0.5, 1]);
+});
+
+test('glTF extensions: a required one the reader lacks is an error naming it, a used one a warning; .glb images become blob: URLs', async () => {
+  const views = [new Float32Array([0, 0, 0, 1, 0, 0, 0, 1, 0]), new Uint8Array([0x89, 0x50, 0x4e, 0x47])];
+  const base = { meshes: [{ primitives: [{ attributes: { POSITION: 0 }, material: 0 }] }],
+    accessors: [{ bufferView: 0, componentType: 5126, count: 3, type: 'VEC3' }] };
+  await assert.rejects(loadGltf(overViews(views, { ...base, materials: [{}], extensionsRequired: ['KHR_draco_mesh_compression'] }),
+    'http://localhost/d.gltf', noFetch), /requires glTF extensions this loader does not implement: KHR_draco_mesh_compression/);
+  const g = await loadGltf(overViews(views, { ...base, extensionsUsed: ['KHR_materials_clearcoat', 'KHR_materials_ior'],
+    images: [{ bufferView: 1, mimeType: 'image/png' }], textures: [{ source: 0 }], materials: [{ pbrMetallicRoughness: { baseColorTexture: { index: 0 } } }] }),
+  'http://localhost/g.gltf', noFetch);
+  assert.deepEqual(g.warnings, ['glTF extensions ignored: KHR_materials_clearcoat']);
+  const url = g.meshes[0].material.diffuseTexture.url;
+  assert.match(url, /^blob:/);
+  const bytes = new Uint8Array(await (await fetch(url)).arrayBuffer());
+  assert.deepEqual([...bytes], [0x89, 0x50, 0x4e, 0x47], 'the image\'s bytes from the binary chunk');
+});

@@ -233,7 +233,7 @@ test('glTF primitives of points or lines in a model give one warning naming the 
   const scene = reader.read(doc.querySelector('xml3d'));
   assert.equal(scene.meshes.size, 1, 'the triangles are drawn');
   assert.deepEqual(scene.warnings.map((w) => w.message),
-    ['<model id="g"> src="m/lines.gltf": 2 glTF primitives of points, lines or triangle fans not drawn: only triangles and triangle strips are']);
+    ['<model id="g"> src="m/lines.gltf": 2 glTF primitives of points or lines not drawn: only triangles, triangle strips and fans are']);
   assert.equal(scene.warnings[0].element.id, 'g');
   assert.deepEqual(scene.errors, []);
 });
