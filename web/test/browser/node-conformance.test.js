@@ -128,6 +128,20 @@ const PAGES = [
     ],
   },
   {
+    page: 'gltf-features.html',
+    warnings: [/^<model id="features"> src="gltf-features\.glb": glTF extensions ignored: KHR_materials_clearcoat/],
+    probes: [
+      probe(V240, 'left: blue on its left half (KHR_texture_transform; red without it)', -1.75, 0, -3, BLUE),
+      probe(V240, 'left: blue on its right half (the image in the .glb)', -1.25, 0.2, -3, BLUE),
+      probe(V240, 'middle: green top-right corner (the sparse vertex of the fan)', 0.3, 0.3, -3, GREEN),
+      probe(V240, 'middle: green bottom-left', -0.3, -0.3, -3, GREEN),
+      probe(V240, 'right: blue (TEXCOORD_1; red through TEXCOORD_0)', 1.5, 0, -3, BLUE),
+      probe(V240, 'right: blue near its corner (quantized positions, scaled by the node)', 1.8, 0.3, -3, BLUE),
+      probe(V240, 'black between the left and the middle quad', -0.75, 0, -3, BLACK),
+      probe(V240, 'black between the middle and the right quad', 0.75, 0, -3, BLACK),
+    ],
+  },
+  {
     page: 'nested-assets.html',
     probes: [
       probe(V240, 'left: big square red', -1.5, -0.4, -3, RED),
