@@ -31,8 +31,15 @@ function uvMapping(info) {
 const sameMapping = (a, b) => a.set === b.set && JSON.stringify(a.m) === JSON.stringify(b.m);
 
 // The fields every glTF material gives, whatever its model.
+// glTF's emission: emissiveFactor (default black) times KHR_materials_emissive_strength's
+// emissiveStrength (default 1), as on the node.
+const emission = (m) => {
+  const k = (m.extensions && m.extensions.KHR_materials_emissive_strength || {}).emissiveStrength;
+  const f = Array.isArray(m.emissiveFactor) ? m.emissiveFactor : [0, 0, 0];
+  return f.slice(0, 3).map((v) => v * (Number.isFinite(k) ? k : 1));
+};
 const MATERIAL_BASE = (m, base) => ({
-  name: m.name, specularColor: [0, 0, 0], shininess: 0.01, emissiveColor: m.emissiveFactor ? [...m.emissiveFactor] : [0, 0, 0],
+  name: m.name, specularColor: [0, 0, 0], shininess: 0.01, emissiveColor: emission(m),
   opacity: m.alphaMode === 'BLEND' ? base[3] : 1, reflectionCoefficient: 0, refractionCoefficient: 0, refractionIndex: 1,
   alphaMask: m.alphaMode === 'MASK', alphaCutoff: m.alphaCutoff ?? 0.5, doubleSided: !!m.doubleSided,
 });
@@ -301,7 +308,7 @@ export async function loadGltf(body, url, fetchBinary, { defer = false } = {}) {
       diffuseColor: [base[0] * (1 - metallic), base[1] * (1 - metallic), base[2] * (1 - metallic)],
       specularColor: [spec + base[0] * metallic, spec + base[1] * metallic, spec + base[2] * metallic],
       shininess: Math.max(0.01, (1 - rough) * (1 - rough)),
-      emissiveColor: m.emissiveFactor ? [...m.emissiveFactor] : [0, 0, 0],
+      emissiveColor: emission(m),
       opacity: m.alphaMode === 'BLEND' ? base[3] : 1,
       diffuseTexture: texture(baseTexture),
       emissiveTexture: texture(m.emissiveTexture),

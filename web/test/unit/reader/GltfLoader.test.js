@@ -341,6 +341,9 @@ test('a glTF material\'s texCoord set and KHR_texture_transform are baked into t
   assert.equal(g.meshes[0].material.model, 'matte');
   assert.deepEqual(g.meshes[0].material.diffuseColor, [0.2, 0.4, 0.6]);
   assert.equal(g.meshes[0].material.reflectionCoefficient, 0);
+  g = await loadGltf(file([{ emissiveFactor: [1, 0.5, 0], extensions: { KHR_materials_emissive_strength: { emissiveStrength: 4 } } }],
+    ['KHR_materials_emissive_strength']), 'http://localhost/s.gltf', noFetch);
+  assert.deepEqual(g.meshes[0].material.emissiveColor, [4, 2, 0], 'emissiveFactor times emissiveStrength, as on the node');
   g = await loadGltf(file([{ extensions: { KHR_materials_pbrSpecularGlossiness: { diffuseFactor: [0.5, 0.25, 1, 1],
     diffuseTexture: { index: 0, texCoord: 1 } } } }], ['KHR_materials_pbrSpecularGlossiness']), 'http://localhost/e.gltf', noFetch);
   assert.deepEqual(g.meshes[0].material.diffuseColor, [0.5, 0.25, 1]);
