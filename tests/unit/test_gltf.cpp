@@ -13,6 +13,8 @@
 #include <string>
 #include <unistd.h>
 
+#include <nlohmann/json.hpp>
+
 #include "core/gltf_loader.h"
 #include "core/image.h"
 
@@ -637,6 +639,48 @@ TEST_CASE("glTF KHR_materials_unlit shows the base colour unlit; unknown require
   CHECK(ls.warnings.size() == 1);
   CHECK(warned(ls, "glTF extensions ignored: KHR_materials_clearcoat"));
   CHECK_FALSE(warned(ls, "KHR_materials_ior"));
+}
+
+TEST_CASE("glTF materials become the XML3D materials of tests/data/gltf-materials.json (the web reader's table too)", "[gltf]") {
+  std::ifstream in(TESSERA_TEST_DATA_DIR "/gltf-materials.json");
+  REQUIRE(in);
+  const nlohmann::json table = nlohmann::json::parse(in);
+  const auto& cases = table.at("cases");
+  nlohmann::json materials = nlohmann::json::array();
+  for (const auto& c : cases) materials.push_back(c.at("material"));
+  TempDir dir;
+  Bin bin;
+  const int pos = bin.view(std::vector<float>{0, 0, 0, 1, 0, 0, 0, 1, 0});
+  const std::string extra = R"(,"materials":)" + materials.dump() +
+                            R"(,"extensionsUsed":["KHR_materials_transmission","KHR_materials_ior","KHR_materials_emissive_strength","KHR_materials_unlit","KHR_materials_pbrSpecularGlossiness"])";
+  LoadedScene ls = load_gltf(dir.write("materials.gltf", gltf_of(dir, bin, R"({"attributes":{"POSITION":0},"material":0})",
+                                                                accessor(pos, 5126, 3, "VEC3"), extra)));
+  CHECK(ls.warnings.empty());
+  REQUIRE(ls.scene.materials().size() == cases.size());
+  size_t i = 0;
+  for (const auto& [id, entry] : ls.scene.materials()) {  // ids in the file's order
+    const Material& m = entry.value;
+    const auto& c = cases.at(i++);
+    const auto& x = c.at("expect");
+    INFO(c.at("name").get<std::string>());
+    auto vec = [](const nlohmann::json& v) { return Vec3{v.at(0).get<float>(), v.at(1).get<float>(), v.at(2).get<float>()}; };
+    auto same = [](const Vec3& a, const Vec3& b) {
+      return std::fabs(a.x - b.x) < 1e-5f && std::fabs(a.y - b.y) < 1e-5f && std::fabs(a.z - b.z) < 1e-5f;
+    };
+    const char* model = m.model == Material::Model::matte ? "matte" : m.model == Material::Model::diffuse ? "diffuse" : "phong";
+    CHECK(model == x.at("model").get<std::string>());
+    CHECK(same(m.diffuse_color, vec(x.at("diffuse"))));
+    CHECK(same(m.specular_color, vec(x.at("specular"))));
+    CHECK(same(m.emissive_color, vec(x.at("emissive"))));
+    if (x.contains("shininess")) CHECK(m.shininess == Approx(x.at("shininess").get<float>()).margin(1e-5));
+    CHECK(m.opacity == Approx(x.at("opacity").get<float>()).margin(1e-6));
+    CHECK(m.reflection == Approx(x.at("reflection").get<float>()).margin(1e-5));
+    CHECK(m.refraction == Approx(x.at("refraction").get<float>()).margin(1e-6));
+    if (x.contains("ior")) CHECK(m.ior == Approx(x.at("ior").get<float>()).margin(1e-6));
+    CHECK(m.alpha_mask == x.at("alphaMask").get<bool>());
+    if (x.contains("alphaCutoff")) CHECK(m.alpha_cutoff == Approx(x.at("alphaCutoff").get<float>()).margin(1e-6));
+    CHECK(m.double_sided == x.at("doubleSided").get<bool>());
+  }
 }
 
 TEST_CASE("a glTF orthographic camera is drawn as a perspective one, and a warning says so", "[gltf]") {

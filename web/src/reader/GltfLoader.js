@@ -288,6 +288,9 @@ export async function loadGltf(body, url, fetchBinary, { defer = false } = {}) {
     };
   }
 
+  // glTF materials as XML3D ones, by the node loader's rules (core/gltf_loader.cpp,
+  // convert_material; both are pinned to tests/data/gltf-materials.json): so one file looks the
+  // same as the node's --scene and as a page's <model>.
   const materials = (json.materials || []).map((m) => {
     const pbr = m.pbrMetallicRoughness || {};
     const ext = m.extensions || {};
@@ -297,28 +300,25 @@ export async function loadGltf(body, url, fetchBinary, { defer = false } = {}) {
     const base = (sg ? sg.diffuseFactor : pbr.baseColorFactor) || [1, 1, 1, 1];
     const metallic = sg ? 0 : pbr.metallicFactor ?? 1, rough = sg ? 1 - (sg.glossinessFactor ?? 1) : pbr.roughnessFactor ?? 1;
     const baseTexture = sg ? sg.diffuseTexture : pbr.baseColorTexture;
-    if (ext.KHR_materials_unlit)  // XML3D's matte: the base colour as it is
-      return { ...MATERIAL_BASE(m, base), model: 'matte', diffuseColor: [base[0], base[1], base[2]],
-        diffuseTexture: texture(baseTexture), emissiveTexture: texture(m.emissiveTexture) };
+    const rgb = [base[0], base[1], base[2]], times = (v, k) => v.map((x) => x * k);
+    const out = { ...MATERIAL_BASE(m, base), model: 'phong', diffuseTexture: texture(baseTexture), emissiveTexture: texture(m.emissiveTexture) };
+    if (m.alphaMode === 'MASK') out.opacity = base[3];  // the cut-out compares texture alpha x opacity with the cutoff
+    if (ext.KHR_materials_unlit) return { ...out, model: 'matte', diffuseColor: rgb };  // XML3D's matte: the base colour as it is
+    // The specular lobe: Phong exponent 2 / a^2 - 2 with a = roughness^2, within 1..128.
+    const a = Math.max(rough * rough, 1e-3);
+    out.shininess = Math.max(Math.min(2 / (a * a) - 2, 128), 1) / 128;
     const transmission = ext.KHR_materials_transmission ? ext.KHR_materials_transmission.transmissionFactor ?? 0 : 0;
-    const spec = 0.04 * (1 - metallic);
-    return {
-      name: m.name,
-      model: 'phong',
-      diffuseColor: [base[0] * (1 - metallic), base[1] * (1 - metallic), base[2] * (1 - metallic)],
-      specularColor: [spec + base[0] * metallic, spec + base[1] * metallic, spec + base[2] * metallic],
-      shininess: Math.max(0.01, (1 - rough) * (1 - rough)),
-      emissiveColor: emission(m),
-      opacity: m.alphaMode === 'BLEND' ? base[3] : 1,
-      diffuseTexture: texture(baseTexture),
-      emissiveTexture: texture(m.emissiveTexture),
-      reflectionCoefficient: metallic * (1 - rough),
-      refractionCoefficient: transmission,
-      refractionIndex: ext.KHR_materials_ior ? ext.KHR_materials_ior.ior ?? 1.5 : (transmission ? 1.5 : 1),
-      alphaMask: m.alphaMode === 'MASK',
-      alphaCutoff: m.alphaCutoff ?? 0.5,
-      doubleSided: !!m.doubleSided,
-    };
+    if (transmission > 0) {  // a dielectric: refraction, with Fresnel reflection
+      const ior = ext.KHR_materials_ior ? ext.KHR_materials_ior.ior ?? 1.5 : 1.5;
+      return { ...out, diffuseColor: times(rgb, 1 - transmission), specularColor: [0.04, 0.04, 0.04], refractionCoefficient: transmission,
+        refractionIndex: ior };
+    }
+    if (metallic >= 0.5) {  // a conductor: a mirror tinted by the base colour
+      const gloss = 1 - Math.min(rough * 2, 0.9);
+      return { ...out, diffuseColor: times(rgb, 1 - gloss), specularColor: rgb, reflectionCoefficient: Math.min(Math.max(...rgb), 1) * gloss };
+    }
+    const spec = rough < 0.5 ? 0.04 * (1 - rough) * 4 : 0;
+    return { ...out, diffuseColor: rgb, specularColor: [spec, spec, spec] };
   });
 
   // undrawn: primitives that are not drawn (points and lines), counted for one warning;

@@ -367,3 +367,32 @@ test('glTF extensions: a required one the reader lacks is an error naming it, a 
   const bytes = new Uint8Array(await (await fetch(url)).arrayBuffer());
   assert.deepEqual([...bytes], [0x89, 0x50, 0x4e, 0x47], 'the image\'s bytes from the binary chunk');
 });
+
+test('glTF materials become the XML3D materials of tests/data/gltf-materials.json, as on the node', async () => {
+  const fs = await import('node:fs');
+  const table = JSON.parse(fs.readFileSync(new URL('../../../../tests/data/gltf-materials.json', import.meta.url), 'utf8'));
+  const views = [new Float32Array([0, 0, 0, 1, 0, 0, 0, 1, 0])];
+  const g = await loadGltf(overViews(views, {
+    extensionsUsed: ['KHR_materials_transmission', 'KHR_materials_ior', 'KHR_materials_emissive_strength', 'KHR_materials_unlit', 'KHR_materials_pbrSpecularGlossiness'],
+    materials: table.cases.map((c) => c.material),
+    meshes: [{ primitives: table.cases.map((_, k) => ({ attributes: { POSITION: 0 }, material: k })) }],
+    accessors: [{ bufferView: 0, componentType: 5126, count: 3, type: 'VEC3' }],
+  }), 'http://localhost/materials.gltf', noFetch);
+  assert.deepEqual(g.warnings, []);
+  assert.equal(g.meshes.length, table.cases.length);
+  table.cases.forEach((c, k) => {
+    const m = g.meshes[k].material, x = c.expect, at = c.name;
+    const close = (got, want, what) => assert.ok(Math.abs(got - want) < 1e-5, `${at}: ${what} ${got}, expected ${want}`);
+    assert.equal(m.model, x.model, at);
+    for (const [key, want] of [['diffuseColor', x.diffuse], ['specularColor', x.specular], ['emissiveColor', x.emissive]])
+      want.forEach((v, j) => close(m[key][j], v, `${key}[${j}]`));
+    if (x.shininess !== undefined) close(m.shininess, x.shininess, 'shininess');
+    close(m.opacity, x.opacity, 'opacity');
+    close(m.reflectionCoefficient, x.reflection, 'reflection');
+    close(m.refractionCoefficient, x.refraction, 'refraction');
+    if (x.ior !== undefined) close(m.refractionIndex, x.ior, 'ior');
+    assert.equal(m.alphaMask, x.alphaMask, at);
+    if (x.alphaCutoff !== undefined) close(m.alphaCutoff, x.alphaCutoff, 'alphaCutoff');
+    assert.equal(m.doubleSided, x.doubleSided, at);
+  });
+});
