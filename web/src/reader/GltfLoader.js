@@ -289,8 +289,8 @@ export async function loadGltf(body, url, fetchBinary, { defer = false } = {}) {
   }
 
   // glTF materials as XML3D ones, by the node loader's rules (core/gltf_loader.cpp,
-  // convert_material; both are pinned to tests/data/gltf-materials.json): so one file looks the
-  // same as the node's --scene and as a page's <model>.
+  // convert_material; both are pinned to tests/data/gltf-materials.json): so one file has the
+  // same materials as the node's --scene and as a page's <model>.
   const materials = (json.materials || []).map((m) => {
     const pbr = m.pbrMetallicRoughness || {};
     const ext = m.extensions || {};
