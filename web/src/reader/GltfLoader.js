@@ -30,6 +30,10 @@ function uvMapping(info) {
 }
 const sameMapping = (a, b) => a.set === b.set && JSON.stringify(a.m) === JSON.stringify(b.m);
 
+// At most this many elements in an accessor without a bufferView (zeros, or a sparse one's
+// base): a count alone cannot allocate gigabytes. The node's loader has the same bound.
+const MAX_ZERO_ELEMENTS = 2 ** 24;
+
 // The fields every glTF material gives, whatever its model.
 // glTF's emission: emissiveFactor (default black) times KHR_materials_emissive_strength's
 // emissiveStrength (default 1), as on the node.
@@ -209,20 +213,33 @@ export async function loadGltf(body, url, fetchBinary, { defer = false } = {}) {
   }
 
   const accessorCache = new Map();
+  // Accessors are checked against their bufferView, and the view against its buffer, before
+  // anything is read or allocated (as the node's loader does): a bad file is an error naming
+  // what is wrong, never a read past the end, zeros in silence, or gigabytes allocated.
   function accessor(i) {
     if (accessorCache.has(i)) return accessorCache.get(i);
-    const a = json.accessors[i];
+    const a = json.accessors && json.accessors[i];
+    if (!a) throw new Error(`accessor ${i} does not exist`);
     const T = TYPES[a.componentType];
     const n = COMPONENTS[a.type];
     if (!T || !n) throw new Error(`accessor ${i}: unsupported type`);
+    if (!Number.isInteger(a.count) || a.count < 0) throw new Error(`accessor ${i}: count ${a.count} is not a count`);
     let out;
-    if (a.bufferView === undefined) out = new T(a.count * n);
-    else {
-      const v = json.bufferViews[a.bufferView];
-      const buf = buffers[v.buffer];
-      const base = (v.byteOffset || 0) + (a.byteOffset || 0);
+    if (a.bufferView === undefined) {
+      if (a.count > MAX_ZERO_ELEMENTS) throw new Error(`accessor ${i} without a bufferView has ${a.count} elements (at most ${MAX_ZERO_ELEMENTS})`);
+      out = new T(a.count * n);
+    } else {
+      const v = json.bufferViews && json.bufferViews[a.bufferView];
+      const buf = v && buffers[v.buffer];
+      if (!buf) throw new Error(`accessor ${i}: bufferView ${a.bufferView} or its buffer does not exist`);
+      const vo = v.byteOffset || 0, ao = a.byteOffset || 0;
+      if (!Number.isInteger(v.byteLength) || !Number.isInteger(vo) || vo < 0 || vo + v.byteLength > buf.byteLength)
+        throw new Error(`bufferView ${a.bufferView} (byteOffset ${vo}, byteLength ${v.byteLength}) exceeds buffer ${v.buffer} (${buf.byteLength} bytes)`);
+      const base = vo + ao;
       const elem = n * T.BYTES_PER_ELEMENT;
       const stride = v.byteStride || elem;
+      if (!Number.isInteger(ao) || ao < 0 || !(stride >= elem) || (a.count > 0 && ao + (a.count - 1) * stride + elem > v.byteLength))
+        throw new Error(`accessor ${i}: ${a.count} elements (stride ${stride}, byteOffset ${ao}) read past the end of bufferView ${a.bufferView} (${v.byteLength} bytes)`);
       if (stride === elem && base % T.BYTES_PER_ELEMENT === 0) {
         out = new T(buf, base, a.count * n);
       } else {  // strided or unaligned: copy element by element

@@ -396,3 +396,25 @@ test('glTF materials become the XML3D materials of tests/data/gltf-materials.jso
     assert.equal(m.doubleSided, x.doubleSided, at);
   });
 });
+
+test('glTF accessors and bufferViews that do not fit are errors naming them, before anything is read or allocated', async () => {
+  const views = [new Float32Array([0, 0, 0, 1, 0, 0, 0, 1, 0])];
+  const file = (accessor, view = {}) => {
+    const f = overViews(views, { meshes: [{ primitives: [{ attributes: { POSITION: 0 } }] }], accessors: [accessor] });
+    Object.assign(f.bufferViews[0], view);
+    return f;
+  };
+  const cases = [
+    [{ bufferView: 0, componentType: 5126, count: 4, type: 'VEC3' }, {}, /accessor 0: 4 elements \(stride 12, byteOffset 0\) read past the end of bufferView 0 \(36 bytes\)/],
+    [{ bufferView: 0, byteOffset: 4, componentType: 5126, count: 3, type: 'VEC3' }, {}, /read past the end of bufferView 0/],
+    [{ bufferView: 0, componentType: 5126, count: 3, type: 'VEC3' }, { byteStride: 16 }, /stride 16.*read past the end/],
+    [{ bufferView: 0, componentType: 5126, count: 3, type: 'VEC3' }, { byteLength: 4000 }, /bufferView 0 \(byteOffset 0, byteLength 4000\) exceeds buffer 0 \(36 bytes\)/],
+    [{ componentType: 5126, count: 2 ** 30, type: 'VEC3' }, {}, /accessor 0 without a bufferView has 1073741824 elements \(at most 16777216\)/],
+    [{ bufferView: 0, componentType: 5126, count: -1, type: 'VEC3' }, {}, /accessor 0: count -1 is not a count/],
+    [{ bufferView: 7, componentType: 5126, count: 3, type: 'VEC3' }, {}, /accessor 0: bufferView 7 or its buffer does not exist/],
+  ];
+  for (const [a, v, message] of cases) await assert.rejects(loadGltf(file(a, v), 'http://localhost/bad.gltf', noFetch), message);
+  const f = file({ bufferView: 0, componentType: 5126, count: 3, type: 'VEC3' });
+  f.meshes[0].primitives[0].attributes.POSITION = 5;
+  await assert.rejects(loadGltf(f, 'http://localhost/bad.gltf', noFetch), /accessor 5 does not exist/);
+});
