@@ -375,8 +375,16 @@ export async function loadGltf(body, url, fetchBinary, { defer = false } = {}) {
     return rgb;
   }
   const lightDefs = (json.extensions && json.extensions.KHR_lights_punctual && json.extensions.KHR_lights_punctual.lights) || [];
+  // glTF's nodes form disjoint trees: a node reached a second time (a second parent, a cycle, a
+  // root listed twice) is an error, as on the node. Without the check a file of 64 nodes each
+  // listing the next one twice would be walked 2^64 times (the page would hang), and a cycle
+  // would recurse until the stack ran out.
+  const reached = new Set();
   function visit(ni, parent) {
-    const node = json.nodes[ni];
+    const node = json.nodes && json.nodes[ni];
+    if (!node) throw new Error(`node ${ni} does not exist`);
+    if (reached.has(ni)) throw new Error(`node ${ni} is reached twice (a second parent, a cycle or a root listed twice)`);
+    reached.add(ni);
     let local;
     if (node.matrix) local = new Float32Array(node.matrix);
     else {

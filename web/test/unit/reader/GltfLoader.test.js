@@ -418,3 +418,20 @@ test('glTF accessors and bufferViews that do not fit are errors naming them, bef
   f.meshes[0].primitives[0].attributes.POSITION = 5;
   await assert.rejects(loadGltf(f, 'http://localhost/bad.gltf', noFetch), /accessor 5 does not exist/);
 });
+
+test('glTF nodes reached twice (a second parent, a cycle) are an error, not a walk that never ends', async () => {
+  const views = [new Float32Array([0, 0, 0, 1, 0, 0, 0, 1, 0])];
+  const base = { meshes: [{ primitives: [{ attributes: { POSITION: 0 } }] }], accessors: [{ bufferView: 0, componentType: 5126, count: 3, type: 'VEC3' }] };
+  // 64 nodes, each listing the next one twice: 2^64 visits without the check.
+  const dag = Array.from({ length: 64 }, (_, k) => (k < 63 ? { mesh: 0, children: [k + 1, k + 1] } : { mesh: 0 }));
+  const t0 = Date.now();
+  await assert.rejects(loadGltf({ ...overViews(views, base), nodes: dag }, 'http://localhost/dag.gltf', noFetch), /node 63 is reached twice/);  // depth first: the last one's second parent
+  assert.ok(Date.now() - t0 < 5000);
+  await assert.rejects(loadGltf({ ...overViews(views, base), nodes: [{ children: [1] }, { children: [0] }] }, 'http://localhost/cycle.gltf', noFetch),
+    /node 0 is reached twice/);
+  await assert.rejects(loadGltf({ ...overViews(views, base), nodes: [{ children: [9] }] }, 'http://localhost/missing.gltf', noFetch),
+    /node 9 does not exist/);
+  const tree = await loadGltf({ ...overViews(views, base), nodes: [{ children: [1, 2] }, { mesh: 0 }, { mesh: 0, translation: [1, 0, 0] }] },
+    'http://localhost/tree.gltf', noFetch);
+  assert.equal(tree.meshes.length, 2, 'one mesh instanced by two nodes is fine');
+});
