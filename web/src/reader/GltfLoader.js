@@ -393,7 +393,8 @@ export async function loadGltf(body, url, fetchBinary, { defer = false } = {}) {
     }
     const world = multiply(parent, local);
     if (node.mesh !== undefined) {
-      const mesh = json.meshes[node.mesh];
+      const mesh = json.meshes && json.meshes[node.mesh];
+      if (!mesh || !Array.isArray(mesh.primitives)) throw new Error(`node ${ni} names mesh ${node.mesh}, which does not exist or has no primitives`);
       mesh.primitives.forEach((p, k) => {
         const mode = p.mode ?? 4;
         if (mode !== 4 && mode !== 5 && mode !== 6) { result.undrawn++; return; }  // points and lines are not drawn
@@ -431,8 +432,8 @@ export async function loadGltf(body, url, fetchBinary, { defer = false } = {}) {
       });
     }
     if (node.camera !== undefined && !result.camera) {
-      const c = json.cameras[node.camera];
-      if (c.type === 'perspective') result.camera = { toWorld: world, fovY: c.perspective.yfov };
+      const c = json.cameras && json.cameras[node.camera];  // one that does not exist is ignored, as on the node
+      if (c && c.type === 'perspective' && c.perspective) result.camera = { toWorld: world, fovY: c.perspective.yfov };
     }
     for (const ch of node.children || []) visit(ch, world);
   }

@@ -431,6 +431,10 @@ test('glTF nodes reached twice (a second parent, a cycle) are an error, not a wa
     /node 0 is reached twice/);
   await assert.rejects(loadGltf({ ...overViews(views, base), nodes: [{ children: [9] }] }, 'http://localhost/missing.gltf', noFetch),
     /node 9 does not exist/);
+  await assert.rejects(loadGltf({ ...overViews(views, base), nodes: [{ mesh: 3 }] }, 'http://localhost/nomesh.gltf', noFetch),
+    /node 0 names mesh 3, which does not exist/);
+  const nocam = await loadGltf({ ...overViews(views, base), nodes: [{ mesh: 0, camera: 2 }] }, 'http://localhost/nocam.gltf', noFetch);
+  assert.equal(nocam.camera, null, 'a camera that does not exist is ignored');
   const tree = await loadGltf({ ...overViews(views, base), nodes: [{ children: [1, 2] }, { mesh: 0 }, { mesh: 0, translation: [1, 0, 0] }] },
     'http://localhost/tree.gltf', noFetch);
   assert.equal(tree.meshes.length, 2, 'one mesh instanced by two nodes is fine');
