@@ -144,10 +144,46 @@ function decodeDataUri(uri) {
 // defer: return before the external buffers are in, where the file allows it (deferrable());
 // the result's `ready` is then the promise of their values (else null), and its `deferred`
 // says so.
-export async function loadGltf(body, url, fetchBinary, { defer = false } = {}) {
+// The glTF structure the reader walks, checked before it walks it: the top-level lists are
+// arrays, nodes' transforms arrays of numbers of the right length, primitives have attributes,
+// the scene exists. What else a malformed file gets wrong still ends as an Error saying the
+// file is malformed (below), never as an exception of another kind.
+const LISTS = ['accessors', 'bufferViews', 'buffers', 'meshes', 'nodes', 'materials', 'textures', 'images', 'samplers', 'scenes', 'cameras'];
+function checkStructure(json) {
+  if (!json || typeof json !== 'object') throw new Error('not a glTF file: no JSON object');
+  for (const k of LISTS)
+    if (json[k] !== undefined && !Array.isArray(json[k])) throw new Error(`"${k}" is not an array`);
+  const numbers = (v, n) => Array.isArray(v) && v.length === n && v.every(Number.isFinite);
+  (json.nodes || []).forEach((node, i) => {
+    if (!node || typeof node !== 'object') throw new Error(`node ${i} is not an object`);
+    for (const [k, n] of [['matrix', 16], ['translation', 3], ['rotation', 4], ['scale', 3]])
+      if (node[k] !== undefined && !numbers(node[k], n)) throw new Error(`node ${i}: "${k}" is not ${n} finite numbers`);
+    if (node.children !== undefined && !Array.isArray(node.children)) throw new Error(`node ${i}: "children" is not an array`);
+  });
+  (json.meshes || []).forEach((mesh, i) => {
+    if (!mesh || !Array.isArray(mesh.primitives)) throw new Error(`mesh ${i} has no primitives`);
+    mesh.primitives.forEach((p, k) => {
+      if (!p || !p.attributes || typeof p.attributes !== 'object') throw new Error(`mesh ${i} primitive ${k} has no attributes`);
+    });
+  });
+  if (json.scenes && json.scenes.length && !(json.scenes[json.scene ?? 0] && typeof json.scenes[json.scene ?? 0] === 'object'))
+    throw new Error(`scene ${json.scene} does not exist`);
+}
+
+export async function loadGltf(body, url, fetchBinary, options = {}) {
+  try {
+    return await load(body, url, fetchBinary, options);
+  } catch (e) {
+    if (e instanceof TypeError || e instanceof RangeError) throw new Error(`malformed glTF: ${e.message}`);
+    throw e;
+  }
+}
+
+async function load(body, url, fetchBinary, { defer = false } = {}) {
   let json = body, glbBin = null;
   if (body instanceof ArrayBuffer) ({ json, bin: glbBin } = parseGlb(body));
-  if (!json.asset || !String(json.asset.version).startsWith('2')) throw new Error('only glTF 2.0 is supported');
+  if (!json || !json.asset || !String(json.asset.version).startsWith('2')) throw new Error('only glTF 2.0 is supported');
+  checkStructure(json);
   const unsupported = (list) => (Array.isArray(list) ? list : []).filter((e) => !SUPPORTED_EXTENSIONS.includes(e));
   const required = unsupported(json.extensionsRequired);
   if (required.length)  // Draco or meshopt geometry would otherwise load as nothing, or as garbage
@@ -438,7 +474,8 @@ export async function loadGltf(body, url, fetchBinary, { defer = false } = {}) {
     for (const ch of node.children || []) visit(ch, world);
   }
   const sceneIndex = json.scene ?? 0;
-  const scene = json.scenes ? json.scenes[sceneIndex] : { nodes: json.nodes.map((_, i) => i) };
+  const scene = json.scenes && json.scenes.length ? json.scenes[sceneIndex] : { nodes: (json.nodes || []).map((_, i) => i) };
+  if (scene.nodes !== undefined && !Array.isArray(scene.nodes)) throw new Error(`scene ${sceneIndex}: "nodes" is not an array`);
   for (const n of scene.nodes || []) visit(n, identity());
   result.environment = scene.extras && scene.extras.environment;
   result.deferred = later;

@@ -439,3 +439,56 @@ test('glTF nodes reached twice (a second parent, a cycle) are an error, not a wa
     'http://localhost/tree.gltf', noFetch);
   assert.equal(tree.meshes.length, 2, 'one mesh instanced by two nodes is fine');
 });
+
+test('mutated glTF files load or fail with an Error, quickly: never a hang, a TypeError or a huge allocation', async () => {
+  // A seeded generator over a valid file with every feature above: each round changes one to
+  // three values somewhere in the JSON (a number to an extreme, a value to another type, a key
+  // dropped) and loads the result.
+  let seed = 12345;
+  const rand = () => ((seed = (seed * 1103515245 + 12345) >>> 0) / 2 ** 32);
+  const views = [new Float32Array([0, 0, 0, 1, 0, 0, 0, 1, 0, 1, 1, 0]), new Uint16Array([0, 1, 2, 2, 1, 3]), new Uint16Array([1]),
+    new Float32Array([2, 2, 0]), new Float32Array([0, 0, 1, 0, 0, 1, 1, 1])];
+  const valid = overViews(views, {
+    extensionsUsed: ['KHR_texture_transform', 'KHR_materials_unlit'],
+    nodes: [{ children: [1, 2] }, { mesh: 0, translation: [1, 2, 3] }, { mesh: 1, rotation: [0, 0, 0, 1], scale: [2, 2, 2] }],
+    meshes: [{ primitives: [{ attributes: { POSITION: 0, TEXCOORD_0: 2 }, indices: 1, material: 0 }] },
+      { primitives: [{ attributes: { POSITION: 3 }, mode: 6, material: 1 }, { attributes: { POSITION: 0 }, mode: 5 }] }],
+    materials: [{ pbrMetallicRoughness: { baseColorTexture: { index: 0, extensions: { KHR_texture_transform: { offset: [0.5, 0], rotation: 1, scale: [2, 2] } } } } },
+      { extensions: { KHR_materials_unlit: {} } }],
+    images: [{ uri: 't.png' }], textures: [{ source: 0 }],
+    accessors: [{ bufferView: 0, componentType: 5126, count: 4, type: 'VEC3' }, { bufferView: 1, componentType: 5123, count: 6, type: 'SCALAR' },
+      { bufferView: 4, componentType: 5126, count: 4, type: 'VEC2' },
+      { bufferView: 0, componentType: 5126, count: 4, type: 'VEC3', sparse: { count: 1, indices: { bufferView: 2, componentType: 5123 }, values: { bufferView: 3 } } }],
+  });
+  const extremes = [-1, 0, 1, 3, 7, 2 ** 31, 2 ** 53, -(2 ** 31), 1e300, 0.5, null, 'x', [], {}, true];
+  const paths = (o, at = []) => (o && typeof o === 'object'
+    ? Object.entries(o).flatMap(([k, v]) => (at.length === 0 && k === 'buffers' ? [] : [[...at, k], ...paths(v, [...at, k])]))
+    : []);
+  const all = paths(valid);
+  let loaded = 0, refused = 0;
+  for (let round = 0; round < 400; round++) {
+    const f = structuredClone(valid);
+    for (let m = 1 + Math.floor(rand() * 3); m > 0; m--) {
+      const p = all[Math.floor(rand() * all.length)];
+      let o = f;
+      for (const k of p.slice(0, -1)) o = o && typeof o === 'object' ? o[k] : undefined;
+      if (!o || typeof o !== 'object') continue;
+      if (rand() < 0.15) delete o[p[p.length - 1]];
+      else o[p[p.length - 1]] = extremes[Math.floor(rand() * extremes.length)];
+    }
+    const t0 = Date.now();
+    try {
+      await loadGltf(f, 'http://localhost/m.gltf', async () => new ArrayBuffer(0));
+      loaded++;
+    } catch (e) {
+      assert.ok(e instanceof Error, `round ${round}: threw ${e}`);
+      // Of the Error class itself, with a message: a TypeError here would be the reader tripping
+      // over the file, not refusing it (loadGltf turns those into "malformed glTF: ...").
+      assert.equal(e.constructor, Error, `round ${round}: ${e.constructor.name}: ${e.message}`);
+      if (process.env.GLTF_FUZZ_LOG) console.log(`FUZZ ${e.message}`);
+      refused++;
+    }
+    assert.ok(Date.now() - t0 < 2000, `round ${round} took ${Date.now() - t0} ms`);
+  }
+  assert.ok(loaded > 50 && refused > 20, `loaded ${loaded}, refused ${refused}`);
+});
