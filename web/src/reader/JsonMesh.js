@@ -15,15 +15,23 @@ export async function parseXml3dJson(json, url, fetchBinary) {
   if (!data || typeof data !== 'object') throw new Error('xml3d-json document has no "data"');
   const map = new Map();
   for (const [name, entry] of Object.entries(data)) {
+    if (!entry || typeof entry !== 'object') throw new Error(`"${name}" is not an entry ({type, seq})`);
     const type = entry.type;
-    const seq = entry.seq && entry.seq[0];
-    if (!seq) continue;
+    const seq = Array.isArray(entry.seq) && entry.seq[0];
+    if (!seq || typeof seq !== 'object') continue;
     let value = seq.value;
     const T = BINARY[type] || (VALUE_TYPES[type] && VALUE_TYPES[type].array) || Array;
-    if (value && !Array.isArray(value) && value.url) {
+    if (value && !Array.isArray(value) && typeof value === 'object' && typeof value.url === 'string') {
       const buf = await fetchBinary(new URL(value.url, url).href);
-      const off = value.byteOffset || 0, len = value.byteLength ?? buf.byteLength - off;
+      const off = value.byteOffset ?? 0, len = value.byteLength ?? buf.byteLength - off;
+      const size = T.BYTES_PER_ELEMENT || 1;
+      if (!Number.isInteger(off) || !Number.isInteger(len) || off < 0 || len < 0 || off + len > buf.byteLength || len % size)
+        throw new Error(`"${name}": byteOffset ${value.byteOffset} and byteLength ${value.byteLength} do not fit ${value.url} ` +
+          `(${buf.byteLength} bytes) in whole ${type} values`);
       value = new T(buf.slice(off, off + len));
+    } else if (value !== undefined && value !== null && !Array.isArray(value)) {
+      // A number here would be a typed array's length: 1e9 would allocate gigabytes.
+      throw new Error(`"${name}": value is neither an array nor a {url, byteOffset, byteLength} reference`);
     } else if (T !== Array) {
       value = new T(value || []);
     }
