@@ -30,6 +30,7 @@ void maybe_preload(self_ptr self) {
   const bool own_camera = st.scene->camera_version() != 0;
   const Camera cam = st.scene->camera();
   *st.scene = pre;
+  st.showing_preload = true;
   st.scene->set_resolution(w, h);
   if (own_camera) st.scene->set_camera(cam);
   if (st.cluster) self->send(st.subtree, update_atom::value, Payload{scene_snapshot_bytes(SceneSnapshot{st.scene})}, true);

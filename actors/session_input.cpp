@@ -30,8 +30,40 @@ void settle_budget(self_ptr self) {
   st.share.set(scene_bytes(*st.scene) + st.cached_bytes.waiting_bytes() + st.acc_bytes);
 }
 
+static void flush_forward(self_ptr self);
+
+// What makes a client's own scene, and may reuse the preloaded copy's ids: its entries.
+static bool scene_content(const ClientRecord& r) {
+  return std::holds_alternative<SetBuffer>(r) || std::holds_alternative<SetTexture>(r) ||
+         std::holds_alternative<SetMaterial>(r) || std::holds_alternative<SetMesh>(r) ||
+         std::holds_alternative<SetLight>(r) || std::holds_alternative<SetBufferRef>(r) ||
+         std::holds_alternative<SetTextureRef>(r);
+}
+
+// A client that uploads its own scene never sees the preloaded one (docs/operations.md): when
+// its first entry (buffer, texture, material, mesh, light) arrives after the copy was given (it asked for a frame
+// before its scene was in), the copy goes, keeping the resolution and what camera and
+// environment the client set. Otherwise its records would meet the copy's entries of the same
+// ids: a mesh that comes before its buffers (references the node refused, uploaded after) was
+// checked against the copy's buffers ("position buffer must be float3").
+static void drop_preload(self_ptr self) {
+  auto& st = self->state;
+  st.showing_preload = false;
+  Scene own;
+  own.set_resolution(st.scene->width(), st.scene->height());
+  if (st.client_camera) own.set_camera(st.scene->camera());
+  if (st.client_environment) own.set_environment(st.scene->environment());
+  *st.scene = std::move(own);
+  flush_forward(self);  // what was accepted before goes down the tree first
+  if (st.cluster) self->send(st.subtree, update_atom::value, Payload{scene_snapshot_bytes(SceneSnapshot{st.scene})}, true);
+  log(self, Event(Ev::preloaded_scene, false).with("dropped", true));
+}
+
 static void apply_update(self_ptr self, ClientRecord&& rec, uint32_t index) {
   auto& st = self->state;
+  if (st.showing_preload && scene_content(rec)) drop_preload(self);
+  if (std::holds_alternative<SetCamera>(rec)) st.client_camera = true;
+  if (std::holds_alternative<SetEnvironment>(rec)) st.client_environment = true;
   // Children get exactly the records this node accepted (encoded before apply moves them).
   std::vector<uint8_t> one;
   if (st.cluster) one = encode(rec);

@@ -29,6 +29,11 @@ struct session_state {
   bool handshake_done = false;
   bool closed = false;
   bool preloaded = false;
+  // The scene is the preloaded copy (maybe_preload), not yet replaced by the client's own: the
+  // first entry the client's records bring (buffer, texture, material, mesh, light) drops it
+  // (drop_preload).
+  bool showing_preload = false;
+  bool client_camera = false, client_environment = false;  // the client has set its own
   bool cluster = false;              // this process has a node actor: accepted records go down the tree
   Handshake hs;
   protocol::Settings render;

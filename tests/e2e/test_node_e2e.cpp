@@ -969,3 +969,68 @@ TEST_CASE("Messages that arrive while references load are held up to one message
   REQUIRE(frame);
   CHECK(frame->frame == 3);
 }
+
+// A scene of one triangle: buffer `pos` its positions (float3), buffer `idx` its indices
+// (uint32), mesh `mesh`; a camera on +Z looking at it.
+static Scene one_triangle(Id pos, Id idx, Id mesh) {
+  Scene s;
+  Buffer p;
+  p.components = 3;
+  p.f = {-1, -1, 0, 1, -1, 0, 0, 1, 0};
+  s.set_buffer(pos, std::move(p));
+  Buffer i;
+  i.type = Buffer::Type::u32;
+  i.u = {0, 1, 2};
+  s.set_buffer(idx, std::move(i));
+  Mesh m;
+  m.positions = pos;
+  m.indices = idx;
+  s.set_mesh(mesh, m);
+  return s;
+}
+
+TEST_CASE("A client that asked for a frame before its scene was in gets its own scene, not the preloaded one", "[e2e][fault]") {
+  // The node preloads a scene (--scene) whose buffer 1 is positions and 2 indices. The client
+  // asks for a frame first (it gets the preloaded copy, as documented), then sends its own
+  // scene with the same ids in other roles, its mesh before its buffers (as a page does when
+  // the node refused its references and it uploads them after). Before 2026-11-30 the mesh
+  // was checked against the copy's buffers: "mesh 3: position buffer must be float3".
+  TestNode node(8, [](NodeSettings& s, ServerOptions&) { s.preload = std::make_shared<const Scene>(one_triangle(1, 2, 3)); });
+  ProtoClient c;
+  REQUIRE(c.connect(node.port()));
+  REQUIRE(c.handshake(DisplayKind::jpeg, W, H));
+  Camera cam;
+  cam.to_world = Mat4::look_at({0, 0, 4}, {0, 0, 0}, {0, 1, 0});
+  std::vector<protocol::ErrorReply> errors;
+  auto first = c.render(cam, 1);
+  REQUIRE(first);
+  CHECK(node.count(Ev::preloaded_scene) == 1);
+  const Scene own = one_triangle(2, 1, 3);  // the same ids, the roles swapped
+  protocol::SetMesh mesh{3, own.meshes().at(3).value};
+  mesh.mesh.material = 4;
+  Material green;
+  green.model = Material::Model::matte;
+  green.diffuse_color = {0, 1, 0};
+  protocol::SetBuffer positions{2, own.buffers().at(2).value}, indices{1, own.buffers().at(1).value};
+  REQUIRE(c.send({protocol::SetMaterial{4, green}}));  // the client's first entry: the copy goes here, not after it
+  REQUIRE(c.send({mesh}));
+  REQUIRE(c.send({positions, indices}));
+  REQUIRE(c.send({protocol::SetCamera{cam}, protocol::RenderRequest{2}}));
+  std::optional<protocol::Frame> second;
+  while ((second = c.next<protocol::Frame>(20000, &errors)) && second->frame != 2) {
+  }
+  REQUIRE(second);
+  std::string said;
+  for (const auto& e : errors) said += e.message + "\n";
+  INFO("errors:\n" << said << node.last_events(12));
+  CHECK(errors.empty());
+  // The preloaded copy was dropped once, and the frame shows the client's triangle in the
+  // client's material: green (unlit) where the first frame showed the preloaded one.
+  CHECK(node.count(Ev::preloaded_scene) == 2);  // given, then dropped ({"preloaded_scene": false, "dropped": true})
+  const Image a = decode_jpeg(first->payload), b = decode_jpeg(second->payload);
+  const uint8_t* centre = b.pixel(W / 2, H / 2);
+  INFO("second frame's centre: " << int(centre[0]) << " " << int(centre[1]) << " " << int(centre[2]));
+  CHECK((centre[0] < 40 && centre[1] > 200 && centre[2] < 40));
+  const uint8_t* before = a.pixel(W / 2, H / 2);
+  CHECK(before[1] - before[0] < 100);  // the preloaded triangle was not green
+}
