@@ -47,7 +47,8 @@ struct LoadError : std::runtime_error {
 
 // Reads accessor `index` as `comps` floats per element (converting normalized integers).
 // An accessor without a bufferView is all zeros before its sparse substitutions; it may hold
-// at most this many elements, so that a count alone cannot allocate gigabytes. Accessors with a bufferView are bounded by their (checked) bufferView instead.
+// at most this many elements, so that a count alone cannot allocate gigabytes. Accessors with
+// a bufferView are bounded by their (checked) bufferView instead.
 constexpr size_t kMaxZeroAccessor = size_t(1) << 24;
 
 // Where accessor `acc`'s `count` elements of `elem` bytes lie: checked against its bufferView
@@ -84,6 +85,13 @@ void check_buffer_views(const tinygltf::Model& m, const std::string& path) {
                       ", byteLength " + std::to_string(bv.byteLength) + ") exceeds buffer " + std::to_string(bv.buffer) +
                       " (" + std::to_string(size) + " bytes)");
   }
+}
+
+// An unsigned integer of `size` bytes (1, 2 or 4), little-endian as glTF stores it.
+uint32_t read_uint(const unsigned char* p, size_t size) {
+  if (size == 1) return p[0];
+  if (size == 2) { uint16_t v; std::memcpy(&v, p, 2); return v; }
+  uint32_t v; std::memcpy(&v, p, 4); return v;
 }
 
 // One component of a vertex attribute as a float (glTF 2.0, "Accessor Data Types", and
@@ -144,10 +152,7 @@ void apply_sparse(const tinygltf::Model& m, const tinygltf::Accessor& acc, size_
   const unsigned char* val = span(sp.values.bufferView, sp.values.byteOffset, elem, "values");
   uint64_t last = 0;
   for (size_t k = 0; k < n; ++k) {
-    uint32_t i = 0;
-    if (isize == 1) i = idx[k];
-    else if (isize == 2) { uint16_t v; std::memcpy(&v, idx + 2 * k, 2); i = v; }
-    else std::memcpy(&i, idx + 4 * k, 4);
+    const uint32_t i = read_uint(idx + k * isize, isize);
     if (i >= acc.count || (k > 0 && i <= last))
       throw LoadError(what + ": sparse index " + std::to_string(i) + " out of range or not increasing");
     last = i;
@@ -199,15 +204,10 @@ std::vector<uint32_t> read_indices(const tinygltf::Model& m, int index, const st
   std::vector<uint32_t> out(acc.count);
   for (size_t i = 0; i < acc.count; ++i) {
     const unsigned char* p = buf.data() + start + i * stride;
-    if (csize == 1) out[i] = p[0];
-    else if (csize == 2) { uint16_t s; std::memcpy(&s, p, 2); out[i] = s; }
-    else std::memcpy(&out[i], p, 4);
+    out[i] = read_uint(p, size_t(csize));
   }
-  apply_sparse(m, acc, size_t(csize), what + " indices", [&](size_t i, const unsigned char* p) {
-    if (csize == 1) out[i] = p[0];
-    else if (csize == 2) { uint16_t s; std::memcpy(&s, p, 2); out[i] = s; }
-    else std::memcpy(&out[i], p, 4);
-  });
+  apply_sparse(m, acc, size_t(csize), what + " indices",
+               [&](size_t i, const unsigned char* p) { out[i] = read_uint(p, size_t(csize)); });
   return out;
 }
 
@@ -299,6 +299,14 @@ const tinygltf::Value* spec_gloss(const tinygltf::Material& gm) {
   return it != gm.extensions.end() && it->second.IsObject() ? &it->second : nullptr;
 }
 
+// A material's base colour texture: pbrMetallicRoughness's, or under
+// KHR_materials_pbrSpecularGlossiness its diffuse texture (index -1: none).
+tinygltf::TextureInfo base_color_texture(const tinygltf::Material& gm) {
+  const tinygltf::Value* sg = spec_gloss(gm);
+  if (!sg) return gm.pbrMetallicRoughness.baseColorTexture;
+  return sg->Has("diffuseTexture") ? texture_info_of(sg->Get("diffuseTexture")) : tinygltf::TextureInfo{};
+}
+
 UvMapping uv_mapping(const tinygltf::TextureInfo& info) {
   UvMapping u;
   u.set = info.texCoord;
@@ -340,7 +348,6 @@ Material convert_material(const tinygltf::Material& gm, const std::map<int, Id>&
     if (it != texture_ids.end()) slot = it->second;
     else warnings.push_back(file + ": material '" + gm.name + "' references missing texture " + std::to_string(index));
   };
-  int base_texture = pbr.baseColorTexture.index;
   // KHR_materials_pbrSpecularGlossiness: its diffuse colour and texture take the base colour's
   // place, 1 - glossiness the roughness's, and it is a dielectric.
   if (const tinygltf::Value* sg = spec_gloss(gm)) {
@@ -358,9 +365,8 @@ Material convert_material(const tinygltf::Material& gm, const std::map<int, Id>&
     }
     metallic = 0;
     rough = 1.0f - float(number_or(*sg, "glossinessFactor", 1));
-    base_texture = sg->Has("diffuseTexture") ? texture_info_of(sg->Get("diffuseTexture")).index : -1;
   }
-  texture(base_texture, mat.diffuse_texture);
+  texture(base_color_texture(gm).index, mat.diffuse_texture);
   // glTF: emission = emissiveFactor (default black) times the emissive texture (sRGB), as the
   // model's emissive colour times its emissive texture.
   texture(gm.emissiveTexture.index, mat.emissive_texture);
@@ -631,9 +637,7 @@ LoadedScene load_gltf(const std::string& path, const GltfOptions& options) {
     const auto& gm = model.materials[mi];
     scene.set_material(material_ids[mi], convert_material(gm, texture_ids, out.warnings, path));
     // A mesh has one set of texture coordinates: the base colour texture's, else the emissive's.
-    const tinygltf::Value* sg = spec_gloss(gm);
-    const tinygltf::TextureInfo base = sg ? (sg->Has("diffuseTexture") ? texture_info_of(sg->Get("diffuseTexture")) : tinygltf::TextureInfo{})
-                                          : gm.pbrMetallicRoughness.baseColorTexture;
+    const tinygltf::TextureInfo base = base_color_texture(gm);
     const auto& emissive = gm.emissiveTexture;
     uv_of[mi] = uv_mapping(base.index >= 0 ? base : emissive);
     if (base.index >= 0 && emissive.index >= 0 && !(uv_mapping(emissive) == uv_of[mi]))

@@ -34,7 +34,6 @@ const sameMapping = (a, b) => a.set === b.set && JSON.stringify(a.m) === JSON.st
 // base): a count alone cannot allocate gigabytes. The node's loader has the same bound.
 const MAX_ZERO_ELEMENTS = 2 ** 24;
 
-// The fields every glTF material gives, whatever its model.
 // glTF's emission: emissiveFactor (default black) times KHR_materials_emissive_strength's
 // emissiveStrength (default 1), as on the node.
 const emission = (m) => {
@@ -42,6 +41,7 @@ const emission = (m) => {
   const f = Array.isArray(m.emissiveFactor) ? m.emissiveFactor : [0, 0, 0];
   return f.slice(0, 3).map((v) => v * (Number.isFinite(k) ? k : 1));
 };
+// The fields every glTF material gives, whatever its model.
 const MATERIAL_BASE = (m, base) => ({
   name: m.name, specularColor: [0, 0, 0], shininess: 0.01, emissiveColor: emission(m),
   opacity: m.alphaMode === 'BLEND' ? base[3] : 1, reflectionCoefficient: 0, refractionCoefficient: 0, refractionIndex: 1,
@@ -54,6 +54,17 @@ function fanToList(v) {
   for (let i = 0; i + 2 < v.length; i++) out.set([v[i + 1], v[i + 2], v[0]], 3 * i);
   return out;
 }
+
+// A material's base colour textureInfo: pbrMetallicRoughness's, or the diffuse texture's under
+// KHR_materials_pbrSpecularGlossiness (as the node's base_color_texture); undefined: none.
+const baseTexture = (m) => {
+  const sg = m.extensions && m.extensions.KHR_materials_pbrSpecularGlossiness;
+  return sg ? sg.diffuseTexture : (m.pbrMetallicRoughness || {}).baseColorTexture;
+};
+
+// Per material, the texture coordinates its textures read: the base colour texture's, else
+// the emissive's.
+const materialMappings = (json) => (json.materials || []).map((m) => uvMapping(baseTexture(m) || m.emissiveTexture));
 
 // Where an array the loader returned lies in an external file, so that a node can load it
 // itself (a buffer_ref, docs/protocol.md "References"): {url, byteOffset, byteStride (0:
@@ -78,16 +89,6 @@ export const pendingValues = (array) => {
 // file's bytes as they are (or u16/u8 indices widened, which a node widens too): those need
 // no values until the download is in. Anything converted from the values (normalised, strided,
 // sparse, RGBA colours, strips unrolled) needs them at once, so such files load whole first.
-// Per material, the texture coordinates its textures read: the base colour texture's (the
-// diffuse texture's under KHR_materials_pbrSpecularGlossiness), else the emissive's.
-function materialMappings(json) {
-  return (json.materials || []).map((m) => {
-    const sg = m.extensions && m.extensions.KHR_materials_pbrSpecularGlossiness;
-    const base = sg ? sg.diffuseTexture : (m.pbrMetallicRoughness || {}).baseColorTexture;
-    return uvMapping(base || m.emissiveTexture);
-  });
-}
-
 function deferrable(json, bufferUrls) {
   const external = (a) => a.bufferView !== undefined && json.bufferViews[a.bufferView] &&
     !!bufferUrls[json.bufferViews[a.bufferView].buffer];
@@ -141,9 +142,6 @@ function decodeDataUri(uri) {
   return out.buffer;
 }
 
-// defer: return before the external buffers are in, where the file allows it (deferrable());
-// the result's `ready` is then the promise of their values (else null), and its `deferred`
-// says so.
 // The glTF structure the reader walks, checked before it walks it: the top-level lists are
 // arrays, nodes' transforms arrays of numbers of the right length, primitives have attributes,
 // the scene exists. What else a malformed file gets wrong still ends as an Error saying the
@@ -170,6 +168,9 @@ function checkStructure(json) {
     throw new Error(`scene ${json.scene} does not exist`);
 }
 
+// defer: return before the external buffers are in, where the file allows it (deferrable());
+// the result's `ready` is then the promise of their values (else null), and its `deferred`
+// says so.
 export async function loadGltf(body, url, fetchBinary, options = {}) {
   try {
     return await load(body, url, fetchBinary, options);
@@ -352,9 +353,8 @@ async function load(body, url, fetchBinary, { defer = false } = {}) {
     const sg = ext.KHR_materials_pbrSpecularGlossiness;
     const base = (sg ? sg.diffuseFactor : pbr.baseColorFactor) || [1, 1, 1, 1];
     const metallic = sg ? 0 : pbr.metallicFactor ?? 1, rough = sg ? 1 - (sg.glossinessFactor ?? 1) : pbr.roughnessFactor ?? 1;
-    const baseTexture = sg ? sg.diffuseTexture : pbr.baseColorTexture;
     const rgb = [base[0], base[1], base[2]], times = (v, k) => v.map((x) => x * k);
-    const out = { ...MATERIAL_BASE(m, base), model: 'phong', diffuseTexture: texture(baseTexture), emissiveTexture: texture(m.emissiveTexture) };
+    const out = { ...MATERIAL_BASE(m, base), model: 'phong', diffuseTexture: texture(baseTexture(m)), emissiveTexture: texture(m.emissiveTexture) };
     if (m.alphaMode === 'MASK') out.opacity = base[3];  // the cut-out compares texture alpha x opacity with the cutoff
     if (ext.KHR_materials_unlit) return { ...out, model: 'matte', diffuseColor: rgb };  // XML3D's matte: the base colour as it is
     // The specular lobe: Phong exponent 2 / a^2 - 2 with a = roughness^2, within 1..128.
@@ -379,9 +379,7 @@ async function load(body, url, fetchBinary, { defer = false } = {}) {
   const result = { meshes: [], lights: [], camera: null, url, undrawn: 0, badColors: 0, warnings };
   const uvOf = materialMappings(json);
   (json.materials || []).forEach((m, k) => {
-    const base = (m.extensions && m.extensions.KHR_materials_pbrSpecularGlossiness || m.pbrMetallicRoughness || {})[
-      m.extensions && m.extensions.KHR_materials_pbrSpecularGlossiness ? 'diffuseTexture' : 'baseColorTexture'];
-    if (base && m.emissiveTexture && !sameMapping(uvMapping(m.emissiveTexture), uvOf[k]))
+    if (baseTexture(m) && m.emissiveTexture && !sameMapping(uvMapping(m.emissiveTexture), uvOf[k]))
       warnings.push(`material '${m.name ?? k}': its emissive texture reads other texture coordinates than its base colour texture; both read the base colour's`);
   });
   // A primitive's texture coordinates: its material's set, through its transform (a new array).
