@@ -434,15 +434,16 @@ async function load(body, url, fetchBinary, { defer = false } = {}) {
         if (mode !== 4 && mode !== 5 && mode !== 6) { result.undrawn++; return; }  // points and lines are not drawn
         const at = p.attributes;
         if (at.POSITION === undefined) return;
+        const positions = asFloat(accessor(at.POSITION));  // checked before its count sizes anything
         let indices = p.indices !== undefined ? indexAccessor(p.indices) : null;
         if (mode === 6) {  // a fan becomes a triangle list (a new array, without a source)
-          const order = indices || Uint32Array.from({ length: json.accessors[at.POSITION].count }, (_, k) => k);
+          const order = indices || Uint32Array.from({ length: positions.length / 3 }, (_, k) => k);
           indices = fanToList(order);
         }
         result.meshes.push({
           name: `${node.name ?? ni}${k}`,
           nodeName: node.name, meshName: mesh.name,
-          positions: asFloat(accessor(at.POSITION)),
+          positions,
           normals: at.NORMAL !== undefined ? asFloat(accessor(at.NORMAL)) : null,
           texcoords: texcoords(at, p.material),
           colors: vertexColors(at),

@@ -414,6 +414,10 @@ test('glTF accessors and bufferViews that do not fit are errors naming them, bef
     [{ bufferView: 7, componentType: 5126, count: 3, type: 'VEC3' }, {}, /accessor 0: bufferView 7 or its buffer does not exist/],
   ];
   for (const [a, v, message] of cases) await assert.rejects(loadGltf(file(a, v), 'http://localhost/bad.gltf', noFetch), message);
+  // A fan without indices: its POSITION count is checked before it sizes the fan's order.
+  const fan = file({ bufferView: 0, componentType: 5126, count: 2 ** 29, type: 'VEC3' });
+  fan.meshes[0].primitives[0].mode = 6;
+  await assert.rejects(loadGltf(fan, 'http://localhost/fan.gltf', noFetch), /accessor 0: 536870912 elements .* read past the end of bufferView 0/);
   const f = file({ bufferView: 0, componentType: 5126, count: 3, type: 'VEC3' });
   f.meshes[0].primitives[0].attributes.POSITION = 5;
   await assert.rejects(loadGltf(f, 'http://localhost/bad.gltf', noFetch), /accessor 5 does not exist/);
