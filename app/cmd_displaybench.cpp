@@ -38,7 +38,8 @@ const char* kHelp =
     "--video-frames N (default 0: none) then renders N consecutive loop frames and encodes them as\n"
     "an H.264 stream at each of --bitrates (kbit/s at --fps, default 30) and as JPEG q85: bytes per\n"
     "frame (P-frames and all), encode ms and PSNR of each decoded frame against the rendered one;\n"
-    "--video-threads T (1..4, default 1, as the node) codes T slices in parallel.\n";
+    "--video-threads T (1..4, default 1, as the node) codes T slices in parallel; --per-frame also\n"
+    "prints each H.264 frame's bytes, encode ms and PSNR.\n";
 
 struct Timing {
   double median = 0, min = 0, max = 0;
@@ -69,6 +70,7 @@ int run(const std::vector<std::string>& argv) {
   const long video_frames = args.integer("--video-frames", 0);
   const double fps = args.number("--fps", 30);
   const long video_threads = args.integer("--video-threads", 1);
+  const bool per_frame = args.flag("--per-frame");
   std::vector<uint32_t> bitrates;
   for (double b : parse_number_list("--bitrates", args.str("--bitrates", "1000,2000,4000,8000,16000"))) {
     if (b < kH264MinKbps || b > kH264MaxKbps) throw std::invalid_argument("--bitrates: each must be within 100..200000");
@@ -190,6 +192,11 @@ int run(const std::vector<std::string>& argv) {
         Image got;
         if (!dec.decode(out.data(), out.size(), got, err, W, H)) throw std::runtime_error("h264 decode: " + err);
         hf.psnr.push_back(compare(got, img).psnr);
+        if (per_frame)
+          std::printf("{\"scene\": %s, \"video_frame\": %zu, \"bitrate_kbps\": %u, \"keyframe\": %s, "
+                      "\"bytes\": %zu, \"encode_ms\": %.3f, \"psnr_db\": %.3f}\n",
+                      scene.c_str(), hf.psnr.size() - 1, kbps, unit.keyframe ? "true" : "false", out.size(),
+                      hf.encode_ms.back(), hf.psnr.back());
         hf.bytes_all += double(out.size());
         if (!unit.keyframe) hf.bytes_p += double(out.size()), hf.p_frames++;
       }

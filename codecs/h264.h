@@ -66,7 +66,10 @@ class H264Encoder {
   ISVCEncoder* enc_ = nullptr;
   int threads_ = 1;
   int width_ = 0, height_ = 0;  // the picture's size (even; the frames' may be one less)
-  uint32_t kbps_ = 0;
+  uint32_t kbps_ = 0;          // the caller's target
+  uint32_t applied_bps_ = 0;   // what OpenH264's rate control has now (see idr_boost_)
+  double idr_boost_ = 1;       // applied / target for the P-frames that share a keyframe's window
+  uint32_t since_idr_ = 0;     // frames coded since the last keyframe
   float fps_ = 0;
   std::vector<uint8_t> yuv_;  // I420 planes of the padded picture
   uint64_t keyframes_ = 0, frames_ = 0;
