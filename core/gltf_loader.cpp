@@ -265,10 +265,41 @@ std::string supported_extensions() {
   return all;
 }
 
+// The names in `names` this loader does not implement, comma-separated ("" when none).
+std::string unsupported_extensions(const std::vector<std::string>& names) {
+  std::string out;
+  for (const std::string& e : names)
+    if (!kSupportedExtensions.count(e)) out += (out.empty() ? "" : ", ") + e;
+  return out;
+}
+
+std::string required_refusal(const std::string& path, const std::string& unsupported) {
+  return path + ": requires glTF extensions this loader does not implement: " + unsupported + " (implemented: " +
+         supported_extensions() + ")";
+}
+
+// The extensionsRequired of a glTF's JSON text, read without tinygltf: for a file tinygltf
+// refuses, so that one requiring an extension this loader lacks is refused by that name rather
+// than by tinygltf's complaint (KHR_draco_mesh_compression's index accessors have no
+// bufferView, which tinygltf calls "accessor[0] invalid bufferView"). Empty when unreadable.
+std::vector<std::string> required_extensions(const unsigned char* text, size_t n) {
+  std::vector<std::string> out;
+  const nlohmann::json j = nlohmann::json::parse(text, text + n, nullptr, /*allow_exceptions=*/false);
+  if (!j.is_object()) return out;
+  const auto it = j.find("extensionsRequired");
+  if (it == j.end() || !it->is_array()) return out;
+  for (const auto& e : *it)
+    if (e.is_string()) out.push_back(e.get<std::string>());
+  return out;
+}
+
 // How a material's textures map a primitive's texture coordinates: which TEXCOORD_n set
 // (textureInfo.texCoord), and KHR_texture_transform's affine map of it, baked into the
 // primitive's coordinates at load. uv' = offset + R(rotation) (scale * uv), R's columns
-// (cos, sin) and (-sin, cos), as the extension's GLSL writes it.
+// (cos, -sin) and (sin, cos): the UVs turn counter-clockwise in glTF's UV space, whose v axis
+// points down, as three.js, Babylon.js, Blender and the TextureTransformTest sample model have
+// it. The GLSL listing in the extension's text has the transpose, a known error in it
+// (KhronosGroup/glTF issue 1563): with it that sample's arrows point at "Error".
 struct UvMapping {
   int set = 0;
   bool transformed = false;
@@ -329,8 +360,8 @@ UvMapping uv_mapping(const tinygltf::TextureInfo& info) {
   if (!(std::isfinite(ou) && std::isfinite(ov) && std::isfinite(su) && std::isfinite(sv) && std::isfinite(r))) return u;
   const float c = std::cos(r), s = std::sin(r);
   u.transformed = true;
-  u.m[0] = c * su; u.m[1] = -s * sv; u.m[2] = ou;
-  u.m[3] = s * su; u.m[4] = c * sv;  u.m[5] = ov;
+  u.m[0] = c * su;  u.m[1] = s * sv; u.m[2] = ou;
+  u.m[3] = -s * su; u.m[4] = c * sv; u.m[5] = ov;
   return u;
 }
 
@@ -542,6 +573,11 @@ LoadedScene load_gltf(const std::string& path, const GltfOptions& options) {
     else
       ok = ctx.LoadASCIIFromString(&model, &err, &warn, reinterpret_cast<const char*>(file.data()),
                                    static_cast<unsigned int>(file.size()), base_dir);
+    // tinygltf may refuse a file that requires an extension this loader lacks before the check
+    // below sees it (Draco's accessors without bufferViews): such a file is refused by name.
+    if (!ok)
+      if (const std::string required = unsupported_extensions(required_extensions(text, text_size)); !required.empty())
+        throw LoadError(required_refusal(path, required));
   } catch (const LoadError&) {
     throw;
   } catch (const std::exception& e) {
@@ -549,22 +585,18 @@ LoadedScene load_gltf(const std::string& path, const GltfOptions& options) {
   }
   if (!ok) throw LoadError(path + ": " + (err.empty() ? "cannot load glTF" : err));
 
-  check_buffer_views(model, path);
   LoadedScene out;
   // Extensions: a file that requires one this loader does not implement is refused by name
-  // (Draco or meshopt compressed geometry would otherwise load as nothing, or as garbage);
+  // (Draco or meshopt compressed geometry would otherwise load as nothing, or as garbage),
+  // before its bufferViews are checked (meshopt's lie in a fallback buffer without data);
   // ones it only uses are named in one warning, and the file loads without them.
   {
-    std::string required, used;
-    for (const std::string& e : model.extensionsRequired)
-      if (!kSupportedExtensions.count(e)) required += (required.empty() ? "" : ", ") + e;
-    if (!required.empty())
-      throw LoadError(path + ": requires glTF extensions this loader does not implement: " + required +
-                      " (implemented: " + supported_extensions() + ")");
-    for (const std::string& e : model.extensionsUsed)
-      if (!kSupportedExtensions.count(e)) used += (used.empty() ? "" : ", ") + e;
-    if (!used.empty()) out.warnings.push_back(path + ": glTF extensions ignored: " + used);
+    if (const std::string required = unsupported_extensions(model.extensionsRequired); !required.empty())
+      throw LoadError(required_refusal(path, required));
+    if (const std::string used = unsupported_extensions(model.extensionsUsed); !used.empty())
+      out.warnings.push_back(path + ": glTF extensions ignored: " + used);
   }
+  check_buffer_views(model, path);
   out.times.parse_ms = ms_since(t0);
   Scene& scene = out.scene;
 
@@ -744,7 +776,18 @@ LoadedScene load_gltf(const std::string& path, const GltfOptions& options) {
   // Nodes: walk the default scene, instancing meshes, picking up the first camera and the lights.
   int scene_index = model.defaultScene >= 0 ? model.defaultScene : 0;
   std::vector<int> roots;
-  if (size_t(scene_index) < model.scenes.size()) roots = model.scenes[scene_index].nodes;
+  if (size_t(scene_index) < model.scenes.size()) {
+    roots = model.scenes[scene_index].nodes;
+  } else if (model.scenes.empty()) {
+    // A file without scenes (glTF allows it): every node tree is drawn, its roots the nodes that
+    // are no node's child, as the web reader does.
+    std::vector<uint8_t> is_child(model.nodes.size(), 0);
+    for (const auto& n : model.nodes)
+      for (int c : n.children)
+        if (c >= 0 && size_t(c) < is_child.size()) is_child[size_t(c)] = 1;
+    for (size_t i = 0; i < model.nodes.size(); ++i)
+      if (!is_child[i]) roots.push_back(int(i));
+  }
   const tinygltf::Value* lights_ext = nullptr;
   if (auto it = model.extensions.find("KHR_lights_punctual"); it != model.extensions.end()) lights_ext = &it->second;
 

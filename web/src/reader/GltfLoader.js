@@ -15,8 +15,10 @@ export const SUPPORTED_EXTENSIONS = Object.freeze(['KHR_lights_punctual', 'KHR_m
 
 // The texture coordinates a textureInfo reads: its set (texCoord, or KHR_texture_transform's)
 // and that extension's affine map, u' = m[0] u + m[1] v + m[2], v' = m[3] u + m[4] v + m[5]
-// (offset + R(rotation) (scale * uv), R's columns (cos, sin) and (-sin, cos), as the
-// extension's GLSL), or m null.
+// (offset + R(rotation) (scale * uv), R's columns (cos, -sin) and (sin, cos): counter-clockwise
+// in glTF's UV space, whose v axis points down, as three.js, Babylon.js and the
+// TextureTransformTest sample model have it; the extension's GLSL listing has the transpose, a
+// known error in it, KhronosGroup/glTF issue 1563), or m null. As on the node.
 function uvMapping(info) {
   const u = { set: info && Number.isInteger(info.texCoord) ? info.texCoord : 0, m: null };
   const t = info && info.extensions && info.extensions.KHR_texture_transform;
@@ -25,7 +27,7 @@ function uvMapping(info) {
   const pair = (v, d) => (Array.isArray(v) && v.length === 2 && v.every(Number.isFinite) ? v : d);
   const [ou, ov] = pair(t.offset, [0, 0]), [su, sv] = pair(t.scale, [1, 1]);
   const r = Number.isFinite(t.rotation) ? t.rotation : 0, c = Math.cos(r), sn = Math.sin(r);
-  u.m = [c * su, -sn * sv, ou, sn * su, c * sv, ov];
+  u.m = [c * su, sn * sv, ou, -sn * su, c * sv, ov];
   return u;
 }
 const sameMapping = (a, b) => a.set === b.set && JSON.stringify(a.m) === JSON.stringify(b.m);
@@ -473,7 +475,11 @@ async function load(body, url, fetchBinary, { defer = false } = {}) {
     for (const ch of node.children || []) visit(ch, world);
   }
   const sceneIndex = json.scene ?? 0;
-  const scene = json.scenes && json.scenes.length ? json.scenes[sceneIndex] : { nodes: (json.nodes || []).map((_, i) => i) };
+  // A file without scenes: every node tree, its roots the nodes that are no node's child (as on
+  // the node); listing every node would reach each child twice.
+  const children = new Set((json.nodes || []).flatMap((n) => n.children || []));
+  const scene = json.scenes && json.scenes.length ? json.scenes[sceneIndex]
+    : { nodes: (json.nodes || []).map((_, i) => i).filter((i) => !children.has(i)) };
   if (scene.nodes !== undefined && !Array.isArray(scene.nodes)) throw new Error(`scene ${sceneIndex}: "nodes" is not an array`);
   for (const n of scene.nodes || []) visit(n, identity());
   result.environment = scene.extras && scene.extras.environment;

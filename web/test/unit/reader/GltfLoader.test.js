@@ -326,10 +326,12 @@ test('a glTF material\'s texCoord set and KHR_texture_transform are baked into t
   });
   let g = await loadGltf(file([{ pbrMetallicRoughness: { baseColorTexture: { index: 0, texCoord: 1 } } }]), 'http://localhost/a.gltf', noFetch);
   near(g.meshes[0].texcoords, [0.5, 0.5, 1, 0.5, 0.5, 1]);
-  // Scale, then a quarter turn (columns (cos, sin), (-sin, cos)), then the offset: u' = -3 v + 0.5, v' = 2 u + 0.25.
+  // Scale, then a quarter turn (columns (cos, -sin), (sin, cos): counter-clockwise with v down, as the
+  // TextureTransformTest sample model and three.js, not the transposed matrix of the extension's GLSL
+  // listing), then the offset: u' = 3 v + 0.5, v' = -2 u + 0.25.
   g = await loadGltf(file([{ pbrMetallicRoughness: { baseColorTexture: { index: 0, extensions: { KHR_texture_transform:
     { offset: [0.5, 0.25], rotation: Math.PI / 2, scale: [2, 3] } } } } }], ['KHR_texture_transform']), 'http://localhost/b.gltf', noFetch);
-  near(g.meshes[0].texcoords, [0.5, 0.25, 0.5, 2.25, -2.5, 0.25]);
+  near(g.meshes[0].texcoords, [0.5, 0.25, 0.5, -1.75, 3.5, 0.25]);
   assert.equal(sourceOf(g.meshes[0].texcoords), null);
   assert.deepEqual(g.warnings, []);
   g = await loadGltf(file([{ pbrMetallicRoughness: { baseColorTexture: { index: 0 } }, emissiveTexture: { index: 0, texCoord: 1 } }]),
@@ -442,6 +444,20 @@ test('glTF nodes reached twice (a second parent, a cycle) are an error, not a wa
   const tree = await loadGltf({ ...overViews(views, base), nodes: [{ children: [1, 2] }, { mesh: 0 }, { mesh: 0, translation: [1, 0, 0] }] },
     'http://localhost/tree.gltf', noFetch);
   assert.equal(tree.meshes.length, 2, 'one mesh instanced by two nodes is fine');
+});
+
+test('a glTF without scenes draws every node tree from its roots, children once, through their parents', async () => {
+  const views = [new Float32Array([0, 0, 0, 1, 0, 0, 0, 1, 0])];
+  const base = { meshes: [{ primitives: [{ attributes: { POSITION: 0 } }] }], accessors: [{ bufferView: 0, componentType: 5126, count: 3, type: 'VEC3' }] };
+  const file = overViews(views, base);
+  delete file.scene;
+  delete file.scenes;
+  // Two trees: node 0 (moved by 5 in x) with its child 1, and node 2 alone.
+  file.nodes = [{ children: [1], translation: [5, 0, 0] }, { mesh: 0 }, { mesh: 0, translation: [0, 7, 0] }];
+  const g = await loadGltf(file, 'http://localhost/noscenes.gltf', noFetch);
+  assert.equal(g.meshes.length, 2);
+  const moved = g.meshes.map((m) => [m.matrix[12], m.matrix[13]]).sort((a, b) => a[0] - b[0]);
+  assert.deepEqual(moved, [[0, 7], [5, 0]], 'the child drawn once, under its parent');
 });
 
 test('mutated glTF files load or fail with an Error, quickly: never a hang, a TypeError or a huge allocation', async () => {
