@@ -906,6 +906,22 @@ LoadedScene load_gltf(const std::string& path, const GltfOptions& options) {
     }
   }
   scene.set_environment(env);
+  // What a glTF viewer would play that this loader does not: said once, so that a model drawn
+  // in its rest pose is not taken for a broken file.
+  {
+    size_t morphed = 0;
+    for (const auto& m : model.meshes)
+      for (const auto& p : m.primitives) morphed += p.targets.empty() ? 0 : 1;
+    std::string still;
+    auto add = [&](size_t n, const char* what) {
+      if (n) still += (still.empty() ? "" : ", ") + std::to_string(n) + " " + what;
+    };
+    add(model.animations.size(), model.animations.size() == 1 ? "animation" : "animations");
+    add(model.skins.size(), model.skins.size() == 1 ? "skin" : "skins");
+    add(morphed, morphed == 1 ? "primitive with morph targets" : "primitives with morph targets");
+    if (!still.empty())
+      out.warnings.push_back(path + ": " + still + " not played: the meshes are drawn in the file's rest pose");
+  }
   if (!out.has_camera) {
     Camera c;
     if (out.bounds.valid()) {

@@ -743,6 +743,31 @@ TEST_CASE("a glTF orthographic camera is drawn as a perspective one, and a warni
   CHECK(warned(ls, "camera of type 'orthographic' drawn as a perspective one with a 45 degree field of view"));
 }
 
+TEST_CASE("glTF animations skins and morph targets are not played and one warning says so; the rest pose loads", "[gltf]") {
+  TempDir dir;
+  Bin bin;
+  const int pos = bin.view(std::vector<float>{0, 0, 0, 1, 0, 0, 0, 1, 0});
+  const int delta = bin.view(std::vector<float>{0, 0, 1, 0, 0, 1, 0, 0, 1});
+  const int times = bin.view(std::vector<float>{0, 1});
+  const int weights = bin.view(std::vector<float>{0, 1});
+  const std::string accessors = accessor(pos, 5126, 3, "VEC3") + "," + accessor(delta, 5126, 3, "VEC3") + "," +
+                                accessor(times, 5126, 2, "SCALAR", false, R"(,"min":[0],"max":[1])") + "," +
+                                accessor(weights, 5126, 2, "SCALAR");
+  {  // Nothing to play: no warning.
+    LoadedScene ls = load_gltf(dir.write("still.gltf", gltf_of(dir, bin, R"({"attributes":{"POSITION":0}})", accessors)));
+    CHECK(ls.warnings.empty());
+  }
+  // A morph target on the primitive, and an animation of its weight.
+  const std::string anim =
+      R"(,"animations":[{"samplers":[{"input":2,"output":3}],"channels":[{"sampler":0,"target":{"node":0,"path":"weights"}}]}])";
+  LoadedScene ls = load_gltf(
+      dir.write("morph.gltf", gltf_of(dir, bin, R"({"attributes":{"POSITION":0},"targets":[{"POSITION":1}]})", accessors, anim)));
+  REQUIRE(ls.scene.meshes().size() == 1);
+  CHECK(floats_of(ls, only_mesh(ls).positions) == std::vector<float>{0, 0, 0, 1, 0, 0, 0, 1, 0});  // the rest pose
+  CHECK(ls.warnings.size() == 1);
+  CHECK(warned(ls, "1 animation, 1 primitive with morph targets not played: the meshes are drawn in the file's rest pose"));
+}
+
 TEST_CASE("a glTF light index beyond int's range names no light", "[gltf][broken]") {
   // Converting 1e300 to int was undefined behaviour (UBSan: "outside the range of representable
   // values of type 'int'"); such a node now names no light, like any other bad index.

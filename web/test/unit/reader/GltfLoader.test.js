@@ -446,6 +446,20 @@ test('glTF nodes reached twice (a second parent, a cycle) are an error, not a wa
   assert.equal(tree.meshes.length, 2, 'one mesh instanced by two nodes is fine');
 });
 
+test('glTF animations, skins and morph targets are not played and one warning says so; the rest pose loads', async () => {
+  const views = [new Float32Array([0, 0, 0, 1, 0, 0, 0, 1, 0]), new Float32Array([0, 0, 1, 0, 0, 1, 0, 0, 1]), new Float32Array([0, 1])];
+  const accessors = [{ bufferView: 0, componentType: 5126, count: 3, type: 'VEC3' }, { bufferView: 1, componentType: 5126, count: 3, type: 'VEC3' },
+    { bufferView: 2, componentType: 5126, count: 2, type: 'SCALAR', min: [0], max: [1] }];
+  let g = await loadGltf(overViews(views, { meshes: [{ primitives: [{ attributes: { POSITION: 0 } }] }], accessors }), 'http://localhost/still.gltf', noFetch);
+  assert.deepEqual(g.warnings, []);
+  const file = overViews(views, { meshes: [{ primitives: [{ attributes: { POSITION: 0 }, targets: [{ POSITION: 1 }] }] }], accessors });
+  file.animations = [{ samplers: [{ input: 2, output: 2 }], channels: [{ sampler: 0, target: { node: 0, path: 'weights' } }] }];
+  g = await loadGltf(file, 'http://localhost/morph.gltf', noFetch);
+  assert.equal(g.meshes.length, 1);
+  near(g.meshes[0].positions, [0, 0, 0, 1, 0, 0, 0, 1, 0]);
+  assert.deepEqual(g.warnings, ['1 animation, 1 primitive with morph targets not played: the meshes are drawn in the file\'s rest pose']);
+});
+
 test('a glTF without scenes draws every node tree from its roots, children once, through their parents', async () => {
   const views = [new Float32Array([0, 0, 0, 1, 0, 0, 0, 1, 0])];
   const base = { meshes: [{ primitives: [{ attributes: { POSITION: 0 } }] }], accessors: [{ bufferView: 0, componentType: 5126, count: 3, type: 'VEC3' }] };
