@@ -31,6 +31,8 @@ int run(const std::vector<std::string>& argv) {
   setup.set_frame(size_t(frame));
 
   for (auto& w : setup.loaded.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
+  if (setup.loaded.default_lighting)
+    std::fprintf(stderr, "note: %s\n", default_lighting_note(setup.scene_path).c_str());
   std::unique_ptr<Renderer> renderer = make_renderer(kind);
   std::vector<std::string> warnings;
   renderer->sync(setup.loaded.scene, warnings);

@@ -796,6 +796,8 @@ LoadedScene load_gltf(const std::string& path, const GltfOptions& options) {
   // each node listing the next one twice doubles the walk (64 such nodes, 1.4 KB, would never
   // finish), and a cycle would recurse until the depth check.
   std::vector<uint8_t> reached(model.nodes.size(), 0);
+  bool perspective_camera = false;  // the scene's camera is a perspective one (no other replaces it)
+  std::string other_camera;         // the warning for a camera of another type, said if it stays
   std::function<void(int, const Mat4&, int)> visit = [&](int ni, const Mat4& parent, int depth) {
     if (ni < 0 || size_t(ni) >= model.nodes.size()) throw LoadError(path + ": node index " + std::to_string(ni) + " out of range");
     if (reached[size_t(ni)])
@@ -832,19 +834,26 @@ LoadedScene load_gltf(const std::string& path, const GltfOptions& options) {
           out.bounds.extend(world.transform_point({prim.pos[i], prim.pos[i + 1], prim.pos[i + 2]}));
       }
     }
-    if (node.camera >= 0 && size_t(node.camera) < model.cameras.size() && !out.has_camera) {
+    // The first perspective camera, as the web reader takes it; else the first other one,
+    // drawn as a perspective one (the renderers have pinhole cameras only).
+    if (node.camera >= 0 && size_t(node.camera) < model.cameras.size() && !perspective_camera) {
       const auto& cam = model.cameras[node.camera];
-      Camera c;
-      c.to_world = world;
-      if (cam.type == "perspective") c.fov_y = float(cam.perspective.yfov);
-      else  // the renderers have pinhole cameras only
-        out.warnings.push_back(node_name + ": camera of type '" + cam.type + "' drawn as a perspective one with a " +
-                               std::to_string(int(std::lround(c.fov_y * 180 / kPi))) + " degree field of view");
-      if (std::string why = check_camera(c); !why.empty()) {
-        out.warnings.push_back(node_name + ": camera ignored: " + why);
-      } else {
-        scene.set_camera(c);
-        out.has_camera = true;
+      const bool perspective = cam.type == "perspective";
+      if (perspective || !out.has_camera) {
+        Camera c;
+        c.to_world = world;
+        if (perspective) c.fov_y = float(cam.perspective.yfov);
+        if (std::string why = check_camera(c); !why.empty()) {
+          out.warnings.push_back(node_name + ": camera ignored: " + why);
+        } else {
+          scene.set_camera(c);
+          out.has_camera = true;
+          perspective_camera = perspective;
+          other_camera = perspective ? std::string() : node_name + ": camera of type '" + cam.type +
+                                                           "' drawn as a perspective one with a " +
+                                                           std::to_string(int(std::lround(c.fov_y * 180 / kPi))) +
+                                                           " degree field of view";
+        }
       }
     }
     if (auto it = node.extensions.find("KHR_lights_punctual"); it != node.extensions.end() && lights_ext) {
@@ -881,6 +890,7 @@ LoadedScene load_gltf(const std::string& path, const GltfOptions& options) {
     for (int child : node.children) visit(child, world, depth + 1);
   };
   for (int r : roots) visit(r, Mat4{}, 0);
+  if (!other_camera.empty()) out.warnings.push_back(other_camera);
 
   // The sky: an ambient term of the sky's average radiance over the upper hemisphere.
   Environment env;
@@ -932,8 +942,28 @@ LoadedScene load_gltf(const std::string& path, const GltfOptions& options) {
     }
     scene.set_camera(c);
   }
+  // A file with no lights and no sky (many exported models: viewers light them with a default
+  // environment) would render black. It gets a sun over the camera's left shoulder, a sky of
+  // about the pavilion's (an ambient term) and a grey-blue background, and the caller is told.
+  if (scene.lights().empty() && !(env.ambient.x > 0 || env.ambient.y > 0 || env.ambient.z > 0)) {
+    Light sun;
+    sun.type = Light::Type::directional;
+    const Vec3 d = normalize(scene.camera().to_world.transform_vector({0.4f, -0.7f, -0.6f}));
+    sun.direction = check_direction(d).empty() ? d : normalize(Vec3{0.4f, -0.7f, -0.6f});
+    scene.set_light(next_id++, sun);
+    env.ambient = Vec3{0.3f};
+    env.background = Vec3{0.24f, 0.27f, 0.33f};
+    env.exposure = 1.0f;
+    scene.set_environment(env);
+    out.default_lighting = true;
+  }
   out.times.convert_ms = ms_since(t_convert);
   return out;
+}
+
+std::string default_lighting_note(const std::string& path) {
+  return path + ": no lights (KHR_lights_punctual) and no sky: lit by a default sun over the camera's shoulder and a "
+                "sky (add lights to the file to light it your way)";
 }
 
 Camera CameraLoop::camera(size_t frame) const {

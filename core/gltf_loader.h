@@ -29,6 +29,9 @@ struct LoadedScene {
   } times;
   Bounds bounds;                      // world bounds of all instances
   bool has_camera = false;            // the scene's first camera node was found
+  // The file has no lights and no sky: the scene holds a default sun and sky instead
+  // (load_gltf), which callers say in a note (not a warning: nothing was left out).
+  bool default_lighting = false;
   std::vector<std::string> warnings;  // things left out or repaired, each naming the file
 };
 
@@ -37,6 +40,8 @@ struct GltfOptions {
 };
 // Throws std::runtime_error naming the file and what is wrong; never crashes on a broken file.
 LoadedScene load_gltf(const std::string& path, const GltfOptions& options = {});
+// What callers print when LoadedScene::default_lighting is set.
+std::string default_lighting_note(const std::string& path);
 
 // A recorded camera loop (../shared/scenes/*/camera-loop.json).
 struct CameraLoop {

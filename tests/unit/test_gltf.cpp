@@ -17,6 +17,7 @@
 
 #include "core/gltf_loader.h"
 #include "core/image.h"
+#include "renderer/raytracer.h"
 
 using namespace tessera;
 
@@ -768,6 +769,68 @@ TEST_CASE("glTF animations skins and morph targets are not played and one warnin
   CHECK(warned(ls, "1 animation, 1 primitive with morph targets not played: the meshes are drawn in the file's rest pose"));
 }
 
+TEST_CASE("a glTF with no lights and no sky gets a default sun and sky and says so; one with either does not", "[gltf]") {
+  TempDir dir;
+  Bin bin;
+  const int pos = bin.view(std::vector<float>{0, 0, 0, 1, 0, 0, 0, 1, 0});
+  const std::string prim = R"({"attributes":{"POSITION":0}})", acc = accessor(pos, 5126, 3, "VEC3");
+  {
+    LoadedScene ls = load_gltf(dir.write("dark.gltf", gltf_of(dir, bin, prim, acc)));
+    CHECK(ls.default_lighting);
+    CHECK(ls.warnings.empty());  // nothing was left out: the callers print a note
+    REQUIRE(ls.scene.lights().size() == 1);
+    const Light& sun = ls.scene.lights().begin()->second.value;
+    CHECK(sun.type == Light::Type::directional);
+    CHECK(sun.direction.z < 0);  // the fitted camera looks down -z: the sun shines the same way, from above
+    CHECK(sun.direction.y < 0);
+    CHECK(ls.scene.environment().ambient.x > 0);
+    CHECK(default_lighting_note("dark.gltf").find("default sun") != std::string::npos);
+    // It renders: the triangle is lit (not black), the background is not black either.
+    RayTracer rt;
+    std::vector<std::string> w;
+    ls.scene.set_resolution(64, 64);
+    rt.sync(ls.scene, w);
+    TaskResult tr;
+    rt.render({0, 0, 64, 64}, RenderSettings{}, tr);
+    int lit = 0;
+    for (int y = 0; y < 64; ++y)
+      for (int x = 0; x < 64; ++x) lit += tr.image.pixel(x, y)[0] > 40 ? 1 : 0;
+    CHECK(lit == 64 * 64);
+  }
+  {  // A light of its own.
+    const std::string light = R"(,"extensionsUsed":["KHR_lights_punctual"],"extensions":{"KHR_lights_punctual":{"lights":[{"type":"point"}]}})";
+    std::string f = gltf_of(dir, bin, prim, acc, light);
+    f.replace(f.find(R"("nodes":[{"mesh":0}])"), 20, R"("nodes":[{"mesh":0},{"extensions":{"KHR_lights_punctual":{"light":0}}}])");
+    f.replace(f.find(R"("scenes":[{"nodes":[0]}])"), 24, R"("scenes":[{"nodes":[0,1]}])");
+    LoadedScene ls = load_gltf(dir.write("lit.gltf", f));
+    CHECK_FALSE(ls.default_lighting);
+    CHECK(ls.scene.lights().size() == 1);
+    CHECK(ls.scene.lights().begin()->second.value.type == Light::Type::point);
+    CHECK(ls.scene.environment().ambient.x == 0);
+  }
+  {  // A sky of its own (the shared scenes' extras).
+    std::string f = gltf_of(dir, bin, prim, acc);
+    f.replace(f.find(R"("scenes":[{"nodes":[0]}])"), 24,
+              R"("scenes":[{"nodes":[0],"extras":{"environment":{"analysis":{"integral_L_dOmega":3.14159}}}}])");
+    LoadedScene ls = load_gltf(dir.write("sky.gltf", f));
+    CHECK_FALSE(ls.default_lighting);
+    CHECK(ls.scene.lights().empty());
+  }
+}
+
+TEST_CASE("a glTF with an orthographic camera before a perspective one is seen through the perspective one (as the web reader)", "[gltf]") {
+  TempDir dir;
+  const std::string j =
+      R"({"asset":{"version":"2.0"},"cameras":[{"type":"orthographic","orthographic":{"xmag":2,"ymag":2,"znear":0.1,"zfar":100}},)"
+      R"({"type":"perspective","perspective":{"yfov":0.5,"znear":0.1}}],)"
+      R"("nodes":[{"camera":0,"translation":[0,0,5]},{"camera":1,"translation":[0,0,9]}],"scenes":[{"nodes":[0,1]}],"scene":0})";
+  LoadedScene ls = load_gltf(dir.write("two.gltf", j));
+  CHECK(ls.has_camera);
+  CHECK(ls.scene.camera().to_world.m[14] == 9);
+  CHECK(ls.scene.camera().fov_y == 0.5f);
+  CHECK(ls.warnings.empty());  // the orthographic camera is not the one drawn
+}
+
 TEST_CASE("a glTF light index beyond int's range names no light", "[gltf][broken]") {
   // Converting 1e300 to int was undefined behaviour (UBSan: "outside the range of representable
   // values of type 'int'"); such a node now names no light, like any other bad index.
@@ -779,7 +842,10 @@ TEST_CASE("a glTF light index beyond int's range names no light", "[gltf][broken
         R"("nodes":[{"extensions":{"KHR_lights_punctual":{"light":)" + std::string(index) + R"(}}}],"scenes":[{"nodes":[0]}],"scene":0})";
     LoadedScene ls = load_gltf(dir.write("light.gltf", j));
     const bool named = std::string(index) == "0";  // the file has one light
-    CHECK(ls.scene.lights().size() == (named ? 1u : 0u));
+    // Naming none, the file has no lights: only the default sun lights it.
+    CHECK(ls.default_lighting == !named);
+    REQUIRE(ls.scene.lights().size() == 1u);
+    CHECK((ls.scene.lights().begin()->second.value.type == Light::Type::point) == named);
   }
 }
 
