@@ -380,6 +380,16 @@ Mat4.lookAt = (eye, center, up) => {
   return new Mat4([x.x, y.x, z.x, 0, x.y, y.y, z.y, 0, x.z, y.z, z.z, 0, -x.dot(e), -y.dot(e), -z.dot(e), 1]);
 };
 
+// The longer names xml3d.js 5 gives the same methods (those of gl-matrix under it), which
+// pages call: xml3d-examples' shaderOverrides turns its camera with
+// `new XML3D.Vec3(0, 1, 0).multiply(rot)`, a TypeError here while only `mul` existed.
+for (const C of [Vec2, Vec3, Vec4, Quat, Mat2, Mat3, Mat4]) C.prototype.multiply = function multiply(o) { return this.mul(o); };
+for (const C of [Vec2, Vec3, Vec4]) {
+  C.prototype.subtract = function subtract(o) { return this.sub(o); };
+  C.prototype.distance = function distance(o) { return this.dist(o); };
+}
+for (const C of [Vec2, Vec3, Vec4, Quat]) C.prototype.len = function len() { return this.length(); };
+
 // ---- Box (mutable) ----------------------------------------------------------------------
 export class Box {
   /** (), (Box other), or (Vec3 min, Vec3 max). The empty box has min > max. */

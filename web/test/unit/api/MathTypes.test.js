@@ -1,7 +1,7 @@
 // XML3D namespace math types (src/api/MathTypes.js) against known values.
 import { test } from 'node:test';
 import assert from 'node:assert/strict';
-import { Vec2, Vec3, Vec4, AxisAngle, Quat, Mat3, Mat4, Box, Ray } from '../../../src/api/MathTypes.js';
+import { Vec2, Vec3, Vec4, AxisAngle, Quat, Mat2, Mat3, Mat4, Box, Ray } from '../../../src/api/MathTypes.js';
 
 const near = (a, b, eps = 1e-5, what = '') => assert.ok(Math.abs(a - b) < eps, `${what} ${a} != ${b}`);
 const nearAll = (a, b, eps = 1e-5) => {
@@ -158,4 +158,28 @@ test('Box: empty, extend, center/size/extent, contains, transformAxisAligned', (
   nearAll(c.max, [10, 1, 3]);
   nearAll(b.min, [-1, 0, 1], 1e-6);
   assert.ok(b.setEmpty().isEmpty());
+});
+
+// xml3d.js 5 (gl-matrix underneath) gives the same methods long names as well, and pages call
+// them: xml3d-examples' shaderOverrides does `new XML3D.Vec3(0, 1, 0).multiply(rot)` (a
+// TypeError while only `mul` existed, so its camera never turned).
+test('long method names of xml3d.js: multiply, subtract, distance, len act as mul, sub, dist, length', () => {
+  const q = Quat.fromAxisAngle(new AxisAngle(0, 0, 1, Math.PI / 2));
+  nearAll(new Vec3(1, 0, 0).multiply(q), new Vec3(1, 0, 0).mul(q));
+  nearAll(new Vec3(1, 0, 0).multiply(q), [0, 1, 0]);
+  nearAll(new Vec3(1, 2, 3).multiply(new Vec3(2, 2, 2)), [2, 4, 6]);
+  nearAll(new Vec2(1, 2).multiply(new Vec2(3, 4)), [3, 8]);
+  nearAll(new Vec4(1, 2, 3, 4).multiply(Mat4.translation([1, 0, 0])), new Vec4(1, 2, 3, 4).mul(Mat4.translation([1, 0, 0])));
+  nearAll(q.multiply(q), q.mul(q));
+  const m = new Mat4().rotateZ(0.3).translate([1, 2, 3]);
+  nearAll(m.multiply(m.invert()), new Mat4());
+  nearAll(new Mat3([2, 0, 0, 0, 2, 0, 0, 0, 2]).multiply(new Mat3()), [2, 0, 0, 0, 2, 0, 0, 0, 2]);
+  nearAll(new Mat2([1, 2, 3, 4]).multiply(new Mat2()), [1, 2, 3, 4]);
+  for (const V of [Vec2, Vec3, Vec4]) {
+    const a = new V(3, 4, 0, 0), b = new V(0, 0, 0, 0);
+    nearAll(a.subtract(new V(1, 1, 1, 1)), a.sub(new V(1, 1, 1, 1)));
+    near(a.distance(b), 5);
+    near(a.len(), 5);
+  }
+  near(new Quat(0, 0, 0, 2).len(), 2);
 });
