@@ -62,8 +62,14 @@ export function parseValueElement(el) {
     });
   } else {
     const nums = text.match(NUMBER) || [];
-    const stripped = text.replace(NUMBER, ' ').replace(/[\s,;]+/g, '');
-    if (stripped.length) error = `<${type} name="${el.getAttribute('name')}"> holds text that is not a number: "${stripped.slice(0, 40)}"`;
+    // The words that are not numbers, as the page has them, a space between each ("NaN NaN",
+    // not "NaNNaN"), and how many there are beyond the first few.
+    const junk = text.replace(NUMBER, ' ').split(/[\s,;]+/).filter((w) => w.length);
+    if (junk.length) {
+      const shown = junk.slice(0, 4).join(' ').slice(0, 60);
+      error = `<${type} name="${el.getAttribute('name')}"> holds text that is not a number: "${shown}"` +
+        (junk.length > 4 ? ` (and ${junk.length - 4} more)` : '');
+    }
     let n = nums.length - (nums.length % info.size);
     if (n !== nums.length)
       error = (error ? error + '; ' : '') + `<${type} name="${el.getAttribute('name')}"> has ${nums.length} numbers, not a multiple of ${info.size}`;

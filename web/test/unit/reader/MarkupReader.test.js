@@ -176,7 +176,11 @@ test('lights: castShadow true makes a light cast shadows, and the node is told s
 test('value elements: bool, int, and numbers mixed with junk are reported', () => {
   const { scene } = read(`<xml3d><mesh><float3 name="position">0 0 0 1 0 0 0 1 0 oops</float3></mesh></xml3d>`);
   assert.equal(scene.meshes.size, 1);
-  assert.match(scene.errors[0].message, /not a number/);
+  assert.match(scene.errors[0].message, /not a number: "oops"$/);
+  // Words apart as the page has them (the examples' candle page has NaN tangents), a count past four.
+  const many = read(`<xml3d><mesh><float3 name="position">0 0 0 1 0 0 0 1 0</float3>
+    <float3 name="tangent">NaN NaN NaN NaN NaN NaN</float3></mesh></xml3d>`).scene;
+  assert.match(many.errors[0].message, /<float3 name="tangent"> holds text that is not a number: "NaN NaN NaN NaN" \(and 2 more\)/);
 });
 
 test('broken references and bad data are reported, the rest is still read', () => {
