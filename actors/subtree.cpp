@@ -1,6 +1,7 @@
 // The subtree actor (subtree_protocol.h): its behaviour, the scene its own renderer renders,
 // and the liveness of a worker. Its children are in subtree_fanout.cpp.
 #include <chrono>
+#include <limits>
 #include <utility>
 
 #include "actors/checks.h"
@@ -168,6 +169,13 @@ subtree_actor::behavior_type subtree_impl(subtree_ptr self, std::shared_ptr<cons
       self->link_to(st.renderer);
     }
   }
+  // Whatever ends this subtree (the session closed, its client left, the parent or the node
+  // went down), the render in flight for it stops at its next packet instead of running on
+  // for nobody: a maximal frame asked for by a client that then left took the thread for
+  // minutes, and held a shutting-down node until it ended.
+  self->attach_functor([cancel = st.cancel](const caf::error&) {
+    if (cancel) cancel->raise(std::numeric_limits<uint32_t>::max());
+  });
   if (spec.parent) {
     st.parent = caf::actor_cast<caf::actor_addr>(spec.parent);
     self->monitor(spec.parent);

@@ -97,6 +97,39 @@ TEST_CASE("tessera serve as a process serves a client and the pages, and exits 0
   CHECK(c.ws.closed());
 }
 
+TEST_CASE("tessera serve stops the render of a client that left: it exits promptly on SIGTERM after one", "[e2e]") {
+  // A client asks for the largest frame the limits allow with many AO rays and deep paths (a
+  // render of minutes on this machine), and leaves. The session's render must stop at its next
+  // packet. Before, it ran to its end for nobody, and SIGTERM waited for it: the node was still
+  // running 30 s later (the hostile-client probe of 2026-11-30).
+  Process p(serve({"--port", "0"}));
+  auto line = p.first_line(30000);
+  INFO("stderr: " << p.err());
+  REQUIRE(line);
+  const uint16_t port = listening_port(*line);
+  {
+    ProtoClient c;
+    REQUIRE(c.connect(port));
+    REQUIRE(c.handshake(protocol::DisplayKind::jpeg, 3840, 2160, 85));
+    REQUIRE(c.upload(pavilion().scene));
+    protocol::Settings heavy;
+    heavy.ao_samples = 64;
+    heavy.max_depth = 16;
+    REQUIRE(c.send({heavy, protocol::SetCamera{pavilion_loop().camera(0)}, protocol::RenderRequest{1}}));
+    std::this_thread::sleep_for(std::chrono::milliseconds(1500));  // the render is under way
+  }  // the client closes its connection
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  const auto t0 = std::chrono::steady_clock::now();
+  p.signal(SIGTERM);
+  auto status = p.wait(20000);
+  REQUIRE(status);
+  CHECK(WIFEXITED(*status));
+  CHECK(WEXITSTATUS(*status) == 0);
+  const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  INFO("exited " << s << " s after SIGTERM");
+  CHECK(s < 10);
+}
+
 // The integer after "KEY": in `line`, or -1.
 static long long field(const std::string& line, const std::string& key) {
   const auto at = line.find("\"" + key + "\": ");

@@ -64,8 +64,21 @@ function start() {
 
 if (typeof window !== 'undefined') installGlobal(window, { version, handlers: () => [...handlers.values()] });
 
+// Configuration starts at DOMContentLoaded, as xml3d.js's does: a module script of the parser
+// runs before that event but after parsing ('interactive'), so starting at once would read the
+// scene, and fire its load event, before the page's module scripts after ours had defined
+// what the page's onload names. Once that event has begun (this module appended or imported
+// later), or where the navigation entry does not say, it starts at once.
+function contentLoaded() {
+  if (document.readyState === 'loading') return false;
+  if (document.readyState === 'complete') return true;
+  const nav = typeof performance !== 'undefined' && performance.getEntriesByType
+    ? performance.getEntriesByType('navigation')[0] : undefined;
+  return !nav || nav.domContentLoadedEventStart > 0;
+}
+
 if (typeof document !== 'undefined') {
-  if (document.readyState === 'loading') document.addEventListener('DOMContentLoaded', start); else start();
+  if (contentLoaded()) start(); else document.addEventListener('DOMContentLoaded', start, { once: true });
 }
 
 export { XML3DHandler };

@@ -106,6 +106,17 @@ test('DOM changes are picked up: attributes, value text, setScriptValue, added a
   await page.close();
 });
 
+test('a page module after ours finds XML3D, and <xml3d> is configured at DOMContentLoaded after it, as xml3d.js does', async () => {
+  // Before: the module configured <xml3d> as soon as it ran, before the page's module below it,
+  // so the scene's onload called a function that did not exist yet.
+  const page = await open(env, '/test/browser/pages/late-module.html');
+  await page.waitForFunction(() => window.sceneLoaded, null, { timeout: 10000 });
+  const seen = await page.evaluate(() => ({ before: window.configuredBeforePageModule, global: window.xml3dGlobalInPageModule }));
+  assert.deepEqual(seen, { before: false, global: true });
+  assert.deepEqual(page.logs.filter((l) => /^(error|pageerror):/.test(l)), [], page.logs.join('\n'));
+  await page.close();
+});
+
 test('a broken page shows a clear error and still renders what it can', async () => {
   const page = await open(env, '/test/browser/pages/broken.html');
   const status = await page.evaluate(() => document.querySelector('.tessera-status').textContent);
