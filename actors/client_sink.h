@@ -51,6 +51,9 @@ class ClientSink {
   // References to files under this origin's /scenes/ are read from the node's scenes folder
   // (update/asset_store.h). "": unknown (the client's references name no file of this node).
   virtual std::string node_origin() const { return ""; }
+  // The session has taken one client message of `bytes` bytes from its mailbox (any thread):
+  // the connection stops reading while too many wait there, and reads on once they are taken.
+  virtual void consumed(size_t bytes) { (void)bytes; }
 };
 
 }  // namespace tessera

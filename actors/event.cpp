@@ -46,6 +46,7 @@ const char* event_name(Ev kind) {
     case Ev::closed_slow_client: return "closed_slow_client";
     case Ev::rejected: return "rejected";
     case Ev::network_thread_error: return "network_thread_error";
+    case Ev::paused_reading: return "paused_reading";
   }
   return "event";
 }

@@ -35,6 +35,8 @@ enum class Ev : uint8_t {
   cluster_security,
   // The server (net/server.cpp): no scope.
   closed_slow_client, rejected, network_thread_error,
+  // The server stopped reading a connection whose session had too many of its messages waiting.
+  paused_reading,
   // A session: its still reached its refine target and rendering stopped.
   converged,
   // A session: a still's sample stopped early, its client having asked for a new frame.

@@ -305,7 +305,11 @@ session_actor::behavior_type session_impl(self_ptr self, std::shared_ptr<ClientS
   if (st.settings->handshake_timeout_ms > 0)
     self->delayed_send(self, std::chrono::milliseconds(st.settings->handshake_timeout_ms), hs_timeout_atom::value);
   return {
-      [=](client_atom, std::vector<uint8_t>& bytes) { on_client(self, bytes); },
+      [=](client_atom, std::vector<uint8_t>& bytes) {
+        const size_t n = bytes.size();
+        on_client(self, bytes);
+        self->state.sink->consumed(n);
+      },
       [=](status_atom) -> SessionStatus {
         auto& st = self->state;
         SessionStatus s;
@@ -336,6 +340,10 @@ session_actor::behavior_type session_impl(self_ptr self, std::shared_ptr<ClientS
         if (st.handshake_done || st.closed) return;
         fail(self, Error{ErrorCode::bad_handshake,
                          "no handshake within " + std::to_string(st.settings->handshake_timeout_ms) + " ms", kNoRecord});
+      },
+      [=](unreported_atom) {
+        self->state.unreported_due = false;
+        report_unreported(self);
       },
       [=](still_atom, uint32_t seed) {
         auto& st = self->state;

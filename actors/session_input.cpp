@@ -1,9 +1,49 @@
 // The session's input (session_state.h): what a client sends, admitted, decoded and applied.
+#include <algorithm>
+#include <string>
+
 #include "actors/errors.h"
 #include "actors/session_state.h"
 #include "protocol/scene_records.h"
 
 namespace tessera::session {
+
+// Whether one more non-fatal error may be reported now (session_state::kErrorsPerSecond).
+static bool take_error_token(session_state& st) {
+  const int64_t now = steady_ns();
+  if (st.error_tokens_ns > 0)
+    st.error_tokens = std::min(session_state::kErrorBurst,
+                               st.error_tokens + double(now - st.error_tokens_ns) * 1e-9 * session_state::kErrorsPerSecond);
+  st.error_tokens_ns = now;
+  if (st.error_tokens < 1) return false;
+  st.error_tokens -= 1;
+  return true;
+}
+
+// After a client message: errors of it (or of earlier ones) not reported are said in one reply
+// when the rate allows, so that a client whose message had 65,536 bad records learns how many.
+void report_unreported(self_ptr self) {
+  auto& st = self->state;
+  if (st.closed || st.unreported_errors == 0) return;
+  if (!take_error_token(st)) {  // when the rate allows one more
+    if (!st.unreported_due) {
+      st.unreported_due = true;
+      self->delayed_send(self, std::chrono::milliseconds(int(1000 / session_state::kErrorsPerSecond) + 1),
+                         unreported_atom::value);
+    }
+    return;
+  }
+  ErrorReply r;
+  r.code = ErrorCode::limit_exceeded;
+  r.fatal = false;
+  r.record = kNoRecord;
+  r.message = std::to_string(st.unreported_errors) + " errors were not reported: more than " +
+              std::to_string(int(session_state::kErrorsPerSecond)) + " a second";
+  st.sink->send(encode(ServerRecord{r}));
+  log(self, Event(Ev::error, to_string(r.code)).with("fatal", false).with("record", -1).with("message", r.message)
+                .with("unreported", st.unreported_errors));
+  st.unreported_errors = 0;
+}
 
 // Sends an error record; a fatal one ends the session (and closes the connection).
 void fail(self_ptr self, const Error& e) {
@@ -11,11 +51,21 @@ void fail(self_ptr self, const Error& e) {
   if (st.closed) return;
   ErrorReply r = to_reply(e);
   st.errors++;
+  if (!r.fatal && !take_error_token(st)) {  // the rate limit of session_state::kErrorsPerSecond
+    st.unreported_errors++;
+    return;
+  }
+  const uint32_t unreported = st.unreported_errors;
+  if (unreported > 0) {
+    r.message += " (" + std::to_string(unreported) + " errors before this one were not reported: more than " +
+                 std::to_string(int(session_state::kErrorsPerSecond)) + " a second)";
+    st.unreported_errors = 0;
+  }
   st.sink->send(encode(ServerRecord{r}));
-  log(self, Event(Ev::error, to_string(e.code))
-                .with("fatal", r.fatal)
-                .with("record", e.record == kNoRecord ? -1 : int64_t(e.record))
-                .with("message", e.message));
+  Event ev(Ev::error, to_string(e.code));
+  ev.with("fatal", r.fatal).with("record", e.record == kNoRecord ? -1 : int64_t(e.record)).with("message", e.message);
+  if (unreported > 0) ev.with("unreported", unreported);
+  log(self, std::move(ev));
   if (r.fatal) {
     st.closed = true;
     st.sink->close(e.message);
@@ -287,6 +337,7 @@ void on_client(self_ptr self, std::vector<uint8_t>& bytes) {
   if (admit_payloads(self, bytes, kept)) on_client_records(self, bytes, kept);
   bytes = {};
   if (!st.closed && !st.resolving) settle_budget(self);  // gives back what was reserved and not kept
+  report_unreported(self);
 }
 
 static void on_client_records(self_ptr self, std::vector<uint8_t>& bytes, const std::vector<uint32_t>& kept) {

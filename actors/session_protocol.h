@@ -48,6 +48,9 @@ using hs_timeout_atom = caf::atom_constant<caf::atom("hstimeout")>;
 // The still after interactive frames, due (NodeSettings::still_delay_ms), sent by the session to
 // itself with the still's seed: a still replaced meanwhile ignores it.
 using still_atom = caf::atom_constant<caf::atom("still")>;
+// Errors not reported yet (session_state::unreported_errors) are due, sent by the session to
+// itself when the rate limit held back their summary.
+using unreported_atom = caf::atom_constant<caf::atom("unreport")>;
 
 using session_actor = caf::typed_actor<caf::reacts_to<client_atom, std::vector<uint8_t>>,
                                        caf::replies_to<status_atom>::with<SessionStatus>,
@@ -56,6 +59,7 @@ using session_actor = caf::typed_actor<caf::reacts_to<client_atom, std::vector<u
                                        caf::reacts_to<tick_atom>,
                                        caf::reacts_to<hs_timeout_atom>,
                                        caf::reacts_to<still_atom, uint32_t>,
+                                       caf::reacts_to<unreported_atom>,
                                        caf::replies_to<snapshot_atom>::with<Payload>>;
 
 }  // namespace tessera

@@ -53,6 +53,15 @@ struct session_state {
   bool in_flight = false;            // the frame actor renders a frame: the scene is read-only
   std::optional<uint32_t> pending;   // the latest render request that arrived while rendering
   uint32_t seq = 0, dropped = 0, errors = 0;
+  // Non-fatal error replies (and their log lines) are limited to kErrorBurst at once and
+  // kErrorsPerSecond after (session::fail): a client's flood of bad records filled the log by
+  // hundreds of MB and one message of 65,536 bad records got as many replies. The rest are
+  // counted and said with the next one reported.
+  static constexpr double kErrorBurst = 32, kErrorsPerSecond = 32;
+  double error_tokens = kErrorBurst;
+  int64_t error_tokens_ns = 0;  // when error_tokens was last filled up (steady_ns)
+  uint32_t unreported_errors = 0;
+  bool unreported_due = false;  // an unreported_atom is on its way
   std::vector<uint8_t> forward;      // accepted scene records not yet sent down the tree
   std::set<std::string> noted;       // the no_effect notices sent (each goes to the client once)
   // The progressive still (docs/protocol.md, "Refinement"): after a requested frame, while no
@@ -103,6 +112,8 @@ using self_ptr = session_actor::stateful_pointer<session_state>;
 void log(self_ptr self, Event e);
 // Sends an error record; a fatal one ends the session (and closes the connection).
 void fail(self_ptr self, const Error& e);
+// Says in one error reply how many errors the rate limit held back, when it allows one more.
+void report_unreported(self_ptr self);
 // The session's share of the node budget becomes what it holds now.
 void settle_budget(self_ptr self);
 // Applies what was cached during the frame, and sends the accepted records down the tree.

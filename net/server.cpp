@@ -114,6 +114,62 @@ struct MjpegStream : std::enable_shared_from_this<MjpegStream<Config>> {
   }
 };
 
+// A static file larger than kStreamAbove, written to its HTTP connection a chunk at a time
+// from the file (the response deferred, as an MJPEG stream's), so that a request holds one
+// chunk of memory however large the file, and the network thread reads no more than a chunk
+// at once. Before, each request read the whole file into three copies (a 20 MB scene buffer
+// cost 58 MB a request, 3.7 GB for 100 clients that did not read), and read it on the
+// network thread, stalling every other client's frames meanwhile.
+constexpr uint64_t kStreamAbove = 1u << 20;
+constexpr size_t kStreamChunk = 256u << 10;
+template <class Config>
+struct FileStream : std::enable_shared_from_this<FileStream<Config>> {
+  typename websocketpp::server<Config>::connection_ptr con;
+  std::atomic<size_t>* live = nullptr;  // the server's count of open file streams
+  std::ifstream in;
+  uint64_t left = 0;  // bytes still to send
+  std::string header;
+  std::vector<char> chunk;
+  bool done = false;
+  // A client that takes no chunk for kStreamIdle is dropped: it holds one of kMaxFileStreams.
+  static constexpr std::chrono::seconds kStreamIdle{20};
+  std::unique_ptr<asio::steady_timer> idle;
+
+  void start() {
+    idle = std::make_unique<asio::steady_timer>(con->get_raw_socket().get_executor());
+    write(asio::buffer(header));
+  }
+  void write(asio::const_buffer b) {
+    auto self = this->shared_from_this();
+    idle->expires_after(kStreamIdle);
+    idle->async_wait([self](const asio::error_code& ec) {
+      if (!ec) self->finish();  // not cancelled: no progress for kStreamIdle
+    });
+    asio::async_write(con->get_socket(), b, [self](const asio::error_code& ec, size_t) {
+      if (ec) { self->finish(); return; }
+      self->next();
+    });
+  }
+  void next() {
+    if (done) return;
+    if (left == 0) { finish(); return; }
+    const size_t n = size_t(std::min<uint64_t>(left, kStreamChunk));
+    chunk.resize(n);
+    if (!in.read(chunk.data(), std::streamsize(n))) { finish(); return; }  // the file shrank: the client sees it short
+    left -= n;
+    write(asio::buffer(chunk));
+  }
+  void finish() {
+    if (done) return;
+    done = true;
+    if (idle) idle->cancel();
+    if (live) --*live;
+    asio::error_code ec;
+    con->get_raw_socket().shutdown(asio::ip::tcp::socket::shutdown_both, ec);
+    con->get_raw_socket().close(ec);
+  }
+};
+
 // Why a request is not admitted: the HTTP status and a short body, or, for a browser refused
 // for its access token, the WebSocket close code and reason it is closed with at once.
 struct Refusal {
@@ -130,6 +186,12 @@ constexpr uint16_t kCloseBadToken = 4401;
 // TCP_NOTSENT_LOWAT of WebSocket connections (see on_open): at 1 Mbit/s 32 KiB is 0.26 s of
 // latency; at 1 Gbit/s the network thread has ~0.13 ms to refill it (it is woken at half).
 constexpr int kNotSentLowat = 32 << 10;
+// A connection stops reading while its session has more than this many messages, or bytes, of
+// its client waiting in its mailbox, and reads on once they are down to the resume marks: a
+// client that sends small valid messages faster than its session takes them grew the node by
+// gigabytes (the hostile-client probe of 2026-11-30), and TCP now holds it back instead.
+constexpr uint32_t kInboxPauseMessages = 256, kInboxResumeMessages = 64;
+constexpr uint64_t kInboxPauseBytes = 64ull << 20, kInboxResumeBytes = 16ull << 20;
 
 // Throws unless this kernel lets the node's TCP connections use congestion control `name`.
 void check_congestion_control(const std::string& name) {
@@ -222,6 +284,8 @@ struct Endpoint final : Server::Impl, std::enable_shared_from_this<Endpoint<Conf
     uint64_t backlog = 0;   // out_bytes + websocketpp's queue, as last seen
     BudgetShare share;      // backlog, in the node's budget
     LinkMeter link;         // the link's throughput (the H.264 display adapts its bitrate to it)
+    connection_ptr held;    // the connection while it does not read (Sink::paused)
+    uint64_t pauses = 0, next_pause_log = 1;
   };
   // Touched only on the network thread.
   std::map<connection_hdl, std::shared_ptr<Conn>, std::owner_less<connection_hdl>> conns;
@@ -232,6 +296,15 @@ struct Endpoint final : Server::Impl, std::enable_shared_from_this<Endpoint<Conf
   // A viewer that opens late starts with the session's last JPEG (and its frame number).
   std::map<std::string, std::pair<std::shared_ptr<const std::vector<uint8_t>>, uint32_t>> last_mjpeg;
   std::set<connection_hdl, std::owner_less<connection_hdl>> pending_opens;  // validated, not yet opened
+  // The session tokens of validated connections not yet opened: a second upgrade with the same
+  // token, written right behind the first, was admitted too (both got 101).
+  std::map<connection_hdl, std::string, std::owner_less<connection_hdl>> pending_tokens;
+  bool token_taken(const std::string& t) const {
+    if (tokens.count(t)) return true;
+    for (auto& [h, p] : pending_tokens)
+      if (p == t) return true;
+    return false;
+  }
   // Admission (net/admission.h): WebSocket connections per client address, counted from the
   // upgrade until they close, and each counted connection's address.
   admission::AddressCounter per_address;
@@ -264,6 +337,9 @@ struct Endpoint final : Server::Impl, std::enable_shared_from_this<Endpoint<Conf
   std::optional<Refusal> check_capacity(const std::string& address);
   void release_address(connection_hdl h);
   void on_message(connection_hdl h, message_ptr msg);
+  void resume(connection_hdl h);  // reads the client's messages again (Sink::consumed)
+  void post_resume(connection_hdl h);
+  bool on_ping(connection_hdl h);
   void on_fail(connection_hdl h);
   void on_http(connection_hdl h);
   // Queues a message for the connection; false when the connection is gone or closing.
@@ -272,6 +348,8 @@ struct Endpoint final : Server::Impl, std::enable_shared_from_this<Endpoint<Conf
   void arm_poll();
   void close_conn(connection_hdl h, Conn& c, websocketpp::close::status::value code, const std::string& reason);
   std::atomic<size_t> open_conns{0};  // including those being closed
+  std::atomic<size_t> file_streams{0};  // FileStreams writing
+  static constexpr size_t kMaxFileStreams = 64;
   void recount() {
     size_t n = 0;
     for (auto& [h, c] : conns) n += !c->closing;
@@ -381,6 +459,22 @@ struct Sink : ClientSink {
   std::string token() const override { return tok; }
   std::string origin;
   std::string node_origin() const override { return origin; }
+  // The client's messages in the session's mailbox (on_message adds, consumed takes away), and
+  // whether the connection has stopped reading for them (set and cleared on the network thread).
+  std::atomic<uint64_t> inbox_bytes{0};
+  std::atomic<uint32_t> inbox_messages{0};
+  std::atomic<bool> paused{false};
+  static bool below_resume(uint32_t messages, uint64_t bytes) {
+    return messages <= kInboxResumeMessages && bytes <= kInboxResumeBytes;
+  }
+  void consumed(size_t bytes) override {
+    const uint64_t b = inbox_bytes.fetch_sub(bytes) - bytes;
+    const uint32_t m = inbox_messages.fetch_sub(1) - 1;
+    if (paused.load() && below_resume(m, b)) {
+      auto h = hdl;
+      post([h](Impl& i) { i.resume(h); });
+    }
+  }
 };
 
 // A client that does not read must not grow the node: websocketpp queues every send without
@@ -492,6 +586,7 @@ void Endpoint<Config>::close_conn(connection_hdl h, Conn& c, websocketpp::close:
   caf::anon_send_exit(c.session, caf::exit_reason::user_shutdown);  // no-op when it ended itself
   recount();
   ws.close(h, code, reason, ec);
+  if (c.sink->paused) post_resume(h);  // reading again, so that the client's close frame is read
 }
 
 // A page's origin is checked first: a foreign page gets HTTP 403 and never a WebSocket. Then
@@ -538,14 +633,16 @@ bool Endpoint<Config>::on_validate(connection_hdl h) {
     return false;
   }
   std::string token = http::query_param(target, "session");
-  if (!token.empty() && (!http::valid_token(token) || tokens.count(token))) {
+  if (!token.empty() && (!http::valid_token(token) || token_taken(token))) {
+    const bool valid = http::valid_token(token);
     con->set_status(websocketpp::http::status_code::bad_request);
-    con->set_body(tokens.count(token) ? "session token in use\n" : "bad session token (8..64 of A-Z a-z 0-9 _ -)\n");
+    con->set_body(valid ? "session token in use\n" : "bad session token (8..64 of A-Z a-z 0-9 _ -)\n");
     return false;
   }
   per_address.try_add(address);
   counted[h] = address;
   pending_opens.insert(h);
+  if (!token.empty()) pending_tokens[h] = token;
   return true;
 }
 
@@ -599,6 +696,7 @@ void Endpoint<Config>::release_address(connection_hdl h) {
 template <class Config>
 void Endpoint<Config>::on_open(connection_hdl h) {
   pending_opens.erase(h);
+  pending_tokens.erase(h);
   if (auto r = refusing.find(h); r != refusing.end()) {  // no session: closed with the reason
     websocketpp::lib::error_code ec;
     ws.close(h, r->second.close_code, r->second.reason, ec);
@@ -630,6 +728,7 @@ void Endpoint<Config>::on_open(connection_hdl h) {
 template <class Config>
 void Endpoint<Config>::on_close(connection_hdl h) {
   pending_opens.erase(h);
+  pending_tokens.erase(h);
   refusing.erase(h);
   release_address(h);
   auto it = conns.find(h);
@@ -665,9 +764,76 @@ template <class Config>
 void Endpoint<Config>::on_message(connection_hdl h, message_ptr msg) {
   auto it = conns.find(h);
   if (it == conns.end() || it->second->closing) return;
+  Conn& c = *it->second;
   const std::string& p = msg->get_payload();
+  Sink<Config>& sink = *c.sink;
+  sink.inbox_messages++;
+  sink.inbox_bytes += p.size();
   // Text messages go to the decoder too: it answers them with a protocol error (bad magic).
-  caf::anon_send(it->second->session, client_atom::value, std::vector<uint8_t>(p.begin(), p.end()));
+  caf::anon_send(c.session, client_atom::value, std::vector<uint8_t>(p.begin(), p.end()));
+  if (sink.paused || (sink.inbox_messages <= kInboxPauseMessages && sink.inbox_bytes <= kInboxPauseBytes)) return;
+  websocketpp::lib::error_code ec;
+  auto con = ws.get_con_from_hdl(h, ec);
+  if (ec) return;
+  // At once, not through pause_reading(), which posts the pause: a read could be issued before
+  // it took effect, and the resume would then start a second read beside it (the connection's
+  // bytes were read twice and it broke). This handler runs inside the connection's read
+  // handler, which issues no further read once the flag is down.
+  con->handle_pause_reading();
+  sink.paused = true;
+  c.held = con;  // with no read in flight nothing else holds it: websocketpp would free it
+  // Logged the 1st, 10th, 100th... time for a connection (a flood pauses it thousands of times).
+  if (++c.pauses == c.next_pause_log) {
+    c.next_pause_log *= 10;
+    log(Event(Ev::paused_reading, true).with("times", c.pauses)
+            .with("waiting_messages", uint64_t(sink.inbox_messages.load()))
+            .with("waiting_bytes", sink.inbox_bytes.load()));
+  }
+  // The session may have taken them all before `paused` was set (it posts a resume only when
+  // it sees it set).
+  if (Sink<Config>::below_resume(sink.inbox_messages, sink.inbox_bytes)) post_resume(h);
+}
+
+// Resumes in a handler of its own: inside websocketpp's read handler (on_message, on_ping) a
+// resume would issue a read, and the handler another one when it returns, two reads into one
+// buffer.
+template <class Config>
+void Endpoint<Config>::post_resume(connection_hdl h) {
+  std::weak_ptr<Endpoint> w = this->shared_from_this();
+  ws.get_io_service().post([w, h] {
+    if (auto i = w.lock()) i->resume(h);
+  });
+}
+
+template <class Config>
+void Endpoint<Config>::resume(connection_hdl h) {
+  auto it = conns.find(h);
+  if (it == conns.end()) return;
+  Sink<Config>& sink = *it->second->sink;
+  // A closing connection reads again whatever waits (the client's close frame must be read).
+  if (!sink.paused || (!it->second->closing && !Sink<Config>::below_resume(sink.inbox_messages, sink.inbox_bytes)))
+    return;
+  websocketpp::lib::error_code ec;
+  auto con = ws.get_con_from_hdl(h, ec);
+  if (ec) return;
+  con->handle_resume_reading();  // on this thread, as the pause: exactly one read is issued
+  sink.paused = false;
+  it->second->held.reset();
+}
+
+// A ping's pong is queued by websocketpp itself, beside the node's messages: a client that
+// pings without reading is held to the same backlog as one that does not read its frames
+// (flush closes it above the cap). Before, nothing looked at the backlog while the node had
+// nothing of its own to send, and a ping flood grew the node by 150 MB/s.
+template <class Config>
+bool Endpoint<Config>::on_ping(connection_hdl h) {
+  auto it = conns.find(h);
+  if (it == conns.end()) return true;  // a refused browser's connection, closing at once
+  Conn& c = *it->second;
+  if (c.closing) return false;
+  flush(h, c);
+  if (!c.closing) arm_poll();  // the pong is queued after this returns: looked at again soon
+  return !c.closing;
 }
 
 // Sets a response's status, headers and body. HEAD gets the same headers (Content-Length of
@@ -757,14 +923,16 @@ void Endpoint<Config>::on_http(connection_hdl h) {
   }
   std::ifstream in;
   if (file) in.open(*file, std::ios::binary);
-  if (!file || !in) {
+  if (!file || !in || !in.seekg(0, std::ios::end)) {
     respond(con, head, sc::not_found, "not found\n");
     return;
   }
-  std::ostringstream body;
-  body << in.rdbuf();
-  std::string bytes = body.str();
-  const uint64_t size = bytes.size();
+  const std::streamoff end = in.tellg();
+  if (end < 0) {
+    respond(con, head, sc::not_found, "not found\n");
+    return;
+  }
+  const uint64_t size = uint64_t(end);
   http::ByteRange range;
   // A Range on HEAD is ignored (RFC 9110 14.2): the headers of the whole file.
   const http::RangeKind kind =
@@ -773,16 +941,53 @@ void Endpoint<Config>::on_http(connection_hdl h) {
   if (kind == http::RangeKind::unsatisfiable) {
     respond(con, false, sc::request_range_not_satisfiable, "range not satisfiable\n");
     con->replace_header("Content-Range", "bytes */" + std::to_string(size));
-  } else if (kind == http::RangeKind::partial) {
-    respond(con, false, sc::partial_content, bytes.substr(size_t(range.first), size_t(range.last - range.first + 1)),
-            type);
-    con->replace_header("Content-Range", "bytes " + std::to_string(range.first) + "-" + std::to_string(range.last) +
-                                             "/" + std::to_string(size));
-  } else {
-    respond(con, head, sc::ok, bytes, type);
+    con->replace_header("Accept-Ranges", "bytes");
+    return;
   }
-  con->replace_header("Accept-Ranges", "bytes");
-  con->replace_header("Cache-Control", "no-cache");
+  const uint64_t first = kind == http::RangeKind::partial ? range.first : 0;
+  const uint64_t length = kind == http::RangeKind::partial ? range.last - range.first + 1 : size;
+  const auto status = kind == http::RangeKind::partial ? sc::partial_content : sc::ok;
+  const std::string content_range = "bytes " + std::to_string(first) + "-" + std::to_string(first + length - 1) + "/" +
+                                    std::to_string(size);
+  if (head || length <= kStreamAbove) {  // read at once (HEAD: only its size)
+    std::string bytes;
+    if (!head) {
+      bytes.resize(size_t(length));
+      if (!in.seekg(std::streamoff(first)) || !in.read(bytes.data(), std::streamsize(length))) {
+        respond(con, head, sc::internal_server_error, "cannot read the file\n");
+        return;
+      }
+    }
+    respond(con, head, status, bytes, type);
+    if (head) con->replace_header("Content-Length", std::to_string(length));
+    if (kind == http::RangeKind::partial) con->replace_header("Content-Range", content_range);
+    con->replace_header("Accept-Ranges", "bytes");
+    con->replace_header("Cache-Control", "no-cache");
+    return;
+  }
+  if (file_streams >= kMaxFileStreams) {
+    respond(con, false, sc::service_unavailable,
+            "busy: " + std::to_string(kMaxFileStreams) + " large files are being sent; try again\n");
+    con->replace_header("Retry-After", "1");
+    return;
+  }
+  if (!in.seekg(std::streamoff(first))) {
+    respond(con, false, sc::internal_server_error, "cannot read the file\n");
+    return;
+  }
+  con->defer_http_response();
+  auto f = std::make_shared<FileStream<Config>>();
+  f->con = con;
+  f->in = std::move(in);
+  f->left = length;
+  f->live = &file_streams;
+  ++file_streams;
+  f->header = std::string("HTTP/1.1 ") + (status == sc::ok ? "200 OK" : "206 Partial Content") +
+              "\r\nContent-Type: " + type + "\r\nContent-Length: " + std::to_string(length) +
+              "\r\nAccept-Ranges: bytes\r\nCache-Control: no-cache\r\nX-Content-Type-Options: nosniff\r\n" +
+              (kind == http::RangeKind::partial ? "Content-Range: " + content_range + "\r\n" : std::string()) +
+              (hsts.empty() ? std::string() : "Strict-Transport-Security: " + hsts + "\r\n") + "Connection: close\r\n\r\n";
+  f->start();
 }
 
 // The `tls_certificate` event of a certificate the port presents from now on.
@@ -828,6 +1033,7 @@ void Endpoint<Config>::start() {
   i.ws.set_close_handler([&i](connection_hdl h) { i.on_close(h); });
   i.ws.set_fail_handler([&i](connection_hdl h) { i.on_fail(h); });
   i.ws.set_message_handler([&i](connection_hdl h, message_ptr m) { i.on_message(h, m); });
+  i.ws.set_ping_handler([&i](connection_hdl h, std::string) { return i.on_ping(h); });
   i.ws.set_http_handler([&i](connection_hdl h) { i.on_http(h); });
   asio::error_code ec;
   auto addr = asio::ip::make_address(i.opts.host, ec);

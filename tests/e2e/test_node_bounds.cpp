@@ -21,6 +21,7 @@
 #include "net/http.h"
 #include "tests/e2e/node_fixture.h"
 #include "net/ws_frame.h"
+#include "tests/unit/temp_files.h"
 
 using namespace tessera;
 using namespace tessera::test;
@@ -204,8 +205,12 @@ TEST_CASE("The node-wide memory budget refuses the client that would cross it an
   auto bomb_msg = protocol::encode(protocol::ClientRecord{bomb});
   CHECK(bomb_msg.size() < (64u << 10));
   REQUIRE(b.ws.send(bomb_msg));
+  // (Past the count of the refusals above beyond the error rate limit, 32 a second.)
   auto refused = b.next<protocol::ErrorReply>(5000);
+  while (refused && refused->message.find("errors were not reported") != std::string::npos)
+    refused = b.next<protocol::ErrorReply>(5000);
   REQUIRE(refused);
+  CHECK(refused->message.find("16777216 bytes") != std::string::npos);
   CHECK(refused->code == ErrorCode::limit_exceeded);
   CHECK_FALSE(refused->fatal);
   // a keeps its whole scene and its frames: the same picture as before.
@@ -220,7 +225,12 @@ TEST_CASE("The node-wide memory budget refuses the client that would cross it an
   REQUIRE(b.send({protocol::SetCamera{pavilion_loop().camera(0)}, protocol::RenderRequest{5}}));
   auto fb2 = b.next<protocol::Frame>(20000, &errors);
   REQUIRE(fb2);
-  CHECK(errors.empty());
+  // No refusal: at most the count of the first upload's refusals beyond the error rate limit
+  // (32 a second), which may come this late.
+  for (auto& e : errors) {
+    INFO(e.message);
+    CHECK(e.message.find("errors were not reported") != std::string::npos);
+  }
   CHECK(compare(decode_jpeg(fa->payload), decode_jpeg(fb2->payload)).psnr > 40);
   b.ws.close();
   CHECK(wait_for([&] { return budget->used() == 0; }, 5000));
@@ -373,4 +383,142 @@ TEST_CASE("HTTP: HEAD, Range, 405 with Allow, no Server header, and only the pub
     INFO(no);
     CHECK(r->status == 404);
   }
+}
+
+// The hostile-client probe of 2026-11-30 found these; each case failed on the node before it.
+
+TEST_CASE("A client that pings without reading is closed at the backlog cap: its pongs do not grow the node",
+          "[e2e][fault]") {
+  // websocketpp answers each ping with a pong by itself; nothing looked at that backlog while the
+  // node had nothing of its own to send, and a ping flood grew the node by 150 MB/s.
+  TestNode node;
+  RawSocket raw;
+  REQUIRE(raw.connect(node.port(), 4096));  // a small receive buffer, never read after the upgrade
+  REQUIRE(raw.upgrade());
+  REQUIRE(raw.send_ws(protocol::encode(protocol::ClientRecord{handshake_of(DisplayKind::jpeg, 96, 64)})));
+  std::vector<uint8_t> ping{0x89, 0x80 | 125, 1, 2, 3, 4};  // a masked ping of 125 bytes
+  ping.resize(ping.size() + 125, 0x55);
+  std::vector<uint8_t> burst;
+  for (int i = 0; i < 1000; ++i) burst.insert(burst.end(), ping.begin(), ping.end());
+  uint64_t peak = 0;
+  bool cut = false;
+  const auto t0 = std::chrono::steady_clock::now();
+  // For up to 30 s (before: pongs piled up in the node for as long as the pings came).
+  while (std::chrono::steady_clock::now() - t0 < std::chrono::seconds(30 * time_scale())) {
+    if (!raw.write(burst.data(), burst.size())) {
+      cut = true;
+      break;
+    }
+    peak = std::max(peak, node.server->queued_bytes());
+  }
+  INFO("peak queued bytes " << peak);
+  CHECK(cut);  // the node closed the connection
+  CHECK(peak <= (8u << 20) + 64 * 1024);
+  CHECK(node.count(Ev::closed_slow_client) == 1);
+  CHECK(wait_for([&] { return node.server->sessions() == 0 && node.server->queued_bytes() == 0; }, 8000));
+}
+
+TEST_CASE("A client that sends small messages faster than its session takes them is held back by TCP, and answered",
+          "[e2e][fault]") {
+  // Each message went into the session's mailbox at once: a flood of valid 24-byte messages
+  // grew the node by gigabytes. Now the connection stops reading while 256 wait, and goes on
+  // when they are taken: the render request after 5,000 of them is answered.
+  TestNode node;
+  ProtoClient c;
+  REQUIRE(c.connect(node.port()));
+  REQUIRE(c.handshake(DisplayKind::jpeg, 96, 64));
+  REQUIRE(c.upload(pavilion().scene));
+  protocol::Settings s;
+  s.max_depth = 2;
+  const std::vector<uint8_t> one = protocol::encode(protocol::ClientRecord{s});
+  for (int i = 0; i < 5000; ++i) REQUIRE(c.ws.send(one));
+  auto f = c.render(pavilion_loop().camera(0), 9, 60000);
+  REQUIRE(f);
+  CHECK(f->frame == 9);
+  CHECK(node.count(Ev::paused_reading) >= 1);
+  CHECK(node.count(Ev::error) == 0);
+}
+
+TEST_CASE("Many bad records are answered by at most 32 error replies at once and one that counts the rest",
+          "[e2e][fault]") {
+  // One message of 5,000 removes of unknown ids got 5,000 replies and 5,000 log lines.
+  TestNode node;
+  ProtoClient c;
+  REQUIRE(c.connect(node.port()));
+  REQUIRE(c.handshake(DisplayKind::jpeg, 96, 64));
+  std::vector<protocol::ClientRecord> bad;
+  for (uint32_t i = 0; i < 5000; ++i) bad.push_back(protocol::Remove{protocol::RecordType::buffer, 1000 + i});
+  REQUIRE(c.send(bad));
+  std::vector<protocol::ErrorReply> errors;
+  CHECK_FALSE(c.next<protocol::Frame>(3000, &errors));  // collects the replies for 3 s
+  REQUIRE(errors.size() >= 2);
+  CHECK(errors.size() <= 33);
+  INFO(errors.back().message);
+  CHECK(errors.back().message.find("errors were not reported") != std::string::npos);
+  uint32_t unreported = uint32_t(std::atoi(errors.back().message.c_str()));
+  CHECK(unreported + (errors.size() - 1) == 5000);
+  CHECK(node.count(Ev::error) == errors.size());
+  // The session serves on: a good request is answered.
+  REQUIRE(c.upload(pavilion().scene));
+  CHECK(c.render(pavilion_loop().camera(0), 3));
+}
+
+TEST_CASE("Two upgrades with one session token at once: one session, the other refused", "[e2e][fault]") {
+  // The token was checked only against opened sessions: two upgrades written back to back both
+  // got 101, and one session's frames went to the other's MJPEG viewers.
+  TestNode node;
+  for (int round = 0; round < 10; ++round) {
+    const std::string resource = "/ws?session=racetoken" + std::to_string(round);
+    RawSocket a, b;
+    REQUIRE(a.connect(node.port()));
+    REQUIRE(b.connect(node.port()));
+    const std::string req = "GET " + resource +
+                            " HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+                            "Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n";
+    REQUIRE(a.write(req));
+    REQUIRE(b.write(req));
+    const int sa = a.read_head(), sb = b.read_head();
+    INFO("round " << round << ": " << sa << " and " << sb);
+    CHECK(((sa == 101 && sb == 400) || (sa == 400 && sb == 101)));
+    a.shut();
+    b.shut();
+    CHECK(wait_for([&] { return node.server->sessions() == 0; }, 5000));
+  }
+}
+
+TEST_CASE("A large static file is sent a chunk at a time: whole, in ranges, and to a client that does not read",
+          "[e2e]") {
+  // Each request read the whole file into three copies on the network thread.
+  TempDir dir;
+  std::string big(3u << 20, '\0');
+  uint32_t x = 12345;
+  for (auto& ch : big) ch = char((x = x * 1664525u + 1013904223u) >> 24);
+  dir.write("big.bin", big);
+  TestNode node(8, [&](NodeSettings&, ServerOptions& o) { o.scenes_root = dir.path; });
+  auto whole = http::request("127.0.0.1", node.port(), "GET", "/scenes/big.bin");
+  REQUIRE(whole);
+  CHECK(whole->status == 200);
+  CHECK(whole->header("content-length") == std::to_string(big.size()));
+  CHECK(whole->body == big);
+  auto part = http::request("127.0.0.1", node.port(), "GET", "/scenes/big.bin", "Range: bytes=1000000-2500000\r\n");
+  REQUIRE(part);
+  CHECK(part->status == 206);
+  CHECK(part->header("content-range") == std::string("bytes 1000000-2500000/") + std::to_string(big.size()));
+  CHECK(part->body == big.substr(1000000, 1500001));
+  auto head = http::request("127.0.0.1", node.port(), "HEAD", "/scenes/big.bin");
+  REQUIRE(head);
+  CHECK(head->status == 200);
+  CHECK(head->body.empty());
+  CHECK(head->header("content-length") == std::to_string(big.size()));
+  // Ten clients that never read: the node holds a chunk for each, not the file, and serves on.
+  std::vector<std::unique_ptr<RawSocket>> stuck;
+  for (int i = 0; i < 10; ++i) {
+    stuck.push_back(std::make_unique<RawSocket>());
+    REQUIRE(stuck.back()->connect(node.port(), 4096));
+    REQUIRE(stuck.back()->write("GET /scenes/big.bin HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n"));
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  auto again = http::request("127.0.0.1", node.port(), "GET", "/scenes/big.bin");
+  REQUIRE(again);
+  CHECK(again->body == big);
 }
