@@ -13,8 +13,10 @@ int run(const std::vector<std::string>& argv) {
   if (args.flag("--help")) {
     std::puts("tessera render --scene S.gltf [--camera-loop L.json --frame K] [--size W H] [--ao N] [--depth D]\n"
               "               [--shadows 0|1] [--ao-distance X] [--threads T] [--renderer raytracer|rasterizer]\n"
-              "               [--bvh-quality medium|high] --out F.png\n"
+              "               [--bvh-quality medium|high] [--default-light] --out F.png\n"
               "Renders one image (with the ray tracer by default) and prints its figures as one JSON line.\n"
+              "A glTF with lit materials and no lights and no sky renders them black (as an XML3D page\n"
+              "without lights); --default-light lights it with a sun over the camera's shoulder and a sky.\n"
               "The rasterizer has no AO, reflection, refraction or shadows; --threads does not limit it\n"
               "(llvmpipe's threads are set by LP_NUM_THREADS).");
     return 0;
@@ -31,8 +33,8 @@ int run(const std::vector<std::string>& argv) {
   setup.set_frame(size_t(frame));
 
   for (auto& w : setup.loaded.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
-  if (setup.loaded.default_lighting)
-    std::fprintf(stderr, "note: %s\n", default_lighting_note(setup.scene_path).c_str());
+  if (const std::string note = lighting_note(setup.scene_path, setup.loaded); !note.empty())
+    std::fprintf(stderr, "note: %s\n", note.c_str());
   std::unique_ptr<Renderer> renderer = make_renderer(kind);
   std::vector<std::string> warnings;
   renderer->sync(setup.loaded.scene, warnings);

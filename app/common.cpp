@@ -96,7 +96,9 @@ SceneSetup load_scene(Args& args, int default_w, int default_h, LoopOption loop_
   const std::string bvh = args.str("--bvh-quality", "medium");
   if (bvh != "high" && bvh != "medium") throw std::invalid_argument("--bvh-quality must be high or medium, not '" + bvh + "'");
   EmbreeDevice::set_high_quality_bvh(bvh == "high");
-  s.loaded = load_gltf(s.scene_path);
+  GltfOptions options;
+  options.default_lighting = args.flag("--default-light");
+  s.loaded = load_gltf(s.scene_path, options);
   if (plain) {  // strip every optional shading feature (for kernel comparisons)
     Scene& sc = s.loaded.scene;
     std::vector<std::pair<Id, Material>> mats;

@@ -214,7 +214,7 @@ std::shared_ptr<NodeSettings> NodeConfig::node_settings() const {
   if (!scene.empty()) {
     LoadedScene loaded = load_gltf(scene);
     for (auto& w : loaded.warnings) std::fprintf(stderr, "warning: %s\n", w.c_str());
-    if (loaded.default_lighting) std::fprintf(stderr, "note: %s\n", default_lighting_note(scene).c_str());
+    if (const std::string note = lighting_note(scene, loaded); !note.empty()) std::fprintf(stderr, "note: %s\n", note.c_str());
     s->preload = std::make_shared<const Scene>(std::move(loaded.scene));
   }
   if (task_timeout_ms < 50) throw std::invalid_argument("tessera.task-timeout-ms must be >= 50");

@@ -942,18 +942,22 @@ LoadedScene load_gltf(const std::string& path, const GltfOptions& options) {
     }
     scene.set_camera(c);
   }
-  // A file with no lights and no sky (many exported models: viewers light them with a default
-  // environment) would render black. It gets a sun over the camera's left shoulder, a sky of
-  // about the pavilion's (an ambient term) and a grey-blue background, and the caller is told.
-  if (scene.lights().empty() && !(env.ambient.x > 0 || env.ambient.y > 0 || env.ambient.z > 0)) {
+  // A file with lit materials and no lights and no sky (many exported models: glTF viewers light
+  // them with a default environment) renders them black, as an XML3D page without lights does,
+  // and the caller is told (`dark`). With options.default_lighting it gets a sun over the
+  // camera's left shoulder and a sky of about the pavilion's (an ambient term) instead; the
+  // background stays as the file has it. All-unlit files (XML3D's matte) are neither.
+  bool lit = false;
+  for (const auto& [id, m] : scene.materials()) lit = lit || m.value.model != Material::Model::matte;
+  out.dark = lit && scene.lights().empty() && !(env.ambient.x > 0 || env.ambient.y > 0 || env.ambient.z > 0);
+  if (out.dark && options.default_lighting) {
+    out.dark = false;
     Light sun;
     sun.type = Light::Type::directional;
     const Vec3 d = normalize(scene.camera().to_world.transform_vector({0.4f, -0.7f, -0.6f}));
     sun.direction = check_direction(d).empty() ? d : normalize(Vec3{0.4f, -0.7f, -0.6f});
     scene.set_light(next_id++, sun);
     env.ambient = Vec3{0.3f};
-    env.background = Vec3{0.24f, 0.27f, 0.33f};
-    env.exposure = 1.0f;
     scene.set_environment(env);
     out.default_lighting = true;
   }
@@ -961,9 +965,14 @@ LoadedScene load_gltf(const std::string& path, const GltfOptions& options) {
   return out;
 }
 
-std::string default_lighting_note(const std::string& path) {
-  return path + ": no lights (KHR_lights_punctual) and no sky: lit by a default sun over the camera's shoulder and a "
-                "sky (add lights to the file to light it your way)";
+std::string lighting_note(const std::string& path, const LoadedScene& loaded) {
+  if (loaded.default_lighting)
+    return path + ": no lights (KHR_lights_punctual) and no sky: lit by a default sun over the camera's shoulder and "
+                  "a sky (--default-light)";
+  if (loaded.dark)
+    return path + ": no lights (KHR_lights_punctual) and no sky: its lit materials render black, as in an XML3D "
+                  "page without lights; --default-light adds a sun and a sky";
+  return "";
 }
 
 Camera CameraLoop::camera(size_t frame) const {

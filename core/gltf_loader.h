@@ -29,19 +29,25 @@ struct LoadedScene {
   } times;
   Bounds bounds;                      // world bounds of all instances
   bool has_camera = false;            // the scene's first camera node was found
-  // The file has no lights and no sky: the scene holds a default sun and sky instead
-  // (load_gltf), which callers say in a note (not a warning: nothing was left out).
+  // The file has lit materials but no lights and no sky, so they render black, as they do in
+  // an XML3D page without lights (`dark`); with GltfOptions::default_lighting the scene holds a
+  // default sun and sky instead (`default_lighting`). Callers say either in a note (not a
+  // warning: nothing was left out).
+  bool dark = false;
   bool default_lighting = false;
   std::vector<std::string> warnings;  // things left out or repaired, each naming the file
 };
 
 struct GltfOptions {
   bool parallel_images = true;  // decode the images on every TBB thread (false: one after another)
+  // A file with lit materials and no lights and no sky gets a sun over the camera's shoulder
+  // and a sky (the commands' --default-light), as glTF viewers light such models.
+  bool default_lighting = false;
 };
 // Throws std::runtime_error naming the file and what is wrong; never crashes on a broken file.
 LoadedScene load_gltf(const std::string& path, const GltfOptions& options = {});
-// What callers print when LoadedScene::default_lighting is set.
-std::string default_lighting_note(const std::string& path);
+// What callers print when LoadedScene::dark or ::default_lighting is set ("" when neither).
+std::string lighting_note(const std::string& path, const LoadedScene& loaded);
 
 // A recorded camera loop (../shared/scenes/*/camera-loop.json).
 struct CameraLoop {

@@ -769,23 +769,15 @@ TEST_CASE("glTF animations skins and morph targets are not played and one warnin
   CHECK(warned(ls, "1 animation, 1 primitive with morph targets not played: the meshes are drawn in the file's rest pose"));
 }
 
-TEST_CASE("a glTF with no lights and no sky gets a default sun and sky and says so; one with either does not", "[gltf]") {
+TEST_CASE("a glTF with no lights and no sky is dark and said so; with default lighting it gets a sun and a sky", "[gltf]") {
   TempDir dir;
   Bin bin;
   const int pos = bin.view(std::vector<float>{0, 0, 0, 1, 0, 0, 0, 1, 0});
-  const std::string prim = R"({"attributes":{"POSITION":0}})", acc = accessor(pos, 5126, 3, "VEC3");
-  {
-    LoadedScene ls = load_gltf(dir.write("dark.gltf", gltf_of(dir, bin, prim, acc)));
-    CHECK(ls.default_lighting);
-    CHECK(ls.warnings.empty());  // nothing was left out: the callers print a note
-    REQUIRE(ls.scene.lights().size() == 1);
-    const Light& sun = ls.scene.lights().begin()->second.value;
-    CHECK(sun.type == Light::Type::directional);
-    CHECK(sun.direction.z < 0);  // the fitted camera looks down -z: the sun shines the same way, from above
-    CHECK(sun.direction.y < 0);
-    CHECK(ls.scene.environment().ambient.x > 0);
-    CHECK(default_lighting_note("dark.gltf").find("default sun") != std::string::npos);
-    // It renders: the triangle is lit (not black), the background is not black either.
+  const std::string acc = accessor(pos, 5126, 3, "VEC3");
+  const std::string white = R"(,"materials":[{"pbrMetallicRoughness":{"baseColorFactor":[1,1,1,1],"metallicFactor":0}}])";
+  const std::string dark =
+      dir.write("dark.gltf", gltf_of(dir, bin, R"({"attributes":{"POSITION":0},"material":0})", acc, white));
+  auto render_red = [](LoadedScene& ls) {  // pixels with red above 40, and the corner's red
     RayTracer rt;
     std::vector<std::string> w;
     ls.scene.set_resolution(64, 64);
@@ -795,24 +787,63 @@ TEST_CASE("a glTF with no lights and no sky gets a default sun and sky and says 
     int lit = 0;
     for (int y = 0; y < 64; ++y)
       for (int x = 0; x < 64; ++x) lit += tr.image.pixel(x, y)[0] > 40 ? 1 : 0;
-    CHECK(lit == 64 * 64);
+    return std::pair<int, int>{lit, tr.image.pixel(0, 0)[0]};
+  };
+  {  // As the file is: dark, as an XML3D page without lights shows it, and a note says so.
+    LoadedScene ls = load_gltf(dark);
+    CHECK(ls.dark);
+    CHECK_FALSE(ls.default_lighting);
+    CHECK(ls.warnings.empty());  // nothing was left out: the callers print a note
+    CHECK(ls.scene.lights().empty());
+    CHECK(lighting_note("dark.gltf", ls).find("render black") != std::string::npos);
+    CHECK(render_red(ls).first == 0);
   }
+  {  // Lit by default (the commands' --default-light).
+    GltfOptions o;
+    o.default_lighting = true;
+    LoadedScene ls = load_gltf(dark, o);
+    CHECK_FALSE(ls.dark);
+    CHECK(ls.default_lighting);
+    REQUIRE(ls.scene.lights().size() == 1);
+    const Light& sun = ls.scene.lights().begin()->second.value;
+    CHECK(sun.type == Light::Type::directional);
+    CHECK(sun.direction.z < 0);  // the fitted camera looks down -z: the sun shines the same way, from above
+    CHECK(sun.direction.y < 0);
+    CHECK(ls.scene.environment().ambient.x > 0);
+    CHECK(lighting_note("dark.gltf", ls).find("default sun") != std::string::npos);
+    const auto [lit, corner] = render_red(ls);
+    CHECK(lit > 500);  // the triangle covers about a third of the image
+    CHECK(corner == 0);  // the background stays the file's
+  }
+  GltfOptions lights_on;
+  lights_on.default_lighting = true;
   {  // A light of its own.
     const std::string light = R"(,"extensionsUsed":["KHR_lights_punctual"],"extensions":{"KHR_lights_punctual":{"lights":[{"type":"point"}]}})";
-    std::string f = gltf_of(dir, bin, prim, acc, light);
+    std::string f = gltf_of(dir, bin, R"({"attributes":{"POSITION":0},"material":0})", acc, light + white);
     f.replace(f.find(R"("nodes":[{"mesh":0}])"), 20, R"("nodes":[{"mesh":0},{"extensions":{"KHR_lights_punctual":{"light":0}}}])");
     f.replace(f.find(R"("scenes":[{"nodes":[0]}])"), 24, R"("scenes":[{"nodes":[0,1]}])");
-    LoadedScene ls = load_gltf(dir.write("lit.gltf", f));
+    LoadedScene ls = load_gltf(dir.write("lit.gltf", f), lights_on);
+    CHECK_FALSE(ls.dark);
     CHECK_FALSE(ls.default_lighting);
     CHECK(ls.scene.lights().size() == 1);
     CHECK(ls.scene.lights().begin()->second.value.type == Light::Type::point);
     CHECK(ls.scene.environment().ambient.x == 0);
+    CHECK(lighting_note("lit.gltf", ls).empty());
+  }
+  {  // Only unlit materials: nothing a light would change.
+    std::string f = gltf_of(dir, bin, R"({"attributes":{"POSITION":0},"material":0})", acc,
+                            R"(,"extensionsUsed":["KHR_materials_unlit"],"materials":[{"extensions":{"KHR_materials_unlit":{}}}])");
+    LoadedScene ls = load_gltf(dir.write("unlit.gltf", f), lights_on);
+    CHECK_FALSE(ls.dark);
+    CHECK_FALSE(ls.default_lighting);
+    CHECK(ls.scene.lights().empty());
   }
   {  // A sky of its own (the shared scenes' extras).
-    std::string f = gltf_of(dir, bin, prim, acc);
+    std::string f = gltf_of(dir, bin, R"({"attributes":{"POSITION":0},"material":0})", acc, white);
     f.replace(f.find(R"("scenes":[{"nodes":[0]}])"), 24,
               R"("scenes":[{"nodes":[0],"extras":{"environment":{"analysis":{"integral_L_dOmega":3.14159}}}}])");
-    LoadedScene ls = load_gltf(dir.write("sky.gltf", f));
+    LoadedScene ls = load_gltf(dir.write("sky.gltf", f), lights_on);
+    CHECK_FALSE(ls.dark);
     CHECK_FALSE(ls.default_lighting);
     CHECK(ls.scene.lights().empty());
   }
@@ -842,10 +873,7 @@ TEST_CASE("a glTF light index beyond int's range names no light", "[gltf][broken
         R"("nodes":[{"extensions":{"KHR_lights_punctual":{"light":)" + std::string(index) + R"(}}}],"scenes":[{"nodes":[0]}],"scene":0})";
     LoadedScene ls = load_gltf(dir.write("light.gltf", j));
     const bool named = std::string(index) == "0";  // the file has one light
-    // Naming none, the file has no lights: only the default sun lights it.
-    CHECK(ls.default_lighting == !named);
-    REQUIRE(ls.scene.lights().size() == 1u);
-    CHECK((ls.scene.lights().begin()->second.value.type == Light::Type::point) == named);
+    CHECK(ls.scene.lights().size() == (named ? 1u : 0u));
   }
 }
 
