@@ -15,6 +15,7 @@
 #include <arpa/inet.h>
 
 #include <atomic>
+#include <cctype>
 #include <cstring>
 #include <thread>
 
@@ -191,7 +192,9 @@ TEST_CASE("The node-wide memory budget refuses the client that would cross it an
   for (auto& e : errors) {
     CHECK(e.code == ErrorCode::limit_exceeded);
     CHECK_FALSE(e.fatal);
-    CHECK(e.message.find("memory budget") != std::string::npos);
+    // A refusal, or the count of refusals beyond the error rate limit (32 a second).
+    CHECK((e.message.find("memory budget") != std::string::npos ||
+           e.message.find("errors were not reported") != std::string::npos));
   }
   // Scene bytes stay within the budget (frames being sent are counted too, never refused).
   CHECK(wait_for([&] { return budget->used() <= budget->limit(); }, 2000));
@@ -451,12 +454,29 @@ TEST_CASE("Many bad records are answered by at most 32 error replies at once and
   REQUIRE(c.send(bad));
   std::vector<protocol::ErrorReply> errors;
   CHECK_FALSE(c.next<protocol::Frame>(3000, &errors));  // collects the replies for 3 s
-  REQUIRE(errors.size() >= 2);
-  CHECK(errors.size() <= 33);
-  INFO(errors.back().message);
-  CHECK(errors.back().message.find("errors were not reported") != std::string::npos);
-  uint32_t unreported = uint32_t(std::atoi(errors.back().message.c_str()));
-  CHECK(unreported + (errors.size() - 1) == 5000);
+  // Every error is either reported or counted in a reply: "N errors were not reported: ..." of
+  // its own, or "(N errors before this one were not reported ...)" after one. How many are
+  // reported depends on how long the 5,000 take (32 at once, then 32 a second: 33 replies in
+  // the Release build, more under a sanitizer), never one each.
+  size_t reported = 0, unreported = 0, summaries = 0;
+  for (auto& e : errors) {
+    INFO(e.message);
+    CHECK(e.code != ErrorCode::internal);
+    if (!e.message.empty() && std::isdigit(static_cast<unsigned char>(e.message[0])) &&
+        e.message.find(" errors were not reported") != std::string::npos) {
+      unreported += size_t(std::atol(e.message.c_str()));
+      ++summaries;
+      continue;
+    }
+    ++reported;
+    if (const auto at = e.message.find(" (");
+        at != std::string::npos && e.message.find("errors before this one were not reported", at) != std::string::npos)
+      unreported += size_t(std::atol(e.message.c_str() + at + 2));
+  }
+  INFO(reported << " reported, " << unreported << " counted, in " << errors.size() << " replies");
+  CHECK(reported + unreported == 5000);
+  CHECK(summaries >= 1);
+  CHECK(errors.size() <= size_t(32 + 32 * 4 * time_scale()));
   CHECK(node.count(Ev::error) == errors.size());
   // The session serves on: a good request is answered.
   REQUIRE(c.upload(pavilion().scene));
