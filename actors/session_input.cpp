@@ -8,6 +8,12 @@
 
 namespace tessera::session {
 
+// "N errors ... not reported: more than 32 a second", as both kinds of reply say it.
+static std::string unreported_text(uint32_t n, const char* which) {
+  return std::to_string(n) + " errors " + which + "not reported: more than " +
+         std::to_string(int(session_state::kErrorsPerSecond)) + " a second";
+}
+
 // Whether one more non-fatal error may be reported now (session_state::kErrorsPerSecond).
 static bool take_error_token(session_state& st) {
   const int64_t now = steady_ns();
@@ -37,8 +43,7 @@ void report_unreported(self_ptr self) {
   r.code = ErrorCode::limit_exceeded;
   r.fatal = false;
   r.record = kNoRecord;
-  r.message = std::to_string(st.unreported_errors) + " errors were not reported: more than " +
-              std::to_string(int(session_state::kErrorsPerSecond)) + " a second";
+  r.message = unreported_text(st.unreported_errors, "were ");
   st.sink->send(encode(ServerRecord{r}));
   log(self, Event(Ev::error, to_string(r.code)).with("fatal", false).with("record", -1).with("message", r.message)
                 .with("unreported", st.unreported_errors));
@@ -57,8 +62,7 @@ void fail(self_ptr self, const Error& e) {
   }
   const uint32_t unreported = st.unreported_errors;
   if (unreported > 0) {
-    r.message += " (" + std::to_string(unreported) + " errors before this one were not reported: more than " +
-                 std::to_string(int(session_state::kErrorsPerSecond)) + " a second)";
+    r.message += " (" + unreported_text(unreported, "before this one were ") + ")";
     st.unreported_errors = 0;
   }
   st.sink->send(encode(ServerRecord{r}));

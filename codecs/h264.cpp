@@ -12,8 +12,6 @@
 namespace tessera {
 namespace {
 
-// BT.709, limited range, in 16.16 fixed point: Y' = 16 + 219/255 (Kr R + Kg G + Kb B),
-// Cb = 128 + 224/255 (B - Y'')/(2 (1 - Kb)), Cr = 128 + 224/255 (R - Y'')/(2 (1 - Kr)).
 // OpenH264's rate control (RC_BITRATE_MODE) shares a budget of kRcWindow frames' bits (its
 // "virtual GOP") among the frames of a window that restarts at each keyframe. A keyframe costs
 // 2-3 frames' bits at the QP the library picks for it, so the window's P-frames after it got
@@ -27,6 +25,9 @@ constexpr uint32_t kRcWindow = 8;
 // At most this factor: above 2 the library's floor for a P-frame (half a frame's bits at the
 // raised rate) would exceed the target's share.
 constexpr double kMaxIdrBoost = 1.8;
+
+// BT.709, limited range, in 16.16 fixed point: Y' = 16 + 219/255 (Kr R + Kg G + Kb B),
+// Cb = 128 + 224/255 (B - Y'')/(2 (1 - Kb)), Cr = 128 + 224/255 (R - Y'')/(2 (1 - Kr)).
 constexpr double kKr = 0.2126, kKb = 0.0722, kKg = 1 - kKr - kKb;
 constexpr int fx(double v) { return int(v * 65536.0 + (v < 0 ? -0.5 : 0.5)); }
 constexpr int kYR = fx(219.0 / 255 * kKr), kYG = fx(219.0 / 255 * kKg), kYB = fx(219.0 / 255 * kKb);

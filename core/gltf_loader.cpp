@@ -796,8 +796,7 @@ LoadedScene load_gltf(const std::string& path, const GltfOptions& options) {
   // each node listing the next one twice doubles the walk (64 such nodes, 1.4 KB, would never
   // finish), and a cycle would recurse until the depth check.
   std::vector<uint8_t> reached(model.nodes.size(), 0);
-  bool perspective_camera = false;  // the scene's camera is a perspective one (no other replaces it)
-  std::string other_camera;         // the warning for a camera of another type, said if it stays
+  std::string other_camera;  // the warning for a camera of another type, said if it stays
   std::function<void(int, const Mat4&, int)> visit = [&](int ni, const Mat4& parent, int depth) {
     if (ni < 0 || size_t(ni) >= model.nodes.size()) throw LoadError(path + ": node index " + std::to_string(ni) + " out of range");
     if (reached[size_t(ni)])
@@ -836,7 +835,8 @@ LoadedScene load_gltf(const std::string& path, const GltfOptions& options) {
     }
     // The first perspective camera, as the web reader takes it; else the first other one,
     // drawn as a perspective one (the renderers have pinhole cameras only).
-    if (node.camera >= 0 && size_t(node.camera) < model.cameras.size() && !perspective_camera) {
+    const bool perspective_set = out.has_camera && other_camera.empty();
+    if (node.camera >= 0 && size_t(node.camera) < model.cameras.size() && !perspective_set) {
       const auto& cam = model.cameras[node.camera];
       const bool perspective = cam.type == "perspective";
       if (perspective || !out.has_camera) {
@@ -848,7 +848,6 @@ LoadedScene load_gltf(const std::string& path, const GltfOptions& options) {
         } else {
           scene.set_camera(c);
           out.has_camera = true;
-          perspective_camera = perspective;
           other_camera = perspective ? std::string() : node_name + ": camera of type '" + cam.type +
                                                            "' drawn as a perspective one with a " +
                                                            std::to_string(int(std::lround(c.fov_y * 180 / kPi))) +

@@ -44,6 +44,14 @@ using websocketpp::connection_hdl;
 
 namespace {
 
+// Ends a deferred HTTP response's connection (an MJPEG stream's or a streamed file's).
+template <class ConnectionPtr>
+void close_socket(const ConnectionPtr& con) {
+  asio::error_code ec;
+  con->get_raw_socket().shutdown(asio::ip::tcp::socket::shutdown_both, ec);
+  con->get_raw_socket().close(ec);
+}
+
 // One MJPEG viewer: the HTTP connection's response is deferred and its socket written
 // directly; a slow viewer gets the latest frame (older pending ones are replaced).
 template <class Config>
@@ -108,9 +116,7 @@ struct MjpegStream : std::enable_shared_from_this<MjpegStream<Config>> {
     if (dead) return;
     dead = true;
     if (live) --*live;
-    asio::error_code ec;
-    con->get_raw_socket().shutdown(asio::ip::tcp::socket::shutdown_both, ec);
-    con->get_raw_socket().close(ec);
+    close_socket(con);
   }
 };
 
@@ -164,9 +170,7 @@ struct FileStream : std::enable_shared_from_this<FileStream<Config>> {
     done = true;
     if (idle) idle->cancel();
     if (live) --*live;
-    asio::error_code ec;
-    con->get_raw_socket().shutdown(asio::ip::tcp::socket::shutdown_both, ec);
-    con->get_raw_socket().close(ec);
+    close_socket(con);
   }
 };
 
@@ -295,13 +299,13 @@ struct Endpoint final : Server::Impl, std::enable_shared_from_this<Endpoint<Conf
   std::map<std::string, std::vector<std::shared_ptr<MjpegStream<Config>>>> mjpeg;
   // A viewer that opens late starts with the session's last JPEG (and its frame number).
   std::map<std::string, std::pair<std::shared_ptr<const std::vector<uint8_t>>, uint32_t>> last_mjpeg;
-  std::set<connection_hdl, std::owner_less<connection_hdl>> pending_opens;  // validated, not yet opened
-  // The session tokens of validated connections not yet opened: a second upgrade with the same
-  // token, written right behind the first, was admitted too (both got 101).
-  std::map<connection_hdl, std::string, std::owner_less<connection_hdl>> pending_tokens;
+  // Validated connections not yet opened, with their session tokens ("": none). A token counts
+  // as taken from validation on: a second upgrade with the same token, written right behind the
+  // first, was admitted too (both got 101).
+  std::map<connection_hdl, std::string, std::owner_less<connection_hdl>> pending_opens;
   bool token_taken(const std::string& t) const {
     if (tokens.count(t)) return true;
-    for (auto& [h, p] : pending_tokens)
+    for (auto& [h, p] : pending_opens)
       if (p == t) return true;
     return false;
   }
@@ -641,8 +645,7 @@ bool Endpoint<Config>::on_validate(connection_hdl h) {
   }
   per_address.try_add(address);
   counted[h] = address;
-  pending_opens.insert(h);
-  if (!token.empty()) pending_tokens[h] = token;
+  pending_opens[h] = token;
   return true;
 }
 
@@ -696,7 +699,6 @@ void Endpoint<Config>::release_address(connection_hdl h) {
 template <class Config>
 void Endpoint<Config>::on_open(connection_hdl h) {
   pending_opens.erase(h);
-  pending_tokens.erase(h);
   if (auto r = refusing.find(h); r != refusing.end()) {  // no session: closed with the reason
     websocketpp::lib::error_code ec;
     ws.close(h, r->second.close_code, r->second.reason, ec);
@@ -728,7 +730,6 @@ void Endpoint<Config>::on_open(connection_hdl h) {
 template <class Config>
 void Endpoint<Config>::on_close(connection_hdl h) {
   pending_opens.erase(h);
-  pending_tokens.erase(h);
   refusing.erase(h);
   release_address(h);
   auto it = conns.find(h);

@@ -198,8 +198,9 @@ async function load(body, url, fetchBinary, { defer = false } = {}) {
   const count = (list) => (Array.isArray(list) ? list.length : 0);
   const morphed = (Array.isArray(json.meshes) ? json.meshes : []).reduce((n, m) => n + (m && Array.isArray(m.primitives)
     ? m.primitives.filter((p) => p && Array.isArray(p.targets) && p.targets.length).length : 0), 0);
-  const still = [[count(json.animations), 'animation'], [count(json.skins), 'skin'], [morphed, 'primitive with morph targets']]
-    .filter(([n]) => n > 0).map(([n, what]) => `${n} ${n === 1 ? what : what.replace(/^(\w+)/, '$1s')}`);
+  const still = [[count(json.animations), 'animation', 'animations'], [count(json.skins), 'skin', 'skins'],
+    [morphed, 'primitive with morph targets', 'primitives with morph targets']]
+    .filter(([n]) => n > 0).map(([n, one, many]) => `${n} ${n === 1 ? one : many}`);
   if (still.length) warnings.push(`${still.join(', ')} not played: the meshes are drawn in the file's rest pose`);
   // The absolute URL of each external buffer (null for data: URIs and the GLB chunk).
   const bufferUrls = (json.buffers || []).map((b) => (b.uri === undefined || b.uri.startsWith('data:') ? null : new URL(b.uri, url).href));
